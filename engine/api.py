@@ -1,0 +1,197 @@
+"""The engine's one interface: a design (or a batch of designs) and a road in, results out.
+
+Everything here is a frozen, picklable value; nothing reads files or the environment.
+Designs are rows (a2 [rad], L2 [m], R_WS [m]); R_ES = R_WS / ratio (Table 8: ratio 2.0).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+from typing import Literal
+
+import numpy as np
+
+STATUS_OK = "ok"
+STATUS_FAILED = "failed"
+
+Method = Literal["reference"]
+
+
+class DesignError(ValueError):
+    """A design that is not physical (names the variable)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Design:
+    """Final-drive design variables (Table 8).
+
+    a2: angle of r_{1->2} in the chassis frame [rad] (wraps around 2 pi);
+    l2: distance from the swingarm pivot to the engine sprocket axis [m];
+    rws: wheel sprocket pitch radius R_WS [m].
+    """
+
+    a2: float
+    l2: float
+    rws: float
+
+    def __post_init__(self) -> None:
+        for name in ("a2", "l2", "rws"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise DesignError(f"{name} must be a finite number, got {v!r}")
+        if self.l2 < 0:
+            raise DesignError(f"l2 must be >= 0 m, got {self.l2}")
+        if self.rws <= 0:
+            raise DesignError(f"rws must be > 0 m, got {self.rws}")
+
+    @classmethod
+    def from_deg(cls, a2_deg: float, l2: float, rws: float) -> "Design":
+        return cls(math.radians(a2_deg), l2, rws)
+
+    @property
+    def a2_deg(self) -> float:
+        return math.degrees(self.a2)
+
+    def row(self) -> np.ndarray:
+        return np.array([self.a2, self.l2, self.rws])
+
+
+@dataclass(frozen=True, slots=True)
+class SimSettings:
+    """How to simulate. Defaults are documented in docs/engine.md.
+
+    method: ``reference`` is the paper's augmented Lagrangian + trapezoidal start +
+    ABM predictor-corrector with under-relaxation (eqs. 57-66).
+    """
+
+    duration: float = 3.5            # simulated time [s] (paper: 3.5 s)
+    method: Method = "reference"
+    dt: float = 1.0e-3               # time step [s] (paper: not given)
+    trapezoidal_steps: int = 4       # paper section 3.3, step 3
+    under_relaxation: float = 0.7    # nu of eq. (65) (paper: 0.7)
+    penalty_alpha: float = 1.0e5     # alpha of eqs. (57)-(58) (paper: 1e5)
+    baumgarte_xi: float = 1.0        # xi of eq. (57) (paper: 1)
+    baumgarte_omega: float = 10.0    # omega of eq. (57) (paper: 10)
+    corrector_tol: float = 1.0e-9    # eq. (66) error bound on q [m, rad]
+    corrector_max_iter: int = 30     # corrector iterations before a step is a failure
+    lambda_tol: float = 1.0e-10      # augmented Lagrangian iteration tolerance on q'' (relative)
+    lambda_max_iter: int = 20        # eq. (58) iterations per evaluation
+    max_constraint_residual: float = 1.0e-3  # max|Phi| beyond which the run has diverged
+    max_airborne_time: float = 0.5   # s a wheel may stay off the road before the run fails
+    series: bool = False             # keep time series (Fig. 13 quantities)
+    series_stride: int = 10          # keep every n-th step in the series
+    tyre_longitudinal: bool = True   # False only for verification (energy balance)
+
+    def __post_init__(self) -> None:
+        if not (self.duration > 0 and math.isfinite(self.duration)):
+            raise ValueError("duration must be > 0 s")
+        if not (0 < self.dt <= 0.01):
+            raise ValueError("dt must be in (0, 0.01] s")
+        if self.method not in ("reference",):
+            raise ValueError(f"method must be 'reference', got {self.method!r}")
+        if self.trapezoidal_steps < 1 or self.corrector_max_iter < 1 or self.lambda_max_iter < 1:
+            raise ValueError("step and iteration counts must be >= 1")
+        if not 0 < self.under_relaxation <= 1:
+            raise ValueError("under_relaxation must be in (0, 1]")
+        if self.penalty_alpha <= 0 or self.baumgarte_omega < 0 or self.baumgarte_xi < 0:
+            raise ValueError("penalty_alpha must be > 0, baumgarte xi and omega >= 0")
+        if self.series_stride < 1:
+            raise ValueError("series_stride must be >= 1")
+
+    def with_(self, **changes: object) -> "SimSettings":
+        return replace(self, **changes)  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True)
+class SimResult:
+    """One simulation's outcome. Lengths in m (slack_m too), SR dimensionless."""
+
+    status: str
+    reason: str
+    distance_m: float
+    squat_ratio: float
+    slack_m: float
+    fitness_m: float
+    chain_length_m: float
+    wall_s: float
+    series: dict[str, np.ndarray] | None = field(default=None, compare=False)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == STATUS_OK
+
+    @property
+    def slack_mm(self) -> float:
+        return self.slack_m * 1000.0
+
+    def summary(self) -> dict[str, float | str]:
+        """The scalar outputs as a JSON-ready dict (CLI keys)."""
+        return {
+            "status": self.status,
+            "reason": self.reason,
+            "distance_m": self.distance_m,
+            "squat_ratio": self.squat_ratio,
+            "slack_mm": self.slack_mm,
+            "fitness_m": self.fitness_m,
+            "chain_length_m": self.chain_length_m,
+            "wall_s": self.wall_s,
+        }
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """Results of a batch, one entry per input design row, in order."""
+
+    designs: np.ndarray          # (n, 3): a2 [rad], L2 [m], R_WS [m]
+    distance_m: np.ndarray
+    squat_ratio: np.ndarray
+    slack_m: np.ndarray
+    fitness_m: np.ndarray
+    chain_length_m: np.ndarray
+    wall_s: np.ndarray
+    status: tuple[str, ...]
+    reason: tuple[str, ...]
+
+    def __len__(self) -> int:
+        return len(self.status)
+
+    @property
+    def ok(self) -> np.ndarray:
+        return np.array([s == STATUS_OK for s in self.status], dtype=bool)
+
+    def result(self, i: int) -> SimResult:
+        return SimResult(
+            status=self.status[i], reason=self.reason[i],
+            distance_m=float(self.distance_m[i]), squat_ratio=float(self.squat_ratio[i]),
+            slack_m=float(self.slack_m[i]), fitness_m=float(self.fitness_m[i]),
+            chain_length_m=float(self.chain_length_m[i]), wall_s=float(self.wall_s[i]),
+        )
+
+    @classmethod
+    def from_results(cls, designs: np.ndarray, results: list[SimResult]) -> "BatchResult":
+        def col(name: str) -> np.ndarray:
+            return np.array([getattr(r, name) for r in results], dtype=float)
+
+        return cls(
+            designs=np.asarray(designs, dtype=float).reshape(-1, 3),
+            distance_m=col("distance_m"), squat_ratio=col("squat_ratio"),
+            slack_m=col("slack_m"), fitness_m=col("fitness_m"),
+            chain_length_m=col("chain_length_m"), wall_s=col("wall_s"),
+            status=tuple(r.status for r in results), reason=tuple(r.reason for r in results),
+        )
+
+    @classmethod
+    def concat(cls, parts: "list[BatchResult]") -> "BatchResult":
+        """Join batches in the given order."""
+        if not parts:
+            return cls.from_results(np.zeros((0, 3)), [])
+        arrays = {
+            f.name: np.concatenate([getattr(p, f.name) for p in parts])
+            for f in fields(cls) if f.name not in ("status", "reason")
+        }
+        return cls(
+            **arrays,
+            status=tuple(s for p in parts for s in p.status),
+            reason=tuple(s for p in parts for s in p.reason),
+        )

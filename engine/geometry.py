@@ -1,0 +1,29 @@
+"""A design's static final-drive quantities, without simulating."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from engine.api import Design, SimSettings
+from engine.model import params as P
+from engine.model.kinematics import taut_length
+from engine.model.road import Road
+from engine.simulate import prepare
+from engine.vehicle import Vehicle
+
+
+def static_geometry(design: Design, vehicle: Vehicle) -> dict[str, Any]:
+    """SR at the design pose, chain length L (69) and taut run at static equilibrium on flat
+    ground, R_ES, and the engine sprocket centre relative to the swingarm pivot (chassis frame)."""
+    setup = prepare(design, Road(), SimSettings(), vehicle)
+    return {
+        "a2_deg": design.a2_deg,
+        "l2": design.l2,
+        "rws": design.rws,
+        "res": float(setup.p[P.R_ES]),
+        "squat_ratio": setup.squat_ratio,
+        "chain_length_m": float(setup.p[P.L_CHAIN]),
+        "taut_length_m": taut_length(setup.q0),
+        "sprocket_centre_m": [design.l2 * math.cos(design.a2), design.l2 * math.sin(design.a2)],
+    }

@@ -1,0 +1,1 @@
+"""The model description: coordinates, parameters, constraints, masses, forces, tyre, road."""

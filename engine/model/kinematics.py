@@ -1,0 +1,131 @@
+"""Position analysis and final-drive geometry: assembling q, the chain tangent, the taut run,
+the chain length (69) and the squat ratio.
+
+Given the six independent coordinates (x1, y1, theta, phi, fs, beta) and alpha, every other
+coordinate follows in closed form from eqs. (1)-(33) (the upper chain run is the common
+external tangent of the pitch circles, eqs. 24-29 and 31).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from engine.model import params as P
+from engine.model.coordinates import (
+    ALPHA, BETA, FS, FT, GAMMA, N_COORDS, PHI, RS, RT, THETA,
+    X1, X2, X3, X4, X5, X6, X7, X8, X9, X10, X11, X12, X13, X14, X15,
+    Y1, Y2, Y3, Y4, Y5, Y6, Y7, Y8, Y9, Y10, Y11, Y12, Y13, Y14, Y15,
+)
+from engine.model.road import Road
+
+
+class GeometryError(ValueError):
+    """A design whose final drive cannot be assembled (e.g. sprockets overlapping)."""
+
+
+def chain_tangent_angle(x2: float, y2: float, x6: float, y6: float, res: float, rws: float) -> float:
+    """gamma: angle of the radii to the upper run's tangent points (eqs. 24-29, 31).
+
+    Eq. (31) with points 10, 11 at angle gamma gives |r_2->6| cos(gamma - delta) = R_ES - R_WS,
+    delta the direction of r_2->6; the upper run is the root gamma = delta - acos(.).
+    """
+    dx, dy = x6 - x2, y6 - y2
+    dist = math.hypot(dx, dy)
+    if dist <= abs(rws - res):
+        raise GeometryError(
+            f"sprocket centres {dist:.4f} m apart cannot carry a chain between radii "
+            f"{res:.4f} m and {rws:.4f} m")
+    gamma = math.atan2(dy, dx) - math.acos((res - rws) / dist)
+    return math.atan2(math.sin(gamma), math.cos(gamma))
+
+
+def assemble(p: np.ndarray, road: Road, x1: float, y1: float, theta: float, phi: float,
+             fs: float, beta: float, alpha: float) -> np.ndarray:
+    """All 39 coordinates from the independent ones (satisfies eqs. 1-29, 31-33; eq. 30
+    holds when alpha is consistent with the chain length P[L_CHAIN])."""
+    q = np.zeros(N_COORDS)
+    q[X1], q[Y1], q[THETA], q[PHI], q[FS], q[BETA], q[ALPHA] = x1, y1, theta, phi, fs, beta, alpha
+    for (ix, iy), length, offset in (((X2, Y2), p[P.L2], p[P.A2]), ((X3, Y3), p[P.L3], p[P.A3]),
+                                     ((X4, Y4), p[P.L4], p[P.A4]), ((X5, Y5), p[P.L5], p[P.A5])):
+        q[ix] = x1 + length * math.cos(theta + offset)                  # (1)-(8)
+        q[iy] = y1 + length * math.sin(theta + offset)
+    for (ix, iy), length in (((X6, Y6), p[P.L_SA]), ((X7, Y7), p[P.L7])):
+        q[ix] = x1 + length * math.cos(phi)                             # (9)-(12)
+        q[iy] = y1 + length * math.sin(phi)
+    q[RS] = math.hypot(q[X3] - q[X7], q[Y3] - q[Y7])                    # (13)
+    ux, uy = q[X5] - q[X4], q[Y5] - q[Y4]
+    n = math.hypot(ux, uy)
+    ux, uy = ux / n, uy / n
+    q[X12], q[Y12] = q[X4] + fs * ux, q[Y4] + fs * uy                   # (14), (17)
+    q[X13], q[Y13] = q[X12] + p[P.L8] * ux, q[Y12] + p[P.L8] * uy       # (15), (16)
+    q[X14], q[Y14] = q[X6], float(road.height_at(q[X6]))                # (18), (32)
+    q[X15], q[Y15] = q[X13], float(road.height_at(q[X13]))              # (19), (33)
+    q[RT] = q[Y6] - q[Y14]                                              # (20)
+    q[FT] = q[Y13] - q[Y15]                                             # (21)
+    gamma = chain_tangent_angle(q[X2], q[Y2], q[X6], q[Y6], p[P.R_ES], p[P.R_WS])
+    q[GAMMA] = gamma
+    for (ix, iy), (cx, cy), radius, ang in (
+            ((X8, Y8), (X2, Y2), p[P.R_ES], alpha), ((X10, Y10), (X2, Y2), p[P.R_ES], gamma),
+            ((X9, Y9), (X6, Y6), p[P.R_WS], beta), ((X11, Y11), (X6, Y6), p[P.R_WS], gamma)):
+        q[ix] = q[cx] + radius * math.cos(ang)                          # (22)-(29)
+        q[iy] = q[cy] + radius * math.sin(ang)
+    return q
+
+
+def taut_length(q: np.ndarray) -> float:
+    """L_taut: the straight upper run between points 10 and 11 (eq. 68)."""
+    return math.hypot(q[X10] - q[X11], q[Y10] - q[Y11])
+
+
+def chain_length(q: np.ndarray, p: np.ndarray) -> float:
+    """L of eq. (69) at pose q."""
+    return ((q[GAMMA] - q[ALPHA]) * p[P.R_ES] + taut_length(q)
+            + (q[BETA] - q[GAMMA]) * p[P.R_WS])
+
+
+def design_pose(p: np.ndarray) -> np.ndarray:
+    """The design pose on flat ground: theta = theta0, phi = phi0, both tyres unloaded (rt0, ft0),
+    rear contact point at x = 0, sprocket reference points opposite the tangent points."""
+    phi0, theta0 = p[P.PHI0], p[P.THETA0]
+    x1 = -p[P.L_SA] * math.cos(phi0)
+    y1 = p[P.RT0] - p[P.L_SA] * math.sin(phi0)
+    # fork slide fs so that the front axle is ft0 above the ground
+    y4 = y1 + p[P.L4] * math.sin(theta0 + p[P.A4])
+    y5 = y1 + p[P.L5] * math.sin(theta0 + p[P.A5])
+    x4 = x1 + p[P.L4] * math.cos(theta0 + p[P.A4])
+    x5 = x1 + p[P.L5] * math.cos(theta0 + p[P.A5])
+    uy = (y5 - y4) / math.hypot(x5 - x4, y5 - y4)
+    fs = (p[P.FT0] - y4) / uy - p[P.L8]
+    flat = Road()
+    q = assemble(p, flat, x1, y1, theta0, phi0, fs, 0.0, 0.0)
+    return assemble(p, flat, x1, y1, theta0, phi0, fs, q[GAMMA] + math.pi, q[GAMMA] - math.pi)
+
+
+def squat_ratio_at(q: np.ndarray, p: np.ndarray, contact_x: float, contact_y: float) -> float:
+    """SR = K / tan(tau) (READING-NOTES reading of Cossalter's squat ratio).
+
+    X is the intersection of the chain's upper run (10-11) with the swingarm line (1-6);
+    tan(tau) is the slope of the line from the rear contact point to X.
+    """
+    ax, ay = q[X10], q[Y10]
+    dx, dy = q[X11] - ax, q[Y11] - ay                 # chain line direction
+    bx, by = q[X1], q[Y1]
+    ex, ey = q[X6] - bx, q[Y6] - by                   # swingarm line direction
+    det = dx * (-ey) - dy * (-ex)
+    if abs(det) < 1e-12 * math.hypot(dx, dy) * math.hypot(ex, ey):
+        rise, run = ey, ex                            # parallel lines: X at infinity along the swingarm
+    else:
+        s = ((bx - ax) * (-ey) - (by - ay) * (-ex)) / det
+        xx, xy = ax + s * dx, ay + s * dy
+        rise, run = xy - contact_y, xx - contact_x
+    if rise == 0.0:
+        return math.inf
+    return p[P.SQUAT_K] * run / rise
+
+
+def design_squat_ratio(p: np.ndarray) -> float:
+    """Squat ratio at the design pose (theta = 0, phi = phi0, unloaded tyres)."""
+    q = design_pose(p)
+    return squat_ratio_at(q, p, q[X6], q[Y6] - p[P.RT0])

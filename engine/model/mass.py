@@ -1,0 +1,91 @@
+"""Bodies, the constant mass matrix M of eq. (54) and the constant gravity forces.
+
+Each rigid body is carried by two basic points i, j of the natural coordinates; a material
+point is r = r_i + a (r_j - r_i) + b R (r_j - r_i) with R the +90 deg rotation, so M is
+constant (section 6): M_ii = (m - 2 m a_G + J) I, M_ij = (m a_G - J) I + m b_G R,
+M_jj = J I, with J = I_i / L_ij^2 and I_i the polar inertia about point i.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from engine.model import params as P
+from engine.model.coordinates import N_COORDS, X1, X2, X5, X6, X8, X9, X12, X13, Y13
+
+_ROT = np.array([[0.0, -1.0], [1.0, 0.0]])
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid body on basic points i -> j (coordinate indices of their x), Table 2."""
+
+    name: str
+    i: int
+    j: int
+    length: float  # |r_i -> r_j|
+    a_g: float     # centre of mass along i -> j, in units of length
+    b_g: float     # centre of mass normal to i -> j (to the left), in units of length
+    mass: float
+    inertia: float  # about the centre of mass
+
+
+def bodies(p: np.ndarray) -> list[Body]:
+    """The six bodies of section 2.1 for the packed parameters p (front wheel: a point mass)."""
+    a5 = p[P.A5]
+    cx, cy = p[P.CHASSIS_COG_X], p[P.CHASSIS_COG_Y]
+    # chassis centre of mass from the chassis frame to the frame along 1 -> 5
+    xl = cx * math.cos(a5) + cy * math.sin(a5)
+    yl = -cx * math.sin(a5) + cy * math.cos(a5)
+    return [
+        Body("chassis", X1, X5, p[P.L5], xl / p[P.L5], yl / p[P.L5], p[P.M_CHASSIS], p[P.I_CHASSIS]),
+        Body("swingarm", X1, X6, p[P.L_SA], p[P.SWINGARM_COG_FRACTION], 0.0, p[P.M_SWINGARM], p[P.I_SWINGARM]),
+        Body("engine_sprocket", X2, X8, p[P.R_ES], 0.0, 0.0, p[P.M_SPROCKET], p[P.I_SPROCKET]),
+        Body("rear_wheel", X6, X9, p[P.R_WS], 0.0, 0.0, p[P.M_REAR_WHEEL], p[P.I_REAR_WHEEL]),
+        Body("lower_fork", X12, X13, p[P.L8], p[P.FORK_COG_FRACTION], 0.0, p[P.M_FORK], p[P.I_FORK]),
+    ]
+
+
+def mass_matrix(p: np.ndarray) -> np.ndarray:
+    """The constant 39 x 39 mass matrix M."""
+    M = np.zeros((N_COORDS, N_COORDS))
+    eye = np.eye(2)
+    for b in bodies(p):
+        J = (b.inertia + b.mass * b.length**2 * (b.a_g**2 + b.b_g**2)) / b.length**2
+        si, sj = slice(b.i, b.i + 2), slice(b.j, b.j + 2)
+        M[si, si] += (b.mass - 2.0 * b.mass * b.a_g + J) * eye
+        M[si, sj] += (b.mass * b.a_g - J) * eye + b.mass * b.b_g * _ROT
+        M[sj, si] += (b.mass * b.a_g - J) * eye + b.mass * b.b_g * _ROT.T
+        M[sj, sj] += J * eye
+    M[X13:X13 + 2, X13:X13 + 2] += p[P.M_FRONT_WHEEL] * eye
+    return M
+
+
+def gravity_forces(p: np.ndarray) -> np.ndarray:
+    """Generalized gravity forces (constant in natural coordinates)."""
+    Q = np.zeros(N_COORDS)
+    g = p[P.GRAVITY]
+    for b in bodies(p):
+        w = b.mass * g
+        Q[b.i] += b.b_g * w
+        Q[b.i + 1] += -(1.0 - b.a_g) * w
+        Q[b.j] += -b.b_g * w
+        Q[b.j + 1] += -b.a_g * w
+    Q[Y13] += -p[P.M_FRONT_WHEEL] * g
+    return Q
+
+
+def centre_of_mass(q: np.ndarray, p: np.ndarray) -> tuple[float, float, float]:
+    """(total mass, x_G, y_G) of the whole motorcycle at pose q."""
+    total, sx, sy = p[P.M_FRONT_WHEEL], p[P.M_FRONT_WHEEL] * q[X13], p[P.M_FRONT_WHEEL] * q[Y13]
+    for b in bodies(p):
+        ri, rj = q[b.i:b.i + 2], q[b.j:b.j + 2]
+        g = ri + b.a_g * (rj - ri) + b.b_g * (_ROT @ (rj - ri))
+        total += b.mass
+        sx += b.mass * g[0]
+        sy += b.mass * g[1]
+    return total, sx / total, sy / total
+

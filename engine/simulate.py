@@ -1,0 +1,138 @@
+"""The driver: one design on one road -> SimResult; a batch -> BatchResult.
+
+Pure: no file I/O, no global state; failures come back as results with status "failed".
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from engine.api import STATUS_FAILED, STATUS_OK, BatchResult, Design, DesignError, SimResult, SimSettings
+from engine.fitness import fitness, slack
+from engine.model import params as P
+from engine.model.coordinates import N_COORDS, X1, X14, Y14
+from engine.model.kinematics import (
+    GeometryError, chain_length, design_squat_ratio, squat_ratio_at,
+)
+from engine.model.mass import gravity_forces, mass_matrix
+from engine.model.road import Road
+from engine.solver import reference
+from engine.solver.equilibrium import EquilibriumError, static_equilibrium
+from engine.vehicle import Vehicle, default_vehicle
+
+_REASONS = {
+    reference.NONFINITE: "the state became non-finite (diverged)",
+    reference.RESIDUAL: "constraint residual max|Phi| exceeded the limit (diverged)",
+    reference.CORRECTOR: "ABM corrector did not converge",
+    reference.REAR_AIRBORNE: "rear wheel off the road for longer than the limit",
+    reference.FRONT_AIRBORNE: "front wheel off the road for longer than the limit",
+}
+
+
+def pack_parameters(vehicle: Vehicle, design: Design, settings: SimSettings) -> np.ndarray:
+    """The model's parameter vector P (engine.model.params); the chain length is filled later."""
+    p = np.zeros(P.N_PARAMS)
+    p[:P.N_VEHICLE] = vehicle.packed()
+    p[P.A2], p[P.L2], p[P.R_WS] = design.a2, design.l2, design.rws
+    p[P.R_ES] = design.rws / vehicle["sprocket_ratio"]   # section 4: R_WS / R_ES fixed
+    p[P.AL_ALPHA], p[P.AL_XI], p[P.AL_OMEGA] = (
+        settings.penalty_alpha, settings.baumgarte_xi, settings.baumgarte_omega)
+    return p
+
+
+@dataclass(frozen=True)
+class Setup:
+    """Everything a run needs that does not change with time."""
+
+    p: np.ndarray       # parameters incl. the chain length L (69)
+    q0: np.ndarray      # static equilibrium on the road
+    M: np.ndarray       # mass matrix
+    qg: np.ndarray      # gravity forces
+    squat_ratio: float  # at the design pose
+
+
+def prepare(design: Design, road: Road, settings: SimSettings, vehicle: Vehicle) -> Setup:
+    """Parameters, static equilibrium and the chain length L of eq. (69) at t = 0."""
+    p = pack_parameters(vehicle, design, settings)
+    qg = gravity_forces(p)
+    q0 = static_equilibrium(p, road, qg)
+    p[P.L_CHAIN] = chain_length(q0, p)
+    return Setup(p=p, q0=q0, M=mass_matrix(p), qg=qg, squat_ratio=float(design_squat_ratio(p)))
+
+
+def _failed(reason: str, sr: float, chain: float, start: float) -> SimResult:
+    return SimResult(STATUS_FAILED, reason, math.nan, sr, math.nan, math.nan, chain,
+                     time.perf_counter() - start)
+
+
+def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
+             vehicle: Vehicle | None = None) -> SimResult:
+    """Simulate one design on one road from rest; never raises for a design that fails."""
+    start = time.perf_counter()
+    vehicle = vehicle or default_vehicle()
+    try:
+        setup = prepare(design, road, settings, vehicle)
+    except (GeometryError, EquilibriumError) as exc:
+        return _failed(str(exc), math.nan, math.nan, start)
+    p = setup.p
+    chain = float(p[P.L_CHAIN])
+    kind, rp = road.packed()
+    y0 = np.zeros(reference.N_STATE)
+    y0[:N_COORDS] = setup.q0
+    n_steps = int(round(settings.duration / settings.dt))
+    max_air_steps = int(math.ceil(settings.max_airborne_time / settings.dt))
+    code, failed_step, y_end, tmin, tmax, series, qs = reference.run_reference(
+        y0, p, kind, rp, setup.M, setup.qg, settings.tyre_longitudinal, settings.dt, n_steps,
+        settings.trapezoidal_steps, settings.under_relaxation, settings.corrector_tol,
+        settings.corrector_max_iter, settings.lambda_tol, settings.lambda_max_iter,
+        settings.max_constraint_residual, max_air_steps, settings.series_stride, settings.series)
+    if code != reference.OK:
+        at = failed_step * settings.dt
+        return _failed(f"{_REASONS[code]} at t = {at:.4f} s", setup.squat_ratio, chain, start)
+    distance = float(y_end[X1] - setup.q0[X1])
+    slack_m = slack(tmin, tmax)
+    fit = fitness(distance, setup.squat_ratio, slack_m, eps1=p[P.EPS1], eps2=p[P.EPS2],
+                  sr_optimum=p[P.SR_OPTIMUM], floor=p[P.FLOOR])
+    out = None
+    if settings.series:
+        out = _series(series, qs, setup, p)
+    return SimResult(STATUS_OK, "", distance, setup.squat_ratio, slack_m, fit, chain,
+                     time.perf_counter() - start, out)
+
+
+def _series(series: np.ndarray, qs: np.ndarray, setup: Setup, p: np.ndarray) -> dict[str, np.ndarray]:
+    """Name the recorded columns (Fig. 13 quantities) and add derived ones."""
+    out = {name: series[:, k].copy() for k, name in enumerate(reference.SERIES_COLUMNS)}
+    out["distance"] = out.pop("x1") - setup.q0[X1]
+    out["pitch"] = out.pop("theta")
+    out["squat_ratio"] = np.array([squat_ratio_at(q, p, q[X14], q[Y14]) for q in qs])
+    out["q"] = qs[:, :N_COORDS].copy()
+    out["qdot"] = qs[:, N_COORDS:].copy()
+    return out
+
+
+def evaluate(designs: np.ndarray, road: Road, settings: SimSettings = SimSettings(),
+             vehicle: Vehicle | None = None) -> BatchResult:
+    """Simulate a batch of design rows (a2 [rad], L2 [m], R_WS [m]), results in input order.
+
+    Series are never kept in a batch. A row that is not a valid design is a failed result.
+    """
+    rows = np.asarray(designs, dtype=float).reshape(-1, 3)
+    settings = settings.with_(series=False)
+    vehicle = vehicle or default_vehicle()
+    results = []
+    for a2, l2, rws in rows:
+        try:
+            design = Design(float(a2), float(l2), float(rws))
+        except DesignError as exc:
+            results.append(_failed(f"invalid design: {exc}", math.nan, math.nan, time.perf_counter()))
+            continue
+        results.append(simulate(design, road, settings, vehicle))
+    return BatchResult.from_results(rows, results)
+
+
+

@@ -1,0 +1,1 @@
+"""Numerics: augmented Lagrangian, integrators, static equilibrium."""

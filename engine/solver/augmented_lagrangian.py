@@ -1,0 +1,67 @@
+"""Accelerations by the augmented Lagrangian formulation, eqs. (57)-(58).
+
+(M + alpha Phi_q^T Phi_q) q'' = Q - Phi_q^T [lambda_i + alpha (Phi_q' q' + 2 xi omega Phi' + omega^2 Phi)]
+lambda_{i+1} = lambda_i + alpha (Phi'' + 2 xi omega Phi' + omega^2 Phi)
+
+The leading matrix is factorised once per evaluation (Cholesky) and the multipliers are
+iterated to convergence, warm-started from the previous evaluation's lambda.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from engine.model import params as P
+from engine.model.constraints import jacobian, phi, phiq_dot_qdot
+from engine.model.coordinates import N_CONSTRAINTS, N_COORDS
+from engine.model.jit import jit
+
+
+@jit
+def cholesky_solve(L: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """Solve L L^T x = b (L lower triangular)."""
+    n = b.shape[0]
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= L[i, k] * out[k]
+        out[i] = s / L[i, i]
+    for i in range(n - 1, -1, -1):
+        s = out[i]
+        for k in range(i + 1, n):
+            s -= L[k, i] * out[k]
+        out[i] = s / L[i, i]
+
+
+@jit
+def accelerations(q: np.ndarray, qd: np.ndarray, Q: np.ndarray, p: np.ndarray, kind: int,
+                  rp: np.ndarray, M: np.ndarray, lam: np.ndarray, tol: float, max_iter: int,
+                  qdd: np.ndarray) -> tuple[float, int]:
+    """q'' into qdd, lambda updated in place. Returns (max|Phi|, iterations; -1 if not converged)."""
+    res = np.empty(N_CONSTRAINTS)
+    J = np.empty((N_CONSTRAINTS, N_COORDS))
+    pdq = np.empty(N_CONSTRAINTS)
+    phi(q, p, kind, rp, res)
+    jacobian(q, p, kind, rp, J)
+    phiq_dot_qdot(q, qd, p, kind, rp, pdq)
+    alpha, xi, omega = p[P.AL_ALPHA], p[P.AL_XI], p[P.AL_OMEGA]
+    stab = pdq + 2.0 * xi * omega * (J @ qd) + omega * omega * res  # Phi_q' q' + 2 xi w Phi' + w^2 Phi
+    A = M + alpha * (J.T @ J)                                          # (57) leading matrix
+    L = np.linalg.cholesky(A)
+    base = Q - alpha * (J.T @ stab)
+    old = np.empty(N_COORDS)
+    iters = -1
+    for it in range(max_iter):
+        old[:] = qdd
+        cholesky_solve(L, base - J.T @ lam, qdd)                       # (57)
+        lam += alpha * (J @ qdd + stab)                                # (58)
+        change = 0.0
+        scale = 1.0
+        for i in range(N_COORDS):
+            change = max(change, abs(qdd[i] - old[i]))
+            scale = max(scale, abs(qdd[i]))
+        if it > 0 and change <= tol * scale:
+            iters = it + 1
+            break
+    return np.max(np.abs(res)), iters
+

@@ -1,0 +1,154 @@
+"""The paper's 23 roads as named presets, each with its paper reference row.
+
+Roads (paper section 5.1; Tables 11-13), built with :class:`engine.model.road.Road`:
+
+- ``flat`` (Table 11);
+- 16 sinusoids ``sine-h{H}cm-l{lambda}m``: H_y = 1, 2, 3, 4 cm x lambda = 2, 3, 4, 5 m,
+  H_y outer (Table 12 row order), e.g. ``sine-h4cm-l3m`` = ``sine:0.04:3``;
+- 6 Gaussian bumps ``bump-h{H}cm-s{sigma}cm``: H_y = 2, 4 cm x sigma = 20, 50, 100 cm,
+  H_y outer (Table 13 row order, restored in READING-NOTES), centre mu = 5.0 m (the
+  READING-NOTES reference choice; the paper gives none), e.g. ``bump-h4cm-s20cm``.
+
+Groups: ``paper`` (all 23 in the order Table 11, Table 12 rows, Table 13 rows),
+``sine`` and ``bump``.
+
+Each preset's ``paper`` dict is its row of Tables 11-13 (the DE optimum the paper found):
+``a2_deg, L2_m, R_WS_m, slack_mm, SR, fitness_m``, as printed (Table 12 prints
+a2 = 371.0 deg for ``sine-h4cm-l2m``: angles wrap, 371 deg = 11 deg; it is kept as
+printed). The rows are read from the shipped ``engine/data/paper_tables.json``.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.resources
+import json
+from dataclasses import dataclass
+from typing import Any
+
+from engine.model.road import DEFAULT_BUMP_CENTRE_M, Road, RoadError
+
+#: Keys of a preset's paper reference row (Tables 11-13).
+PAPER_KEYS = ("a2_deg", "L2_m", "R_WS_m", "slack_mm", "SR", "fitness_m")
+
+GROUPS = ("paper", "sine", "bump")
+
+
+@dataclass(frozen=True)
+class RoadPreset:
+    """A named road with the paper's optimum on it (``paper`` is None for user roads)."""
+
+    name: str
+    road: Road
+    paper: dict[str, float] | None
+    description: str
+
+    @property
+    def spec(self) -> str:
+        """The road's spec string (``Road.parse(spec) == road``)."""
+        return self.road.spec
+
+
+@functools.cache
+def paper_tables() -> dict[str, Any]:
+    """The paper's tables as shipped in ``engine/data/paper_tables.json`` (do not mutate)."""
+    path = importlib.resources.files("engine") / "data" / "paper_tables.json"
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+def _cm(metres: float) -> int:
+    return round(metres * 100)
+
+
+def _reference(row: dict[str, Any]) -> dict[str, float]:
+    return {key: float(row[key]) for key in PAPER_KEYS}
+
+
+def _build() -> dict[str, RoadPreset]:
+    tables = paper_tables()
+    presets = [
+        RoadPreset("flat", Road("flat"), _reference(tables["table11_flat"][0]),
+                   "flat road (Table 11)")
+    ]
+    for i, row in enumerate(tables["table12_sine"], start=1):
+        h, lam = row["H_y_m"], row["lambda_m"]
+        presets.append(RoadPreset(
+            f"sine-h{_cm(h)}cm-l{lam:g}m", Road("sine", height=h, wavelength=lam),
+            _reference(row),
+            f"sinusoid H_y = {_cm(h)} cm, lambda = {lam:g} m (Table 12 row {i})",
+        ))
+    for i, row in enumerate(tables["table13_gaussian"], start=1):
+        h, sigma = row["H_y_m"], row["sigma_m"]
+        presets.append(RoadPreset(
+            f"bump-h{_cm(h)}cm-s{_cm(sigma)}cm",
+            Road("bump", height=h, sigma=sigma, mu=DEFAULT_BUMP_CENTRE_M),
+            _reference(row),
+            f"Gaussian bump H_y = {_cm(h)} cm, sigma = {sigma:g} m, "
+            f"mu = {DEFAULT_BUMP_CENTRE_M:g} m (Table 13 row {i})",
+        ))
+    return {p.name: p for p in presets}
+
+
+#: The 23 presets by name, in the paper's table order.
+PRESETS: dict[str, RoadPreset] = _build()
+
+
+def preset_group(name: str) -> list[RoadPreset]:
+    """Presets of a group: ``paper`` (23), ``sine`` (16) or ``bump`` (6), in table order."""
+    key = name.strip().lower()
+    if key == "paper":
+        return list(PRESETS.values())
+    if key in ("sine", "bump"):
+        return [p for p in PRESETS.values() if p.road.kind == key]
+    raise ValueError(f"unknown preset group {name!r}: expected one of {', '.join(GROUPS)}")
+
+
+def resolve_roads(text: str) -> list[RoadPreset | Road]:
+    """Roads from a comma-separated list of group names, preset names and road specs.
+
+    ``"paper"``, ``"flat,sine-h4cm-l3m"``, ``"sine:0.04:3,bump:0.03:0.4:6"``. A road spec
+    equal to a preset's road resolves to that preset (so it carries the paper row).
+    Order is kept; repeated roads are dropped after their first occurrence. Raises
+    ValueError naming the bad item.
+    """
+    if not isinstance(text, str) or not text.strip():
+        raise ValueError("road list must be a non-empty string")
+    by_road = {p.road: p for p in PRESETS.values()}
+    out: list[RoadPreset | Road] = []
+    seen: set[Road] = set()
+    for raw in text.split(","):
+        item = raw.strip()
+        if not item:
+            raise ValueError(f"empty item in road list {text!r}")
+        key = item.lower()
+        if key in GROUPS:
+            found: list[RoadPreset | Road] = list(preset_group(key))
+        elif key in PRESETS:
+            found = [PRESETS[key]]
+        elif ":" in item:
+            try:
+                road = Road.parse(item)
+            except RoadError as exc:
+                raise ValueError(f"bad road {item!r}: {exc}") from None
+            found = [by_road.get(road, road)]
+        else:
+            raise ValueError(
+                f"unknown road {item!r}: expected a group ({', '.join(GROUPS)}), a preset "
+                "name (e.g. sine-h4cm-l3m) or a spec (flat, sine:H:LAMBDA, bump:H:SIGMA[:MU])"
+            )
+        for entry in found:
+            road = entry.road if isinstance(entry, RoadPreset) else entry
+            if road not in seen:
+                seen.add(road)
+                out.append(entry)
+    return out
+
+
+def as_road(item: RoadPreset | Road) -> Road:
+    """The :class:`Road` of a preset or a road."""
+    return item.road if isinstance(item, RoadPreset) else item
+
+
+def road_label(item: RoadPreset | Road) -> str:
+    """A short label: the preset name, else the road's spec string."""
+    return item.name if isinstance(item, RoadPreset) else item.spec

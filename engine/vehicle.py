@@ -1,0 +1,174 @@
+"""Vehicle parameters: the paper's bike by default, or a user's file of the same shape.
+
+The file (engine/data/vehicle.json) groups parameters; each is ``{"value", "unit", "source"}``.
+Loading validates every key: a missing key, a non-number, or a physically impossible value
+(negative mass, zero stiffness, ...) raises :class:`VehicleError` naming the key.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from engine.model import params as P
+
+#: Rules for each key: (lower bound, lower inclusive, upper bound). None = unbounded.
+_POSITIVE = (0.0, False, None)
+_NON_NEGATIVE = (0.0, True, None)
+_FRACTION = (0.0, True, 1.0)
+_ANY = (None, True, None)
+
+_RULES: dict[str, tuple[float | None, bool, float | None]] = {
+    **{k: _POSITIVE for k in ("L4", "L5", "L7", "L_SA", "rt0", "ft0", "L8")},
+    **{k: _NON_NEGATIVE for k in ("L3",)},
+    **{k: _ANY for k in ("a3", "a4", "a5", "theta0", "phi0", "chassis_cog_x", "chassis_cog_y")},
+    **{k: _POSITIVE for k in ("k_rs", "s_rs", "k_fs", "s_fs", "k_rt", "k_ft")},
+    **{k: _NON_NEGATIVE for k in ("c_rs", "c_fs", "c_rt", "c_ft")},
+    **{k: _POSITIVE for k in (
+        "m_chassis", "I_chassis", "m_swingarm", "I_swingarm", "m_sprocket", "I_sprocket",
+        "m_rear_wheel", "I_rear_wheel", "m_fork", "I_fork", "m_front_wheel")},
+    "swingarm_cog_fraction": _FRACTION,
+    "fork_cog_fraction": _FRACTION,
+    **{k: _ANY for k in ("pDx2", "pEx1", "pEx2", "pEx3", "pEx4", "pKx2", "pKx3")},
+    **{k: _POSITIVE for k in ("pCx1", "pDx1", "pKx1", "Fz0")},
+    "K_vlow0": _NON_NEGATIVE,
+    **{k: _POSITIVE for k in ("sigma_k0", "sigma_min", "eps_F", "V_low")},
+    "torque": _ANY,
+    "sprocket_ratio": _POSITIVE,
+    "gravity": _POSITIVE,
+    "eps1": _NON_NEGATIVE,
+    "eps2": _NON_NEGATIVE,
+    "sr_optimum": _ANY,
+    "floor": _FRACTION,
+    "squat_K": _POSITIVE,
+}
+#: Calibration targets: validated and carried, not packed for the model.
+_TARGET_RULES: dict[str, tuple[float | None, bool, float | None]] = {
+    "target_rear_share": (0.0, False, 1.0),
+    "target_cog_height": _POSITIVE,
+    "target_distance": _POSITIVE,
+    "calibration_a2_deg": _ANY,
+    "calibration_l2": _NON_NEGATIVE,
+    "calibration_rws": _POSITIVE,
+}
+
+
+class VehicleError(ValueError):
+    """A vehicle file that is malformed or not physical; the message names the key."""
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """Validated vehicle parameters (SI units), immutable and picklable."""
+
+    name: str
+    values: tuple[tuple[str, float], ...]
+    units: tuple[tuple[str, str], ...]
+    sources: tuple[tuple[str, str], ...]
+    groups: tuple[tuple[str, str], ...]
+
+    def __getitem__(self, key: str) -> float:
+        return dict(self.values)[key]
+
+    def packed(self) -> np.ndarray:
+        """The vehicle part of the model's parameter vector P (see engine.model.params)."""
+        v = dict(self.values)
+        return np.array([v[k] for k in P.VEHICLE_KEYS], dtype=float)
+
+    def replace(self, **changes: float) -> "Vehicle":
+        """A copy with some values changed (validated)."""
+        d = self.to_dict()
+        for key, value in changes.items():
+            group = dict(self.groups).get(key)
+            if group is None:
+                raise VehicleError(f"unknown vehicle parameter {key!r}")
+            d["parameters"][group][key]["value"] = value
+        return load_vehicle_dict(d)
+
+    def to_dict(self) -> dict[str, Any]:
+        units, sources, groups = dict(self.units), dict(self.sources), dict(self.groups)
+        out: dict[str, Any] = {"name": self.name, "parameters": {}}
+        for key, value in self.values:
+            out["parameters"].setdefault(groups[key], {})[key] = {
+                "value": value, "unit": units[key], "source": sources[key]}
+        return out
+
+    def fingerprint(self) -> str:
+        """sha256 of the parameter values (not names or sources): a cache key."""
+        canon = json.dumps(sorted(self.values), separators=(",", ":"))
+        return hashlib.sha256(canon.encode()).hexdigest()
+
+
+def _check(key: str, raw: Any, rule: tuple[float | None, bool, float | None]) -> float:
+    if isinstance(raw, bool) or not isinstance(raw, (int, float)):
+        raise VehicleError(f"vehicle parameter {key!r}: value must be a number, got {raw!r}")
+    value = float(raw)
+    if not math.isfinite(value):
+        raise VehicleError(f"vehicle parameter {key!r}: value must be finite, got {raw!r}")
+    lo, lo_inclusive, hi = rule
+    if lo is not None and (value < lo or (value == lo and not lo_inclusive)):
+        bound = ">=" if lo_inclusive else ">"
+        raise VehicleError(f"vehicle parameter {key!r}: must be {bound} {lo:g}, got {value:g}")
+    if hi is not None and value > hi:
+        raise VehicleError(f"vehicle parameter {key!r}: must be <= {hi:g}, got {value:g}")
+    return value
+
+
+def load_vehicle_dict(data: Any) -> Vehicle:
+    """Validate a parsed vehicle file."""
+    if not isinstance(data, dict) or not isinstance(data.get("parameters"), dict):
+        raise VehicleError("vehicle file: top-level object with a 'parameters' object expected")
+    found: dict[str, tuple[str, Any, str, str]] = {}
+    for group, entries in data["parameters"].items():
+        if not isinstance(entries, dict):
+            raise VehicleError(f"vehicle group {group!r}: object expected")
+        for key, entry in entries.items():
+            if not isinstance(entry, dict) or "value" not in entry:
+                raise VehicleError(f"vehicle parameter {key!r}: object with a 'value' expected")
+            if key in found:
+                raise VehicleError(f"vehicle parameter {key!r}: given twice")
+            found[key] = (group, entry["value"], str(entry.get("unit", "")), str(entry.get("source", "")))
+    rules = {**_RULES, **_TARGET_RULES}
+    for key in rules:
+        if key not in found:
+            raise VehicleError(f"vehicle parameter {key!r}: missing")
+    for key in found:
+        if key not in rules:
+            raise VehicleError(f"vehicle parameter {key!r}: unknown key")
+    values = tuple((k, _check(k, found[k][1], rules[k])) for k in rules)
+    v = dict(values)
+    if v["sigma_min"] > v["sigma_k0"]:
+        raise VehicleError("vehicle parameter 'sigma_min': must not exceed sigma_k0")
+    return Vehicle(
+        name=str(data.get("name", "")),
+        values=values,
+        units=tuple((k, found[k][2]) for k in rules),
+        sources=tuple((k, found[k][3]) for k in rules),
+        groups=tuple((k, found[k][0]) for k in rules),
+    )
+
+
+def load_vehicle(path: str | Path) -> Vehicle:
+    """Read and validate a vehicle JSON file."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except OSError as exc:
+        raise VehicleError(f"vehicle file {str(path)!r}: {exc.strerror or exc}") from None
+    except json.JSONDecodeError as exc:
+        raise VehicleError(f"vehicle file {str(path)!r}: not valid JSON ({exc.msg}, line {exc.lineno})") from None
+    return load_vehicle_dict(data)
+
+
+@lru_cache(maxsize=1)
+def default_vehicle() -> Vehicle:
+    """The paper's motorcycle (engine/data/vehicle.json)."""
+    text = resources.files("engine").joinpath("data/vehicle.json").read_text()
+    return load_vehicle_dict(json.loads(text))

@@ -1,0 +1,51 @@
+"""Energy balance: drive, dampers and longitudinal tyre force off, the bike dropped 2 cm onto
+a flat road keeps its total mechanical energy (kinetic + gravity + springs)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from engine import Design, Road, SimSettings
+from engine.model import params as P
+from engine.model.coordinates import FS, FT, N_COORDS, RS, RT
+from engine.simulate import prepare
+from engine.solver import reference
+
+DROP = 0.02
+
+
+def _energy(q, qd, setup):
+    p = setup.p
+    kinetic = 0.5 * qd @ setup.M @ qd
+    gravity = -setup.qg @ q                      # Q_g is constant: V_g = -Q_g . q
+    springs = 0.5 * p[P.K_RS] * (q[RS] - p[P.S_RS]) ** 2 + 0.5 * p[P.K_FS] * (q[FS] - p[P.S_FS]) ** 2
+    springs += 0.5 * p[P.K_RT] * min(q[RT] - p[P.RT0], 0.0) ** 2
+    springs += 0.5 * p[P.K_FT] * min(q[FT] - p[P.FT0], 0.0) ** 2
+    return kinetic + gravity + springs
+
+
+def test_energy_is_conserved_within_half_a_percent_of_the_drop(vehicle):
+    conservative = vehicle.replace(torque=0.0, c_rs=0.0, c_fs=0.0, c_rt=0.0, c_ft=0.0)
+    settings = SimSettings(duration=1.0, tyre_longitudinal=False)
+    road = Road.parse("flat")
+    setup = prepare(Design.from_deg(195.3, 0.037, 0.088), road, settings, conservative)
+    q0 = setup.q0.copy()
+    q0[1:26:2] += DROP            # points 1-13 up by 2 cm (contact points stay on the road)
+    q0[RT] += DROP
+    q0[FT] += DROP
+    y0 = np.zeros(reference.N_STATE)
+    y0[:N_COORDS] = q0
+    kind, rp = road.packed()
+    code, _, _, _, _, series, states = reference.run_reference(
+        y0, setup.p, kind, rp, setup.M, setup.qg, False, settings.dt, 1000, 4, 0.7,
+        settings.corrector_tol, settings.corrector_max_iter, settings.lambda_tol,
+        settings.lambda_max_iter, 1e-3, 10**6, 1, True)
+    assert code == reference.OK
+    e = np.array([_energy(s[:N_COORDS], s[N_COORDS:], setup) for s in states])
+    e_rest = _energy(setup.q0, np.zeros(N_COORDS), setup)
+    drop_energy = e[0] - e_rest
+    assert drop_energy > 0.9 * 269.2 * 9.81 * DROP * 0.5   # the drop is a real energy input
+    assert (series[:, reference.SERIES_COLUMNS.index("fz_rear")] > 0).any()  # it lands
+    drift = np.max(np.abs(e - e[0])) / drop_energy
+    print(f"energy drift {drift:.2e} of the drop energy {drop_energy:.2f} J")
+    assert drift < 0.005, drift

@@ -1,0 +1,84 @@
+"""Magic formula, transient slip model and road profiles against their definitions."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from engine import Road, RoadError
+from engine.model.road_height import road_height
+from engine.model.tyre import (
+    deformation_rate, magic_formula, relaxation_length, slip_stiffness, transient_slip,
+)
+from engine.simulate import pack_parameters
+from engine import Design, SimSettings
+
+
+@pytest.fixture()
+def p(vehicle):
+    return pack_parameters(vehicle, Design.from_deg(0, 0, 0.09), SimSettings())
+
+
+@pytest.mark.parametrize("fz", [500.0, 1600.0, 2500.0])
+def test_magic_formula_slope_peak_and_sign(p, fz):
+    h = 1e-7
+    slope = (magic_formula(fz, h, p) - magic_formula(fz, -h, p)) / (2 * h)
+    assert slope == pytest.approx(slip_stiffness(fz, p), rel=1e-5)            # dF/dk at 0 = K_xk
+    kappas = np.linspace(0, 1, 20001)
+    peak = max(magic_formula(fz, k, p) for k in kappas)
+    dfz = (fz - 1600.0) / 1600.0
+    assert peak == pytest.approx((1.2017 - 0.092206 * dfz) * fz, rel=1e-4)  # D_x = mu_x F_z
+    assert magic_formula(fz, 0.2, p) > 0 > magic_formula(fz, -0.2, p)
+    assert magic_formula(0.0, 0.2, p) == 0.0
+
+
+def test_transient_state_settles_on_the_kinematic_slip(p):
+    """Eq. (42) at constant speeds: u -> -V_sx sigma / |V_x|, so kappa' -> -V_sx / |V_x|."""
+    vx, vsx, sigma, u, dt = 10.0, -0.8, 0.2, 0.0, 1e-4
+    for _ in range(20000):
+        u += dt * deformation_rate(u, sigma, vsx, vx)
+    assert transient_slip(u, sigma, vsx, vx, 1500.0, p) == pytest.approx(-vsx / vx, rel=1e-6)
+
+
+def test_relaxation_length_limits(p):
+    fz = 1500.0
+    assert relaxation_length(0.0, 0.0, fz, p) == pytest.approx(0.2)             # sigma_k0 at kappa' = 0
+    k = 1e-4
+    assert relaxation_length(magic_formula(fz, k, p), k, fz, p) == pytest.approx(0.2, rel=1e-3)
+    assert relaxation_length(0.0, 10.0, fz, p) == pytest.approx(0.02)           # sigma_min floor
+
+
+@pytest.mark.parametrize("spec", ["flat", "sine:0.04:2", "sine:0.01:5", "bump:0.04:0.2", "bump:0.02:1.0:3"])
+def test_road_derivatives(spec):
+    road = Road.parse(spec)
+    kind, rp = road.packed()
+    for x in np.linspace(-2, 12, 57):
+        h, d1, d2 = road_height(kind, rp, x)
+        assert h == pytest.approx(float(road.height_at(x)), abs=1e-15)
+        e = 1e-5
+        hp, d1p, _ = road_height(kind, rp, x + e)
+        hm, d1m, _ = road_height(kind, rp, x - e)
+        assert d1 == pytest.approx((hp - hm) / (2 * e), abs=1e-8)
+        assert d2 == pytest.approx((d1p - d1m) / (2 * e), abs=1e-6)
+
+
+def test_bump_default_centre_and_profile_road():
+    assert Road.parse("bump:0.04:0.2").mu == 5.0
+    road = Road.from_points([0, 1, 2], [0, 0.1, 0.0])
+    kind, rp = road.packed()
+    assert road_height(kind, rp, 0.5)[:2] == pytest.approx((0.05, 0.1))
+    assert road_height(kind, rp, 5.0)[0] == 0.0
+
+
+@pytest.mark.parametrize("spec", ["cobbles", "sine:0.04", "sine:a:3", "sine:0.04:0", "bump:0.04:-1", ""])
+def test_bad_road_specs(spec):
+    with pytest.raises(RoadError):
+        Road.parse(spec)
+
+
+def test_profile_needs_increasing_x():
+    with pytest.raises(RoadError, match="increasing"):
+        Road.from_points([0, 2, 1], [0, 0, 0])
+    assert math.isfinite(Road.from_points([0, 1], [0, 0]).height_at(0.5))

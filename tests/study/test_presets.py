@@ -1,0 +1,97 @@
+"""The paper's 23 road presets and their reference rows (Tables 11-13)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from engine.model.road import Road
+from engine.study import PRESETS, RoadPreset, preset_group, resolve_roads, road_label
+from engine.study.presets import PAPER_KEYS, paper_tables
+
+REPO = Path(__file__).parents[2]
+SHARED_TABLES = REPO / ".." / "shared" / "paper" / "tables.json"
+
+
+def shared_tables() -> dict:
+    if not SHARED_TABLES.exists():
+        pytest.skip(f"{SHARED_TABLES} not available")
+    return json.loads(SHARED_TABLES.read_text())
+
+
+def test_shipped_tables_equal_the_shared_paper_tables() -> None:
+    shipped = json.loads((REPO / "engine" / "data" / "paper_tables.json").read_text())
+    assert shipped == shared_tables()
+    assert paper_tables() == shipped
+
+
+def test_23_roads_split_1_16_6_with_unique_names() -> None:
+    presets = preset_group("paper")
+    assert len(presets) == len(PRESETS) == 23
+    kinds = [p.road.kind for p in presets]
+    assert (kinds.count("flat"), kinds.count("sine"), kinds.count("bump")) == (1, 16, 6)
+    assert len({p.name for p in presets}) == 23
+    assert len({p.road for p in presets}) == 23
+    assert [p.name for p in preset_group("sine")] == [p.name for p in presets[1:17]]
+    assert [p.name for p in preset_group("bump")] == [p.name for p in presets[17:]]
+
+
+def test_names_and_roads_follow_the_paper() -> None:
+    assert PRESETS["flat"].road == Road("flat")
+    assert PRESETS["sine-h4cm-l3m"].road == Road("sine", height=0.04, wavelength=3.0)
+    assert PRESETS["bump-h4cm-s20cm"].road == Road("bump", height=0.04, sigma=0.2, mu=5.0)
+    sines = {(p.road.height, p.road.wavelength) for p in preset_group("sine")}
+    assert sines == {(h, lam) for h in (0.01, 0.02, 0.03, 0.04) for lam in (2.0, 3.0, 4.0, 5.0)}
+    bumps = {(p.road.height, p.road.sigma, p.road.mu) for p in preset_group("bump")}
+    assert bumps == {(h, s, 5.0) for h in (0.02, 0.04) for s in (0.2, 0.5, 1.0)}
+
+
+def test_specs_parse_back() -> None:
+    for preset in PRESETS.values():
+        assert Road.parse(preset.spec) == preset.road
+        assert resolve_roads(preset.spec) == [preset]
+
+
+def test_reference_rows_match_tables_11_to_13() -> None:
+    tables = shared_tables()
+    rows = tables["table11_flat"] + tables["table12_sine"] + tables["table13_gaussian"]
+    presets = preset_group("paper")
+    for preset, row in zip(presets, rows, strict=True):
+        assert preset.paper == {key: row[key] for key in PAPER_KEYS}
+        if preset.road.kind == "sine":
+            assert (preset.road.height, preset.road.wavelength) == (row["H_y_m"], row["lambda_m"])
+        if preset.road.kind == "bump":
+            assert (preset.road.height, preset.road.sigma) == (row["H_y_m"], row["sigma_m"])
+    assert PRESETS["flat"].paper["fitness_m"] == 20.708
+    assert PRESETS["sine-h4cm-l3m"].paper["fitness_m"] == 19.861   # READING-NOTES check row
+    assert PRESETS["sine-h4cm-l2m"].paper["a2_deg"] == 371.0       # printed; wraps to 11 deg
+    assert PRESETS["bump-h4cm-s20cm"].paper["fitness_m"] == 20.584
+
+
+def test_resolve_roads_mixes_groups_names_and_specs_in_order() -> None:
+    roads = resolve_roads("flat, sine-h1cm-l2m ,sine:0.04:3,bump:0.03:0.4:6")
+    assert [road_label(r) for r in roads] == ["flat", "sine-h1cm-l2m", "sine-h4cm-l3m", "bump:0.03:0.4:6"]
+    assert isinstance(roads[2], RoadPreset) and isinstance(roads[3], Road)
+    assert len(resolve_roads("paper")) == 23
+    assert len(resolve_roads("bump,paper,flat")) == 23          # repeats dropped
+    assert [r.name for r in resolve_roads("bump,flat")][-1] == "flat"
+    assert resolve_roads("SINE-H1CM-L2M") == [PRESETS["sine-h1cm-l2m"]]
+
+
+@pytest.mark.parametrize("text, bad", [
+    ("paper,nope", "nope"),
+    ("sine:0.01", "sine:0.01"),
+    ("flat,bump:0.02:-1", "bump:0.02:-1"),
+    ("flat,,sine", "empty"),
+    ("", "non-empty"),
+])
+def test_resolve_roads_errors_name_the_bad_item(text: str, bad: str) -> None:
+    with pytest.raises(ValueError, match=bad):
+        resolve_roads(text)
+
+
+def test_unknown_group() -> None:
+    with pytest.raises(ValueError, match="gravel"):
+        preset_group("gravel")

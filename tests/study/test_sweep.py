@@ -1,0 +1,89 @@
+"""Table 9 grid, grid specs and sweep plans."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from engine.model.road import Road
+from engine.study import (
+    PRESETS,
+    TABLE9_DEFAULT_RWS_M,
+    parse_grid,
+    plan_sweep,
+    product_grid,
+    table9_grid,
+)
+
+
+def test_table9_grid_has_1980_designs_in_row_major_order() -> None:
+    grid = table9_grid()
+    assert grid.shape == (1980, 3)
+    cube = grid.reshape(180, 11, 1, 3)
+    np.testing.assert_allclose(np.degrees(cube[:, 0, 0, 0]), np.arange(0, 360, 2), atol=1e-12)
+    np.testing.assert_allclose(cube[0, :, 0, 1], np.linspace(0, 0.2, 11), atol=1e-15)
+    assert cube[0, -1, 0, 1] == 0.2 and cube[0, 3, 0, 1] == 0.06
+    assert TABLE9_DEFAULT_RWS_M == 0.093 and np.all(grid[:, 2] == 0.093)
+    assert len({tuple(row) for row in grid}) == 1980
+    assert np.all(table9_grid(rws=0.05)[:, 2] == 0.05)
+
+
+def test_table9_spec_and_defaults() -> None:
+    grid = table9_grid()
+    assert np.array_equal(parse_grid("a2_deg=0:358:2,l2=0:0.2:0.02,rws=0.093"), grid)
+    assert np.array_equal(parse_grid(""), grid)
+    assert np.array_equal(parse_grid(" l2 = 0:0.2:0.02 "), grid)
+    assert np.array_equal(parse_grid("rws=0.08"), table9_grid(rws=0.08))
+
+
+def test_grid_syntax() -> None:
+    grid = parse_grid("a2_deg=90|0,l2=0.1,rws=0.05:0.15:0.05")
+    expected = product_grid(np.radians([90.0, 0.0]), [0.1], [0.05, 0.1, 0.15])
+    np.testing.assert_allclose(grid, expected, rtol=0, atol=1e-15)
+    assert grid.shape == (6, 3) and grid[2, 2] == 0.15
+    assert parse_grid("a2=1.5,l2=0,rws=0.1").tolist() == [[1.5, 0.0, 0.1]]
+    # stop is included only when it lands on the grid (within 1e-9 steps)
+    assert parse_grid("a2=0,l2=0:0.05:0.02,rws=0.1")[:, 1].tolist() == [0.0, 0.02, 0.04]
+    assert parse_grid("a2=0,l2=0:0.3:0.1,rws=0.1")[:, 1].tolist() == [0.0, 0.1, 0.2, 0.3]
+
+
+@pytest.mark.parametrize("spec, variable", [
+    ("l2=-0.02", "l2"),
+    ("l2=0.1|-0.1", "l2"),
+    ("rws=0", "rws"),
+    ("rws=-0.1:0.1:0.05", "rws"),
+    ("a2_deg=0:10:0", "a2_deg"),
+    ("a2_deg=0:10:-2", "a2_deg"),
+    ("l2=0.2:0:0.02", "l2"),
+    ("l2=abc", "l2"),
+    ("l2=0:1", "l2"),
+    ("rws=0.1|0.1", "rws"),
+    ("rws=nan", "rws"),
+    ("theta=1", "theta"),
+    ("l2", "l2"),
+    ("a2=1,a2_deg=2", "a2"),
+    ("a2_deg=0:1000000:0.0001", "a2_deg"),
+])
+def test_bad_specs_name_the_variable(spec: str, variable: str) -> None:
+    with pytest.raises(ValueError, match=variable):
+        parse_grid(spec)
+
+
+def test_sweep_plan_counts() -> None:
+    plan = plan_sweep("paper")
+    assert len(plan) == 23
+    assert all(isinstance(road, Road) and designs.shape == (1980, 3) for road, designs in plan)
+    assert sum(len(designs) for _, designs in plan) == 45540
+    assert [road for road, _ in plan] == [p.road for p in PRESETS.values()]
+
+
+def test_sweep_plan_inputs() -> None:
+    plan = plan_sweep([PRESETS["flat"], Road.parse("sine:0.02:3")], "a2_deg=0|180,l2=0.1")
+    assert [road.spec for road, _ in plan] == ["flat", "sine:0.02:3"]
+    assert all(designs.shape == (2, 3) for _, designs in plan)
+    plan[0][1][0, 0] = 99.0                     # each road gets its own array
+    assert plan[1][1][0, 0] == 0.0
+    array_plan = plan_sweep("flat", np.array([[0.0, 0.0, 0.09]]))
+    assert array_plan[0][1].tolist() == [[0.0, 0.0, 0.09]]
+    with pytest.raises(ValueError):
+        plan_sweep("flat", np.zeros((3, 2)))

@@ -1,0 +1,73 @@
+"""The local engine commands: JSON outputs, batch order, exit code 2 on bad arguments."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+
+import pytest
+
+from service.cli import main
+
+
+def run(argv, capsys):
+    code = main(argv)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_geometry_json(capsys):
+    code, out, _ = run(["geometry", "--a2-deg", "0", "--l2", "0", "--rws", "0.093", "--json"], capsys)
+    g = json.loads(out)
+    assert code == 0
+    assert g["squat_ratio"] == pytest.approx(1.092, abs=0.01)     # Table 14, geometry 1
+    assert g["res"] == pytest.approx(0.0465)
+    assert g["sprocket_centre_m"] == [0.0, 0.0]
+    assert g["chain_length_m"] > g["taut_length_m"] > 0.5
+
+
+def test_simulate_json_keys_and_series(tmp_path, capsys):
+    series = tmp_path / "s.csv"
+    code, out, _ = run(["simulate", "--a2-deg", "195.3", "--l2", "0.037", "--rws", "0.088", "--road", "flat",
+                        "--duration", "0.5", "--json", "--series", str(series)], capsys)
+    r = json.loads(out)
+    assert code == 0
+    for key in ("distance_m", "squat_ratio", "slack_mm", "fitness_m", "chain_length_m", "status", "reason", "wall_s"):
+        assert key in r
+    assert r["status"] == "ok" and r["distance_m"] > 0
+    lines = series.read_text().splitlines()
+    assert lines[0].startswith("t,distance,pitch,chain_tension")
+    assert len(lines) == 1 + 51  # header, t = 0 and every 10th of 500 steps
+
+
+def test_evaluate_keeps_input_order(tmp_path, capsys):
+    designs = tmp_path / "d.csv"
+    designs.write_text("a2_deg,l2,rws\n0,0,0.093\n270,0.15,0.05\n195.3,0.037,0.088\n")
+    code, out, _ = run(["evaluate", "--designs", str(designs), "--road", "flat", "--duration", "0.3", "--json"], capsys)
+    rows = json.loads(out)
+    assert code == 0
+    assert [(r["a2_deg"], r["l2"], r["rws"]) for r in rows] == pytest.approx([(0, 0, 0.093), (270, 0.15, 0.05), (195.3, 0.037, 0.088)])
+    assert all(r["status"] == "ok" for r in rows)
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0.09", "--road", "cobbles"], "cobbles"),
+    (["simulate", "--a2-deg", "0", "--l2", "-0.1", "--rws", "0.09", "--road", "flat"], "l2"),
+    (["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0", "--road", "flat"], "rws"),
+    (["geometry", "--a2-deg", "abc", "--l2", "0", "--rws", "0.09"], "a2-deg"),
+    (["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0.09", "--road", "flat", "--duration", "-1"], "duration"),
+])
+def test_bad_arguments_exit_2_with_one_line(argv, fragment, capsys):
+    code, _, err = run(argv, capsys)
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1
+    assert fragment in err
+
+
+def test_console_script_is_installed():
+    exe = shutil.which("finaldrive")
+    assert exe, "the finaldrive console script is not on PATH (pip install -e .)"
+    out = subprocess.run([exe, "geometry", "--a2-deg", "0", "--l2", "0",
+                          "--rws", "0.093", "--json"], capture_output=True, text=True, check=True)
+    assert json.loads(out.stdout)["squat_ratio"] > 1
