@@ -18,7 +18,7 @@ from scipy.optimize import brentq
 from engine.api import Design, SimSettings
 from engine.model import params as P
 from engine.model.coordinates import FT, RT, THETA, X14, X15
-from engine.model.mass import centre_of_mass, gravity_forces
+from engine.model.mass import centre_of_mass
 from engine.model.road import Road
 from engine.simulate import pack_parameters, simulate
 from engine.solver.equilibrium import static_equilibrium
@@ -47,7 +47,7 @@ def calibration_design(vehicle: Vehicle) -> Design:
 def static_loads(vehicle: Vehicle, design: Design | None = None) -> StaticLoads:
     """Static equilibrium on flat ground and the loads it gives."""
     p = pack_parameters(vehicle, design or calibration_design(vehicle), SimSettings())
-    q = static_equilibrium(p, Road(), gravity_forces(p))
+    q = static_equilibrium(p, Road())
     rear = -p[P.K_RT] * (q[RT] - p[P.RT0])
     front = -p[P.K_FT] * (q[FT] - p[P.FT0])
     mass, xg, yg = centre_of_mass(q, p)

@@ -14,15 +14,20 @@ import numpy as np
 from engine.api import STATUS_FAILED, STATUS_OK, BatchResult, Design, DesignError, SimResult, SimSettings
 from engine.fitness import fitness, slack
 from engine.model import params as P
-from engine.model.coordinates import N_COORDS, X1, X14, Y14
+from engine.fast import minimal
+from engine.fast.rosenbrock import run_fast
+from engine.model.coordinates import BETA, FS, N_COORDS, PHI, THETA, X1, X14, Y1, Y14
 from engine.model.kinematics import (
-    GeometryError, chain_length, design_squat_ratio, squat_ratio_at,
+    GeometryError, chain_length, design_squat_ratio, pose_from_minimal, squat_ratio_at,
 )
 from engine.model.mass import gravity_forces, mass_matrix
 from engine.model.road import Road
 from engine.solver import reference
 from engine.solver.equilibrium import EquilibriumError, static_equilibrium
 from engine.vehicle import Vehicle, default_vehicle
+
+#: The natural coordinates that are the fast path's minimal coordinates z, in order.
+MINIMAL_COORDS = (X1, Y1, THETA, PHI, FS, BETA)
 
 _REASONS = {
     reference.NONFINITE: "the state became non-finite (diverged)",
@@ -50,18 +55,15 @@ class Setup:
 
     p: np.ndarray       # parameters incl. the chain length L (69)
     q0: np.ndarray      # static equilibrium on the road
-    M: np.ndarray       # mass matrix
-    qg: np.ndarray      # gravity forces
     squat_ratio: float  # at the design pose
 
 
 def prepare(design: Design, road: Road, settings: SimSettings, vehicle: Vehicle) -> Setup:
     """Parameters, static equilibrium and the chain length L of eq. (69) at t = 0."""
     p = pack_parameters(vehicle, design, settings)
-    qg = gravity_forces(p)
-    q0 = static_equilibrium(p, road, qg)
+    q0 = static_equilibrium(p, road)
     p[P.L_CHAIN] = chain_length(q0, p)
-    return Setup(p=p, q0=q0, M=mass_matrix(p), qg=qg, squat_ratio=float(design_squat_ratio(p)))
+    return Setup(p=p, q0=q0, squat_ratio=float(design_squat_ratio(p)))
 
 
 def _failed(reason: str, sr: float, chain: float, start: float) -> SimResult:
@@ -81,37 +83,55 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
     p = setup.p
     chain = float(p[P.L_CHAIN])
     kind, rp = road.packed()
-    y0 = np.zeros(reference.N_STATE)
-    y0[:N_COORDS] = setup.q0
-    n_steps = int(round(settings.duration / settings.dt))
-    max_air_steps = int(math.ceil(settings.max_airborne_time / settings.dt))
-    code, failed_step, y_end, tmin, tmax, series, qs = reference.run_reference(
-        y0, p, kind, rp, setup.M, setup.qg, settings.tyre_longitudinal, settings.dt, n_steps,
-        settings.trapezoidal_steps, settings.under_relaxation, settings.corrector_tol,
-        settings.corrector_max_iter, settings.lambda_tol, settings.lambda_max_iter,
-        settings.max_constraint_residual, max_air_steps, settings.series_stride, settings.series)
+    n_steps, dt = settings.steps()
+    if settings.method == "fast":
+        # outputs (series rows) every stride steps of dt, at the reference's times
+        n_out = max(1, math.ceil(settings.duration / (dt * settings.series_stride) - 1e-9))
+        y0 = np.zeros(minimal.N_STATE)
+        y0[:minimal.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
+        code, failed_at, y_end, tmin, tmax, series, states = run_fast(
+            y0, p, kind, rp, settings.tyre_longitudinal, settings.duration / n_out, n_out,
+            settings.fast_tolerance, settings.fast_max_step, settings.max_airborne_time, 1,
+            settings.series)
+        x1_end = y_end[minimal.ZX1]
+    else:
+        max_air_steps = int(math.ceil(settings.max_airborne_time / dt))
+        y0 = np.zeros(reference.N_STATE)
+        y0[:N_COORDS] = setup.q0
+        code, failed_step, y_end, tmin, tmax, series, states = reference.run_reference(
+            y0, p, kind, rp, mass_matrix(p), gravity_forces(p), settings.tyre_longitudinal, dt, n_steps,
+            settings.trapezoidal_steps, settings.under_relaxation, settings.corrector_tol,
+            settings.corrector_max_iter, settings.lambda_tol, settings.lambda_max_iter,
+            settings.max_constraint_residual, max_air_steps, settings.series_stride, settings.series)
+        x1_end = y_end[X1]
+        failed_at = failed_step * dt
     if code != reference.OK:
-        at = failed_step * settings.dt
-        return _failed(f"{_REASONS[code]} at t = {at:.4f} s", setup.squat_ratio, chain, start)
-    distance = float(y_end[X1] - setup.q0[X1])
+        return _failed(f"{_REASONS[code]} at t = {failed_at:.4f} s", setup.squat_ratio, chain, start)
+    distance = float(x1_end - setup.q0[X1])
     slack_m = slack(tmin, tmax)
     fit = fitness(distance, setup.squat_ratio, slack_m, eps1=p[P.EPS1], eps2=p[P.EPS2],
                   sr_optimum=p[P.SR_OPTIMUM], floor=p[P.FLOOR])
     out = None
     if settings.series:
-        out = _series(series, qs, setup, p)
+        if settings.method == "fast":
+            qs = np.array([pose_from_minimal(s, p, road) for s in states])
+        else:
+            qs = states[:, :N_COORDS]
+        out = _series(series, qs, setup, p, settings.method)
     return SimResult(STATUS_OK, "", distance, setup.squat_ratio, slack_m, fit, chain,
                      time.perf_counter() - start, out)
 
 
-def _series(series: np.ndarray, qs: np.ndarray, setup: Setup, p: np.ndarray) -> dict[str, np.ndarray]:
+def _series(series: np.ndarray, qs: np.ndarray, setup: Setup, p: np.ndarray,
+            method: str) -> dict[str, np.ndarray]:
     """Name the recorded columns (Fig. 13 quantities) and add derived ones."""
     out = {name: series[:, k].copy() for k, name in enumerate(reference.SERIES_COLUMNS)}
     out["distance"] = out.pop("x1") - setup.q0[X1]
     out["pitch"] = out.pop("theta")
     out["squat_ratio"] = np.array([squat_ratio_at(q, p, q[X14], q[Y14]) for q in qs])
-    out["q"] = qs[:, :N_COORDS].copy()
-    out["qdot"] = qs[:, N_COORDS:].copy()
+    out["q"] = np.array(qs, dtype=float)
+    if method == "fast":
+        del out["residual"]  # minimal coordinates satisfy the constraints exactly
     return out
 
 

@@ -74,6 +74,16 @@ def assemble(p: np.ndarray, road: Road, x1: float, y1: float, theta: float, phi:
     return q
 
 
+def pose_from_minimal(z: np.ndarray, p: np.ndarray, road: Road) -> np.ndarray:
+    """All 39 coordinates from z = (x1, y1, theta, phi, fs, beta), alpha from the chain
+    length P[L_CHAIN] through eq. (30)."""
+    x1, y1, theta, phi, fs, beta = (float(v) for v in z[:6])
+    q = assemble(p, road, x1, y1, theta, phi, fs, beta, 0.0)
+    gamma = q[GAMMA]
+    alpha = gamma - (p[P.L_CHAIN] - taut_length(q) - (beta - gamma) * p[P.R_WS]) / p[P.R_ES]
+    return assemble(p, road, x1, y1, theta, phi, fs, beta, alpha)
+
+
 def taut_length(q: np.ndarray) -> float:
     """L_taut: the straight upper run between points 10 and 11 (eq. 68)."""
     return math.hypot(q[X10] - q[X11], q[Y10] - q[Y11])

@@ -50,6 +50,24 @@ def magic_formula(fz: float, kappa: float, p: np.ndarray) -> float:
 
 
 @jit
+def magic_formula_slope(fz: float, kappa: float, p: np.ndarray) -> tuple[float, float]:
+    """(F_x, dF_x/dkappa) of eq. (45), for linearly implicit steps."""
+    if fz <= FZ_CONTACT_MIN:
+        return 0.0, 0.0
+    dfz = (fz - p[P.FZ0]) / p[P.FZ0]
+    cx = p[P.PCX1]
+    dx = (p[P.PDX1] + p[P.PDX2] * dfz) * fz
+    sgn = 1.0 if kappa > 0.0 else (-1.0 if kappa < 0.0 else 0.0)
+    ex = (p[P.PEX1] + p[P.PEX2] * dfz + p[P.PEX3] * dfz * dfz) * (1.0 - p[P.PEX4] * sgn)
+    bx = slip_stiffness(fz, p) / (cx * dx)
+    bk = bx * kappa
+    arg = bk - ex * (bk - math.atan(bk))
+    angle = cx * math.atan(arg)
+    darg = bx - ex * (bx - bx / (1.0 + bk * bk))
+    return dx * math.sin(angle), dx * math.cos(angle) * cx / (1.0 + arg * arg) * darg
+
+
+@jit
 def low_speed_damping(vx: float, p: np.ndarray) -> float:
     """K_vlow, eq. (44)."""
     avx = abs(vx)

@@ -1,10 +1,11 @@
 """Static equilibrium at rest on the road (section 3.3, step 2).
 
 The paper relaxes the dynamics with a trapezoidal solver; the equilibrium itself is a property
-of the model, so it is solved here directly: with the bike at rest, no drive torque and no
-longitudinal tyre force, the generalized forces projected on the free coordinates
-z = (y1, theta, phi, fs) vanish, J(z)^T Q(q(z)) = 0 with J = dq/dz. The rear contact point is
-held at x = 0 (READING-NOTES: x = 0 at the rear tyre's initial contact point).
+of the model, so it is solved here directly: at rest, with no drive torque and no longitudinal
+tyre force, the generalized forces on the free coordinates vanish. The free coordinates are
+y1, theta, phi and fs; the rear contact point stays at x = 0 (READING-NOTES: x = 0 at the rear
+tyre's initial contact point), which ties x1 to phi: x1 = -L_SA cos(phi). The forces come
+from the compiled minimal-coordinate model (engine.fast.minimal), by Newton's method.
 """
 
 from __future__ import annotations
@@ -12,39 +13,74 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from engine.fast.minimal import (
+    N_AUX, N_DOF, N_STATE, ZFS, ZPHI, ZTHETA, ZU, ZX1, ZY1, design_constants, fast_rhs,
+)
 from engine.model import params as P
-from engine.model.coordinates import FS, FT, GAMMA, PHI, RS, RT, THETA, X1, X14, X15, Y1
-from engine.model.forces import radial_tyre_force
+from engine.model.coordinates import FS, FT, GAMMA, PHI, RT, THETA, X1, X14, X15, Y1
+from engine.model.jit import jit
 from engine.model.kinematics import assemble, design_pose
 from engine.model.road import Road
 
-#: Step of the central differences for J = dq/dz and for the Newton matrix.
-_FD_STEP = 1.0e-6
 #: The first guess presses both tyres this far into the road [m] so both springs act.
 _GUESS_PRELOAD = 0.005
 #: Newton stops when the update is below this [m, rad].
-_XTOL = 1.0e-10
+_XTOL = 1.0e-12
 _MAX_NEWTON = 30
+#: Step of the central differences of the Newton matrix [m, rad].
+_FD_STEP = 1.0e-7
 
 
 class EquilibriumError(RuntimeError):
     """No static equilibrium found (the bike cannot stand on this road)."""
 
 
-def _pose(z: np.ndarray, p: np.ndarray, road: Road) -> np.ndarray:
-    y1, theta, phi, fs = z
-    x1 = -p[P.L_SA] * math.cos(phi)   # rear axle, hence the rear contact point, at x = 0
-    return assemble(p, road, x1, y1, theta, phi, fs, 0.0, 0.0)
+@jit
+def _rest_forces(free, p0, geo, kind, rp, out):
+    """Generalized forces at rest on (y1, theta, phi + x1 with it, fs), over the chassis weight."""
+    y = np.zeros(N_STATE)
+    y[ZY1], y[ZTHETA], y[ZPHI], y[ZFS] = free[0], free[1], free[2], free[3]
+    y[ZX1] = -p0[P.L_SA] * math.cos(free[2])
+    ydot = np.zeros(N_STATE)
+    aux = np.zeros(N_AUX)
+    L = np.zeros((N_DOF, N_DOF))
+    b = np.zeros(N_DOF)
+    c = np.zeros(N_DOF)
+    ws = np.zeros((6, N_DOF))
+    fast_rhs(y, p0, geo, kind, rp, p0[P.SIGMA_K0], False, False, ydot, aux, L, b, c, ws)
+    F = L @ (L.T @ ydot[N_DOF:ZU])  # M z'' = F at rest (no velocity products)
+    w = p0[P.M_CHASSIS] * p0[P.GRAVITY]
+    out[0] = F[ZY1] / w
+    out[1] = F[ZTHETA] / w
+    out[2] = (F[ZPHI] + p0[P.L_SA] * math.sin(free[2]) * F[ZX1]) / w
+    out[3] = F[ZFS] / w
 
 
-def static_forces(q: np.ndarray, p: np.ndarray, qg: np.ndarray) -> np.ndarray:
-    """Generalized forces at rest: gravity, springs (34)-(35), tyre springs (36)-(37)."""
-    Q = qg.copy()
-    Q[RS] += -p[P.K_RS] * (q[RS] - p[P.S_RS])
-    Q[FS] += -p[P.K_FS] * (q[FS] - p[P.S_FS])
-    Q[RT] += radial_tyre_force(q[RT], 0.0, p[P.RT0], p[P.K_RT], 0.0)
-    Q[FT] += radial_tyre_force(q[FT], 0.0, p[P.FT0], p[P.K_FT], 0.0)
-    return Q
+@jit
+def _newton(free, p0, kind, rp, xtol, max_iter, fd):
+    """Newton's method on _rest_forces = 0; returns (free, converged)."""
+    geo = design_constants(p0)
+    g = np.empty(4)
+    gp = np.empty(4)
+    gm = np.empty(4)
+    K = np.empty((4, 4))
+    for _ in range(max_iter):
+        _rest_forces(free, p0, geo, kind, rp, g)
+        for k in range(4):
+            free[k] += fd
+            _rest_forces(free, p0, geo, kind, rp, gp)
+            free[k] -= 2.0 * fd
+            _rest_forces(free, p0, geo, kind, rp, gm)
+            free[k] += fd
+            K[:, k] = (gp - gm) / (2.0 * fd)
+        step = np.linalg.solve(K, g)
+        free -= step
+        if not np.all(np.isfinite(free)):
+            return free, False
+        if np.max(np.abs(step)) < xtol:
+            return free, True
+    return free, False
 
 
 def _first_guess(p: np.ndarray, road: Road) -> np.ndarray:
@@ -57,44 +93,20 @@ def _first_guess(p: np.ndarray, road: Road) -> np.ndarray:
     return np.array([y1, q0[THETA] + pitch, q0[PHI] + pitch, q0[FS]])
 
 
-def static_equilibrium(p: np.ndarray, road: Road, qg: np.ndarray) -> np.ndarray:
+def static_equilibrium(p: np.ndarray, road: Road) -> np.ndarray:
     """The equilibrium pose q (sprocket reference points opposite the tangent points)."""
-
-    def residual(z: np.ndarray) -> np.ndarray:
-        q = _pose(z, p, road)
-        Q = static_forces(q, p, qg)
-        g = np.empty(4)
-        for k in range(4):
-            dz = np.zeros(4)
-            dz[k] = _FD_STEP
-            dq = (_pose(z + dz, p, road) - _pose(z - dz, p, road)) / (2.0 * _FD_STEP)
-            dq[GAMMA] = 0.0  # gamma, alpha, beta carry no static force
-            g[k] = dq @ Q
-        return g / (p[P.M_CHASSIS] * p[P.GRAVITY])
-
-    z = _first_guess(p, road)
-    for _ in range(_MAX_NEWTON):
-        g = residual(z)
-        K = np.empty((4, 4))
-        for k in range(4):
-            dz = np.zeros(4)
-            dz[k] = 0.1 * _FD_STEP
-            K[:, k] = (residual(z + dz) - residual(z - dz)) / (0.2 * _FD_STEP)
-        try:
-            step = np.linalg.solve(K, g)
-        except np.linalg.LinAlgError:
-            raise EquilibriumError("static equilibrium not found: singular stiffness") from None
-        z = z - step
-        if not np.all(np.isfinite(z)):
-            break
-        if np.max(np.abs(step)) < _XTOL:
-            break
-    else:
+    p0 = p.copy()
+    p0[P.TORQUE] = 0.0
+    kind, rp = road.packed()
+    try:
+        free, ok = _newton(_first_guess(p, road), p0, kind, rp, _XTOL, _MAX_NEWTON, _FD_STEP)
+    except np.linalg.LinAlgError:
+        raise EquilibriumError("static equilibrium not found: singular stiffness") from None
+    if not ok:
         raise EquilibriumError("static equilibrium not found: Newton did not converge")
-    if not np.all(np.isfinite(z)):
-        raise EquilibriumError("static equilibrium not found: diverged")
-    q = _pose(z, p, road)
+    y1, theta, phi, fs = (float(v) for v in free)
+    x1 = -p[P.L_SA] * math.cos(phi)
+    q = assemble(p, road, x1, y1, theta, phi, fs, 0.0, 0.0)
     if q[RT] >= p[P.RT0] or q[FT] >= p[P.FT0]:
         raise EquilibriumError("static equilibrium has a wheel off the road")
-    y1, theta, phi, fs = z
-    return assemble(p, road, q[0], y1, theta, phi, fs, q[GAMMA] + math.pi, q[GAMMA] - math.pi)
+    return assemble(p, road, x1, y1, theta, phi, fs, q[GAMMA] + math.pi, q[GAMMA] - math.pi)

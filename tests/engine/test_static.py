@@ -9,7 +9,6 @@ from engine import Design, Road, SimSettings
 from engine.calibrate import static_loads
 from engine.model import params as P
 from engine.model.coordinates import FT, RT
-from engine.model.mass import gravity_forces
 from engine.simulate import pack_parameters
 from engine.solver.equilibrium import static_equilibrium
 from engine.solver.reference import constraint_residual
@@ -39,7 +38,7 @@ def test_wheelbase_is_the_model_geometry(vehicle):
 def test_equilibrium_satisfies_constraints_on_every_road(vehicle, spec):
     road = Road.parse(spec)
     p = pack_parameters(vehicle, Design.from_deg(195.3, 0.037, 0.088), SimSettings())
-    q = static_equilibrium(p, road, gravity_forces(p))
+    q = static_equilibrium(p, road)
     kind, rp = road.packed()
     res = constraint_residual(q, p, kind, rp)
     res[29] = 0.0  # eq. (30) is closed by choosing L (69) from this pose

@@ -1,0 +1,11 @@
+"""The /v1 router: one include per resource."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from service.api.routes import events, health, jobs, results, roads
+
+api_router = APIRouter(prefix="/v1")
+for module in (jobs, results, events, roads, health):
+    api_router.include_router(module.router)

@@ -1,0 +1,105 @@
+"""Errors as RFC 9457 problem details (``application/problem+json``), never tracebacks."""
+
+from __future__ import annotations
+
+import logging
+from http import HTTPStatus
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from service.schemas import Problem, ProblemItem
+
+log = logging.getLogger(__name__)
+
+PROBLEM_MEDIA_TYPE = "application/problem+json"
+
+
+class ApiProblem(Exception):
+    """Raise from a route to answer with a problem document."""
+
+    def __init__(
+        self, status: int, detail: str, *, slug: str | None = None,
+        errors: list[ProblemItem] | None = None, headers: dict[str, str] | None = None,
+    ) -> None:
+        super().__init__(detail)
+        self.status, self.detail, self.slug, self.errors, self.headers = status, detail, slug, errors, headers
+
+
+def problem_response(
+    request: Request, status: int, detail: str, *, slug: str | None = None,
+    errors: list[ProblemItem] | None = None, headers: dict[str, str] | None = None,
+) -> JSONResponse:
+    body = Problem(
+        type=f"urn:finaldrive:problem:{slug}" if slug else "about:blank",
+        title=HTTPStatus(status).phrase, status=status, detail=detail,
+        instance=request.url.path, errors=errors,
+    )
+    return JSONResponse(
+        body.model_dump(exclude_none=True), status_code=status, media_type=PROBLEM_MEDIA_TYPE, headers=headers
+    )
+
+
+def validation_problem(loc: tuple[str | int, ...], msg: str) -> ApiProblem:
+    """A 422 naming one field (``loc`` as in pydantic errors, e.g. ("body", "roads", 0))."""
+    return ApiProblem(422, f"{_where(loc)}: {msg}", slug="validation-error", errors=[ProblemItem(loc=list(loc), msg=msg)])
+
+
+def _where(loc: tuple[str | int, ...] | list[Any]) -> str:
+    return ".".join(str(part) for part in loc) or "request"
+
+
+async def _on_api_problem(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, ApiProblem)
+    return problem_response(request, exc.status, exc.detail, slug=exc.slug, errors=exc.errors, headers=exc.headers)
+
+
+async def _on_http_exception(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, StarletteHTTPException)
+    detail = exc.detail if isinstance(exc.detail, str) else HTTPStatus(exc.status_code).phrase
+    return problem_response(request, exc.status_code, detail, headers=getattr(exc, "headers", None))
+
+
+async def _on_validation_error(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, RequestValidationError)
+    items = [ProblemItem(loc=list(e.get("loc", ())), msg=str(e.get("msg", "invalid"))) for e in exc.errors()]
+    detail = "; ".join(f"{_where(i.loc)}: {i.msg}" for i in items[:5]) or "invalid request"
+    return problem_response(request, 422, detail, slug="validation-error", errors=items)
+
+
+async def _on_unexpected(request: Request, exc: Exception) -> JSONResponse:
+    log.exception("unhandled error on %s %s", request.method, request.url.path, exc_info=exc)
+    return problem_response(request, 500, "internal error; see the server log")
+
+
+def install(app: FastAPI) -> None:
+    app.add_exception_handler(ApiProblem, _on_api_problem)
+    app.add_exception_handler(StarletteHTTPException, _on_http_exception)
+    app.add_exception_handler(RequestValidationError, _on_validation_error)
+    app.add_exception_handler(Exception, _on_unexpected)
+
+
+def documented(*statuses: int) -> dict[int | str, dict[str, Any]]:
+    """``responses=`` entries for problem statuses (media type fixed in the OpenAPI hook)."""
+    text = {
+        400: "the body could not be read (not UTF-8 JSON)",
+        401: "missing or wrong bearer token (only when FINALDRIVE_API_TOKEN is set)",
+        404: "no such job",
+        413: "request body larger than FINALDRIVE_MAX_BODY_BYTES",
+        422: "invalid request; `errors` names each field and the reason",
+    }
+    return {s: {"model": Problem, "description": text[s]} for s in statuses}
+
+
+def problem_media_types(openapi: dict[str, Any]) -> dict[str, Any]:
+    """Declare error responses as application/problem+json in an OpenAPI document."""
+    for path in openapi.get("paths", {}).values():
+        for operation in path.values():
+            for status, response in operation.get("responses", {}).items():
+                content = response.get("content")
+                if status[0] in "45" and content:  # the route's media type (JSON, SSE) -> problem
+                    response["content"] = {PROBLEM_MEDIA_TYPE: next(iter(content.values()))}
+    return openapi

@@ -1,0 +1,90 @@
+"""Database rows -> response bodies."""
+
+from __future__ import annotations
+
+import math
+from datetime import UTC, datetime
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from service.db.models import Evaluation, Generation, Job, JobRoad, JobState
+from service.db.repository import roads_of, utcnow
+from service.schemas import EvaluationOut, JobOut, JobSpec, RoadProgress, RobustBest
+
+
+def _aware(t: datetime | None) -> datetime | None:
+    return None if t is None else t.replace(tzinfo=UTC)
+
+
+def evaluation_out(e: Evaluation, road_name: str) -> EvaluationOut:
+    return EvaluationOut(
+        id=e.id, road_index=e.road_index, road=road_name, step=e.step, candidate=e.candidate,
+        a2=e.a2, a2_deg=math.degrees(e.a2), l2=e.l2, rws=e.rws, distance_m=e.distance_m,
+        squat_ratio=e.squat_ratio, slack_m=e.slack_m, fitness_m=e.fitness_m,
+        chain_length_m=e.chain_length_m, status=e.status,  # type: ignore[arg-type]
+        reason=e.reason, wall_s=e.wall_s, cached=e.cached,
+    )
+
+
+def road_progress(roads: list[tuple[JobRoad, Evaluation | None]]) -> list[RoadProgress]:
+    return [
+        RoadProgress(
+            index=r.road_index, name=r.name, spec=r.spec, best=None if best is None else evaluation_out(best, r.name)
+        )
+        for r, best in roads
+    ]
+
+
+def robust_best(session: Session, job: Job) -> RobustBest | None:
+    """The best design of a robust-de job by its aggregate score (latest generation)."""
+    if job.kind != "robust-de":
+        return None
+    row = session.execute(
+        select(Generation.generation, Generation.population, Generation.best_f)
+        .where(Generation.job_id == job.id, Generation.run == 0)
+        .order_by(Generation.generation.desc()).limit(1)
+    ).first()
+    if row is None or not row.population:
+        return None
+    a2, l2, rws = row.population[0]
+    return RobustBest(
+        aggregate=job.spec.get("aggregate") or "mean", score_m=row.best_f, a2=a2, a2_deg=math.degrees(a2),
+        l2=l2, rws=rws, generation=row.generation,
+    )
+
+
+def job_out(
+    session: Session, job: Job, roads: list[tuple[JobRoad, Evaluation | None]], *, detail: bool
+) -> JobOut:
+    completed = job.n_done + job.n_failed
+    now = utcnow()
+    elapsed = None
+    if job.started_at is not None:
+        elapsed = ((job.finished_at or now) - job.started_at).total_seconds()
+    return JobOut(
+        id=job.id, kind=job.kind,  # type: ignore[arg-type]
+        state=job.state,  # type: ignore[arg-type]
+        spec=JobSpec.model_validate(job.spec), total=job.total, done=job.n_done, failed=job.n_failed,
+        cached=job.n_cached, progress=min(1.0, completed / job.total) if job.total else 1.0,
+        created_at=_aware(job.created_at),  # type: ignore[arg-type]
+        started_at=_aware(job.started_at), finished_at=_aware(job.finished_at),
+        elapsed_s=elapsed, eta_s=_eta(job, completed, now), error=job.error,
+        roads=road_progress(roads), robust_best=robust_best(session, job) if detail else None,
+    )
+
+
+def _eta(job: Job, completed: int, now: datetime) -> float | None:
+    """Remaining evaluations at the rate observed since the job last (re)started."""
+    if job.state != JobState.running.value or job.resumed_at is None:
+        return None
+    since = completed - job.completed_at_resume
+    seconds = (now - job.resumed_at).total_seconds()
+    if since <= 0 or seconds <= 0:
+        return None
+    return max(0, job.total - completed) * seconds / since
+
+
+def jobs_out(session: Session, jobs: list[Job]) -> list[JobOut]:
+    roads = roads_of(session, [j.id for j in jobs])
+    return [job_out(session, j, roads[j.id], detail=False) for j in jobs]

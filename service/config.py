@@ -1,0 +1,42 @@
+"""Service settings, read from the environment (prefix ``FINALDRIVE_``) when the app starts.
+
+Nothing here runs at import time: :func:`get_settings` builds (and caches) the settings on
+first use, and tests pass their own :class:`Settings` to ``create_app``.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from typing import Literal
+
+from pydantic import Field, SecretStr
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+ExecutorKind = Literal["serial", "process", "ray"]
+
+
+class Settings(BaseSettings):
+    """Every knob of the REST job service (env var = ``FINALDRIVE_`` + upper-case name)."""
+
+    model_config = SettingsConfigDict(env_prefix="FINALDRIVE_", extra="ignore")
+
+    db_url: str = Field("sqlite:///./finaldrive.db", description="SQLAlchemy database URL")
+    host: str = Field("127.0.0.1", description="interface `finaldrive serve` binds")
+    port: int = Field(8000, ge=0, le=65535, description="port `finaldrive serve` binds")
+    executor: ExecutorKind = Field("serial", description="where simulations run")
+    num_workers: int | None = Field(None, ge=1, description="worker processes (process/ray)")
+    ray_address: str | None = Field(None, description="Ray cluster address (ray executor)")
+    batch_size: int | None = Field(None, ge=1, description="designs per worker task")
+    api_token: SecretStr | None = Field(None, description="bearer token for mutating endpoints")
+    max_body_bytes: int = Field(1_048_576, ge=1024, description="request body size limit")
+    max_job_evaluations: int = Field(250_000, ge=1, description="largest job accepted")
+    sweep_chunk: int = Field(64, ge=1, description="designs dispatched per sweep step")
+    events_poll_seconds: float = Field(0.5, gt=0, description="SSE progress poll interval")
+    status_cache_seconds: float = Field(0.25, ge=0, description="max age of a cached GET /v1/jobs/{id} (0: off)")
+    auto_create_db: bool = Field(True, description="create the schema in an empty database")
+
+
+@lru_cache
+def get_settings() -> Settings:
+    """Settings from the environment, built once, on first call."""
+    return Settings()

@@ -1,0 +1,1 @@
+"""The results store: SQLAlchemy models, the database engine, migrations and queries."""

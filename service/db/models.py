@@ -1,0 +1,162 @@
+"""SQLAlchemy 2 tables of the results store.
+
+``evaluations`` is also the result cache: a row with the same ``cache_key`` (design, road,
+vehicle, settings, engine version) is reused instead of simulating again.
+"""
+
+from __future__ import annotations
+
+import enum
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import (
+    JSON,
+    Boolean,
+    DateTime,
+    Float,
+    ForeignKey,
+    Index,
+    Integer,
+    String,
+    Text,
+    UniqueConstraint,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+
+class JobState(str, enum.Enum):
+    """Life cycle of a job; the last four are terminal except ``interrupted``."""
+
+    queued = "queued"
+    running = "running"
+    succeeded = "succeeded"
+    failed = "failed"
+    cancelled = "cancelled"
+    interrupted = "interrupted"
+
+
+TERMINAL_STATES = frozenset({JobState.succeeded, JobState.failed, JobState.cancelled})
+ACTIVE_STATES = frozenset({JobState.queued, JobState.running, JobState.interrupted})
+
+
+class EvalStatus(str, enum.Enum):
+    ok = "ok"
+    failed = "failed"
+
+
+class Base(DeclarativeBase):
+    pass
+
+
+class Job(Base):
+    """One submitted job: its spec, state and progress counters."""
+
+    __tablename__ = "jobs"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    kind: Mapped[str] = mapped_column(String(16))
+    state: Mapped[str] = mapped_column(String(16), default=JobState.queued.value)
+    spec: Mapped[dict[str, Any]] = mapped_column(JSON)
+    request_hash: Mapped[str] = mapped_column(String(64))
+    idempotency_key: Mapped[str | None] = mapped_column(String(255), unique=True)
+    total: Mapped[int] = mapped_column(Integer)
+    n_done: Mapped[int] = mapped_column(Integer, default=0)
+    n_failed: Mapped[int] = mapped_column(Integer, default=0)
+    n_cached: Mapped[int] = mapped_column(Integer, default=0)
+    error: Mapped[str | None] = mapped_column(Text)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+    started_at: Mapped[datetime | None] = mapped_column(DateTime)
+    resumed_at: Mapped[datetime | None] = mapped_column(DateTime)
+    completed_at_resume: Mapped[int] = mapped_column(Integer, default=0)
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime)
+
+    __table_args__ = (
+        Index("ix_jobs_state_id", "state", "id"),
+        Index("ix_jobs_kind_id", "kind", "id"),
+    )
+
+
+class JobRoad(Base):
+    """A road of a job, in the job's order, with the best evaluation on it so far."""
+
+    __tablename__ = "job_roads"
+
+    job_id: Mapped[int] = mapped_column(ForeignKey("jobs.id", ondelete="CASCADE"), primary_key=True)
+    road_index: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(64))
+    spec: Mapped[str] = mapped_column(String(255))
+    best_fitness: Mapped[float | None] = mapped_column(Float)
+    best_evaluation_id: Mapped[int | None] = mapped_column(Integer)
+
+
+class Evaluation(Base):
+    """One simulation result of a job: a design on a road (SI units, a2 in rad).
+
+    ``step`` is the DE generation (0 = initial population; always 0 for sweeps) and
+    ``candidate`` the row within the sweep grid or the generation.
+    """
+
+    __tablename__ = "evaluations"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    job_id: Mapped[int] = mapped_column(ForeignKey("jobs.id", ondelete="CASCADE"))
+    road_index: Mapped[int] = mapped_column(Integer)
+    step: Mapped[int] = mapped_column(Integer)
+    candidate: Mapped[int] = mapped_column(Integer)
+    a2: Mapped[float] = mapped_column(Float)
+    l2: Mapped[float] = mapped_column(Float)
+    rws: Mapped[float] = mapped_column(Float)
+    distance_m: Mapped[float | None] = mapped_column(Float)
+    squat_ratio: Mapped[float | None] = mapped_column(Float)
+    slack_m: Mapped[float | None] = mapped_column(Float)
+    fitness_m: Mapped[float | None] = mapped_column(Float)
+    chain_length_m: Mapped[float | None] = mapped_column(Float)
+    status: Mapped[str] = mapped_column(String(8))
+    reason: Mapped[str] = mapped_column(Text, default="")
+    wall_s: Mapped[float] = mapped_column(Float)
+    cached: Mapped[bool] = mapped_column(Boolean, default=False)
+    cache_key: Mapped[str] = mapped_column(String(64))
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+    __table_args__ = (
+        UniqueConstraint("job_id", "road_index", "step", "candidate", name="uq_evaluations_slot"),
+        Index("ix_evaluations_job_id", "job_id", "id"),
+        Index("ix_evaluations_job_road_id", "job_id", "road_index", "id"),
+        Index("ix_evaluations_cache_key", "cache_key"),
+    )
+
+
+class Generation(Base):
+    """One told DE generation of a run (run = road index for ``de``, 0 for ``robust-de``).
+
+    ``generation`` counts tells: 1 is the initial population. ``state`` resumes the run.
+    """
+
+    __tablename__ = "generations"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    job_id: Mapped[int] = mapped_column(ForeignKey("jobs.id", ondelete="CASCADE"))
+    run: Mapped[int] = mapped_column(Integer)
+    generation: Mapped[int] = mapped_column(Integer)
+    population: Mapped[list[list[float]]] = mapped_column(JSON)
+    fitness: Mapped[list[float | None]] = mapped_column(JSON)
+    state: Mapped[dict[str, Any]] = mapped_column(JSON)
+    best_f: Mapped[float | None] = mapped_column(Float)
+    n_evals: Mapped[int] = mapped_column(Integer)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+    __table_args__ = (UniqueConstraint("job_id", "run", "generation", name="uq_generations_step"),)
+
+
+class Recording(Base):
+    """A requested animation file of one design (produced by the recording worker)."""
+
+    __tablename__ = "recordings"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    job_id: Mapped[int | None] = mapped_column(ForeignKey("jobs.id", ondelete="SET NULL"), index=True)
+    spec: Mapped[dict[str, Any]] = mapped_column(JSON)
+    status: Mapped[str] = mapped_column(String(16))
+    path: Mapped[str | None] = mapped_column(Text)
+    created_at: Mapped[datetime] = mapped_column(DateTime)

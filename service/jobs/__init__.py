@@ -1,0 +1,1 @@
+"""Turning job specs into work, and running it through the workers executor."""

@@ -1,0 +1,54 @@
+"""Keys of the result cache: one simulation = design + road + vehicle + settings + engine.
+
+Two evaluations with the same key give the same result, so the store reuses the first
+one (within a job and across jobs). Designs are rounded to 1e-12 (rad, m) so that a value
+that went through JSON or the database still matches.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import fields
+
+import numpy as np
+
+from engine.api import SimSettings
+from engine.model.road import Road
+from engine.vehicle import Vehicle, default_vehicle
+
+#: SimSettings fields that only choose what is returned, not the result.
+_OUTPUT_ONLY = frozenset({"series", "series_stride"})
+DESIGN_DECIMALS = 12
+
+
+def road_key(road: Road) -> str:
+    """``Road.spec``, or for a user profile a hash of its points (the spec names only the label)."""
+    if road.kind != "profile":
+        return road.spec
+    points = json.dumps([road.xs, road.ys], separators=(",", ":"))
+    return "profile:" + hashlib.sha256(points.encode()).hexdigest()
+
+
+def settings_key(settings: SimSettings) -> dict[str, object]:
+    return {f.name: getattr(settings, f.name) for f in fields(settings) if f.name not in _OUTPUT_ONLY}
+
+
+def context_prefix(road: Road, settings: SimSettings, vehicle: Vehicle | None, engine_version: str) -> str:
+    """Everything but the design, serialised once per road (hashed with each design)."""
+    context = {
+        "road": road_key(road),
+        "vehicle": (vehicle or default_vehicle()).fingerprint(),
+        "settings": settings_key(settings),
+        "engine": engine_version,
+    }
+    return json.dumps(context, sort_keys=True, separators=(",", ":"))
+
+
+def design_keys(prefix: str, designs: np.ndarray) -> list[str]:
+    """sha256 per design row of (rounded design, context prefix)."""
+    rounded = np.round(np.asarray(designs, dtype=float), DESIGN_DECIMALS) + 0.0  # -0.0 -> 0.0
+    return [
+        hashlib.sha256(f"{prefix}|{row[0]!r},{row[1]!r},{row[2]!r}".encode()).hexdigest()
+        for row in rounded.tolist()
+    ]

@@ -1,0 +1,64 @@
+"""Accepting a job: resolve the spec, enforce the size limit, honour Idempotency-Key."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+from sqlalchemy.exc import IntegrityError
+
+from service.db.engine import Database
+from service.db.models import Job
+from service.db.repository import create_job, job_by_idempotency_key
+from service.jobs.plan import PlanError, build_plan
+from service.schemas import JobSpec
+
+
+class IdempotencyKeyReused(Exception):
+    """The key was used before with a different request body."""
+
+
+def request_hash(spec: JobSpec) -> str:
+    canon = json.dumps(spec.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(canon.encode()).hexdigest()
+
+
+def submit_job(
+    db: Database, spec: JobSpec, *, idempotency_key: str | None, max_evaluations: int
+) -> tuple[Job, bool]:
+    """(job, created). Raises PlanError (bad field or too large) or IdempotencyKeyReused."""
+    spec = spec.normalised()
+    digest = request_hash(spec)
+    if idempotency_key is not None:
+        existing = _replay(db, idempotency_key, digest)
+        if existing is not None:
+            return existing, False
+    plan = build_plan(spec)
+    total = plan.total()
+    if total > max_evaluations:
+        raise PlanError(
+            (), f"the job needs {total} evaluations, more than the limit of {max_evaluations} "
+            "(FINALDRIVE_MAX_JOB_EVALUATIONS)",
+        )
+    try:
+        with db.write() as session:
+            job = create_job(
+                session, kind=spec.kind, spec=spec.model_dump(mode="json"), request_hash=digest,
+                idempotency_key=idempotency_key, total=total,
+                roads=[(r.name, r.road.spec) for r in plan.roads],
+            )
+    except IntegrityError:  # a concurrent request with the same key won the race
+        existing = _replay(db, idempotency_key or "", digest)
+        if existing is None:
+            raise
+        return existing, False
+    return job, True
+
+
+def _replay(db: Database, key: str, digest: str) -> Job | None:
+    with db.read() as session:
+        job = job_by_idempotency_key(session, key)
+    if job is not None and job.request_hash != digest:
+        raise IdempotencyKeyReused(key)
+    return job
+

@@ -1,0 +1,50 @@
+"""The ASGI app: ``create_app(settings=None)``; everything stateful starts in the lifespan."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from functools import partial
+from typing import Any
+
+import anyio
+from fastapi import FastAPI
+
+from service.api import problems
+from service.api.limits import BodySizeLimit
+from service.api.main import api_router
+from service.config import Settings, get_settings
+from service.jobs.runner import EvalStream
+from service.services import start_services
+
+DESCRIPTION = """Simulate motorcycle final-drive designs on roads: parameter sweeps and differential
+evolution jobs, stored in a results database. Errors are `application/problem+json` documents.
+When the server has `FINALDRIVE_API_TOKEN` set, POST endpoints need `Authorization: Bearer <token>`."""
+
+
+def create_app(settings: Settings | None = None, *, stream: EvalStream | None = None) -> FastAPI:
+    """The app. ``settings`` default to the environment (read at start-up, not here);
+    ``stream`` replaces the workers executor's evaluation stream (for tests)."""
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        resolved = settings or get_settings()
+        services = await anyio.to_thread.run_sync(partial(start_services, resolved, stream))
+        app.state.services = services
+        try:
+            yield
+        finally:
+            await anyio.to_thread.run_sync(services.close)
+
+    app = FastAPI(title="finaldrive", version="1", description=DESCRIPTION, lifespan=lifespan)
+    app.add_middleware(BodySizeLimit)
+    problems.install(app)
+    app.include_router(api_router)
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            app.openapi_schema = problems.problem_media_types(FastAPI.openapi(app))
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
+    return app

@@ -1,0 +1,225 @@
+"""Request and response bodies of the REST API (pydantic; no database or engine imports).
+
+Units: SI, angles of designs in radians except where a name ends in ``_deg``.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_validator
+
+JobKind = Literal["sweep", "de", "robust-de"]
+JobStateName = Literal["queued", "running", "succeeded", "failed", "cancelled", "interrupted"]
+
+_STRICT = ConfigDict(extra="forbid")
+
+
+class SimulationSpec(BaseModel):
+    """How each design is simulated (a subset of engine.SimSettings)."""
+
+    model_config = _STRICT
+
+    duration: float = Field(3.5, gt=0, le=60, description="simulated time [s]")
+    dt: float = Field(1.0e-3, gt=0, le=0.01, description="time step [s]")
+    method: Literal["reference", "fast"] = "reference"
+
+
+class DESpec(BaseModel):
+    """Differential evolution parameters (paper Table 10 defaults)."""
+
+    model_config = _STRICT
+
+    np: int = Field(50, ge=4, le=10_000, description="population size NP")
+    f: float = Field(0.6, ge=0, le=2, description="differential weight F")
+    cp: float = Field(0.6, ge=0, le=1, description="crossover probability CP")
+    mp: float = Field(0.1, ge=0, le=1, description="mutation probability MP")
+    mr_fraction: float = Field(0.2, ge=0, le=1, description="mutation range MR / (upper - lower)")
+    iters: int = Field(50, ge=0, le=100_000, description="generations after the initial population")
+    patience: int | None = Field(None, ge=1, description="stop after this many generations without improvement")
+    max_evals: int | None = Field(None, ge=1, description="evaluation budget per DE run (>= np)")
+
+    @model_validator(mode="after")
+    def _budget(self) -> DESpec:
+        if self.max_evals is not None and self.max_evals < self.np:
+            raise ValueError(f"max_evals ({self.max_evals}) must be >= np ({self.np})")
+        return self
+
+
+Interval = tuple[float, float]
+
+
+class Bounds(BaseModel):
+    """DE search box (paper Table 8 defaults); each entry is [lower, upper]."""
+
+    model_config = _STRICT
+
+    a2_deg: Interval = Field((0.0, 360.0), description="sprocket angle a2 [deg], periodic")
+    l2_m: Interval = Field((0.0, 0.2), description="pivot-to-sprocket distance L2 [m]")
+    rws_m: Interval = Field((0.05, 0.15), description="wheel sprocket radius R_WS [m]")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Bounds:
+        for name in ("a2_deg", "l2_m", "rws_m"):
+            lo, hi = getattr(self, name)
+            if not lo <= hi:
+                raise ValueError(f"{name}: lower bound {lo:g} is above upper bound {hi:g}")
+        if self.a2_deg[0] == self.a2_deg[1]:
+            raise ValueError("a2_deg: the periodic angle needs lower < upper")
+        if self.a2_deg[1] - self.a2_deg[0] > 360:
+            raise ValueError("a2_deg: the range may not exceed 360 deg")
+        if self.l2_m[0] < 0:
+            raise ValueError("l2_m: must be >= 0 m")
+        if self.rws_m[0] <= 0:
+            raise ValueError("rws_m: must be > 0 m")
+        return self
+
+
+class JobSpec(BaseModel):
+    """A job: a sweep over a design grid, or a DE (per road, or robust over all roads)."""
+
+    model_config = _STRICT
+
+    kind: JobKind
+    roads: list[Annotated[str, StringConstraints(strip_whitespace=True, min_length=1, max_length=500)]] = Field(
+        min_length=1, max_length=64,
+        description="preset names, groups (paper, sine, bump) or specs (flat, sine:H:LAMBDA, bump:H:SIGMA[:MU])",
+    )
+    grid: str | None = Field(None, max_length=500, description='sweep only: "table9" or a grid spec')
+    bounds: Bounds | None = Field(None, description="de / robust-de only (default: Table 8)")
+    de: DESpec | None = Field(None, description="de / robust-de only (default: Table 10)")
+    aggregate: Literal["mean", "worst"] | None = Field(None, description="robust-de only (default mean)")
+    seed: int = Field(0, ge=0, le=2**32 - 1)
+    settings: SimulationSpec = Field(default_factory=SimulationSpec)
+    vehicle: dict[str, Any] | None = Field(None, description="vehicle parameters (default: the paper's)")
+
+    @model_validator(mode="after")
+    def _kind_fields(self) -> JobSpec:
+        if self.kind == "sweep":
+            for name in ("bounds", "de", "aggregate"):
+                if getattr(self, name) is not None:
+                    raise ValueError(f"{name}: not allowed for a sweep")
+        elif self.grid is not None:
+            raise ValueError(f"grid: not allowed for {self.kind}")
+        if self.kind == "de" and self.aggregate is not None:
+            raise ValueError("aggregate: only for robust-de")
+        return self
+
+    def normalised(self) -> JobSpec:
+        """The spec with every default filled in (what is stored and hashed)."""
+        fill: dict[str, Any] = {}
+        if self.kind == "sweep":
+            fill["grid"] = self.grid or "table9"
+        else:
+            fill["bounds"] = self.bounds or Bounds()
+            fill["de"] = self.de or DESpec()
+            if self.kind == "robust-de":
+                fill["aggregate"] = self.aggregate or "mean"
+        return self.model_copy(update=fill)
+
+
+class EvaluationOut(BaseModel):
+    id: int
+    road_index: int
+    road: str
+    step: int = Field(description="DE generation (0 = initial population); 0 for sweeps")
+    candidate: int = Field(description="row in the sweep grid or the DE generation")
+    a2: float = Field(description="[rad]")
+    a2_deg: float
+    l2: float = Field(description="[m]")
+    rws: float = Field(description="[m]")
+    distance_m: float | None
+    squat_ratio: float | None
+    slack_m: float | None
+    fitness_m: float | None
+    chain_length_m: float | None
+    status: Literal["ok", "failed"]
+    reason: str
+    wall_s: float
+    cached: bool = Field(description="reused from an earlier identical simulation")
+
+
+class EvaluationPage(BaseModel):
+    items: list[EvaluationOut]
+    next_cursor: str | None = Field(description="pass as ?cursor= for the next page; null at the end")
+
+
+class RoadProgress(BaseModel):
+    index: int
+    name: str
+    spec: str
+    best: EvaluationOut | None = Field(description="best successful evaluation so far")
+
+
+class RobustBest(BaseModel):
+    aggregate: Literal["mean", "worst"]
+    score_m: float | None = Field(description="aggregate fitness of the best design")
+    a2: float
+    a2_deg: float
+    l2: float
+    rws: float
+    generation: int
+
+
+class JobOut(BaseModel):
+    id: int
+    kind: JobKind
+    state: JobStateName
+    spec: JobSpec
+    total: int = Field(description="evaluations planned (DE: upper bound until it finishes)")
+    done: int = Field(description="successful evaluations stored")
+    failed: int = Field(description="failed evaluations stored")
+    cached: int = Field(description="evaluations taken from the result cache")
+    progress: float
+    created_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+    elapsed_s: float | None
+    eta_s: float | None
+    error: str | None
+    roads: list[RoadProgress]
+    robust_best: RobustBest | None = None
+
+
+class JobPage(BaseModel):
+    items: list[JobOut]
+    next_cursor: str | None
+
+
+class BestOut(BaseModel):
+    job_id: int
+    roads: list[RoadProgress]
+    robust_best: RobustBest | None = None
+
+
+class RoadOut(BaseModel):
+    name: str
+    spec: str
+    kind: str
+    description: str
+    paper: dict[str, float] | None = Field(description="the paper's optimum on this road")
+
+
+class HealthOut(BaseModel):
+    status: Literal["ok"]
+    schema_revision: str
+    executor: str
+    engine_version: str
+    active_jobs: int
+
+
+class ProblemItem(BaseModel):
+    loc: list[str | int]
+    msg: str
+
+
+class Problem(BaseModel):
+    """RFC 9457 problem details (media type application/problem+json)."""
+
+    type: str
+    title: str
+    status: int
+    detail: str
+    instance: str | None = None
+    errors: list[ProblemItem] | None = None

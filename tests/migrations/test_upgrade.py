@@ -1,0 +1,76 @@
+"""Migrations: an empty database upgraded to head matches the models; other revisions are refused."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import pytest
+from alembic import command
+from alembic.autogenerate import compare_metadata
+from alembic.runtime.migration import MigrationContext
+from fastapi.testclient import TestClient
+from sqlalchemy import text
+
+from service.cli import server_cmds
+from service.config import Settings
+from service.db.engine import make_engine
+from service.db.migrate import SchemaMismatchError, alembic_config, current_revision, head_revision, upgrade
+from service.db.models import Base
+from service.main import create_app
+
+
+@pytest.fixture
+def url(tmp_path: Path) -> str:
+    return f"sqlite:///{tmp_path / 'm.db'}"
+
+
+def test_empty_database_upgraded_to_head_matches_models(url: str) -> None:
+    upgrade(url)
+    engine = make_engine(url)
+    with engine.connect() as conn:
+        assert compare_metadata(MigrationContext.configure(conn), Base.metadata) == []
+        assert conn.exec_driver_sql("PRAGMA journal_mode").scalar() == "wal"
+        assert conn.exec_driver_sql("PRAGMA foreign_keys").scalar() == 1
+        assert conn.exec_driver_sql("PRAGMA synchronous").scalar() == 2  # FULL
+    assert current_revision(engine) == head_revision()
+    engine.dispose()
+
+
+def test_downgrade_and_upgrade_again(url: str) -> None:
+    upgrade(url)
+    command.downgrade(alembic_config(url), "base")
+    engine = make_engine(url)
+    assert current_revision(engine) is None
+    upgrade(url)
+    assert current_revision(engine) == head_revision()
+    engine.dispose()
+
+
+def _set_revision(url: str, revision: str) -> None:
+    engine = make_engine(url)
+    with engine.begin() as conn:
+        conn.execute(text("UPDATE alembic_version SET version_num = :r"), {"r": revision})
+    engine.dispose()
+
+
+def test_service_refuses_a_database_at_another_revision(url: str) -> None:
+    upgrade(url)
+    _set_revision(url, "v0.0.1.a")
+    with pytest.raises(SchemaMismatchError, match="newer finaldrive"), TestClient(create_app(Settings(db_url=url))):
+        pass
+
+
+def test_service_refuses_tables_without_a_revision_and_says_what_to_run(
+    url: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    engine = make_engine(url)
+    with engine.begin() as conn:
+        conn.exec_driver_sql("CREATE TABLE legacy (id INTEGER PRIMARY KEY)")
+    engine.dispose()
+    args = argparse.Namespace(db=url, host=None, port=None, executor=None)
+    assert server_cmds.run_serve(args) == 1
+    err = capsys.readouterr().err
+    assert "revision none" in err and f"finaldrive db upgrade --db {url}" in err
+    assert server_cmds.run_db_upgrade(argparse.Namespace(db=url)) == 0
+    assert current_revision(make_engine(url)) == head_revision()

@@ -1,0 +1,158 @@
+"""End to end: a real uvicorn process, the real engine, the serial executor, a tmp SQLite file."""
+
+from __future__ import annotations
+
+import json
+import signal
+import socket
+import sqlite3
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+
+from engine import evaluate
+from service.jobs.plan import build_plan
+from service.schemas import JobSpec
+
+SIM = {"duration": 0.3}
+SWEEP = {"kind": "sweep", "roads": ["flat"], "grid": "a2_deg=0:270:90,l2=0.05|0.15,rws=0.09", "settings": SIM}
+DE = {"kind": "de", "roads": ["sine:0.02:3"], "de": {"np": 6, "iters": 3}, "seed": 7, "settings": SIM}
+LONG_DE = {"kind": "de", "roads": ["flat"], "de": {"np": 8, "iters": 14}, "seed": 11, "settings": SIM}
+TERMINAL = {"succeeded", "failed", "cancelled"}
+
+
+class Server:
+    """``finaldrive serve`` (``python -m service.cli serve``) on a free loopback port."""
+
+    def __init__(self, db: Path, log: Path) -> None:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            self.port = s.getsockname()[1]
+        self.url = f"http://127.0.0.1:{self.port}"
+        self.db_url = f"sqlite:///{db}"
+        self.log = log
+        self.proc: subprocess.Popen[bytes] | None = None
+
+    def start(self) -> httpx.Client:
+        cmd = [sys.executable, "-m", "service.cli", "serve", "--port", str(self.port),
+               "--db", self.db_url, "--executor", "serial"]
+        with self.log.open("ab") as out:
+            self.proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT)
+        client = httpx.Client(base_url=self.url, timeout=10)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            assert self.proc.poll() is None, self.log.read_text()
+            try:
+                if client.get("/v1/health").status_code == 200:
+                    return client
+            except httpx.TransportError:
+                time.sleep(0.1)
+        raise AssertionError("server did not start:\n" + self.log.read_text())
+
+    def kill(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGKILL)
+            self.proc.wait(10)
+
+
+@pytest.fixture
+def server(tmp_path: Path) -> Iterator[Server]:
+    srv = Server(tmp_path / "e2e.db", tmp_path / "server.log")
+    try:
+        yield srv
+    finally:
+        srv.kill()
+
+
+def wait(client: httpx.Client, job_id: int, timeout: float = 120) -> dict[str, Any]:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        job = client.get(f"/v1/jobs/{job_id}").json()
+        if job["state"] in TERMINAL:
+            return job
+        time.sleep(0.1)
+    raise AssertionError(f"job {job_id} still {job['state']}")
+
+
+def reference_de(spec: dict[str, Any]) -> Any:
+    """The same DE, uninterrupted, in this process."""
+    plan = build_plan(JobSpec.model_validate(spec).normalised())
+    de = plan.new_optimiser(0)
+    while not de.done:
+        de.tell(evaluate(de.ask(), plan.roads[0].road, plan.settings).fitness_m)
+    return de
+
+
+def test_sweep_and_de_over_http_match_in_process(server: Server) -> None:
+    client = server.start()
+    sweep = client.post("/v1/jobs", json=SWEEP)
+    de = client.post("/v1/jobs", json=DE)
+    assert (sweep.status_code, de.status_code) == (201, 201)
+
+    plan = build_plan(JobSpec.model_validate(SWEEP).normalised())
+    assert plan.designs is not None
+    expected = evaluate(plan.designs, plan.roads[0].road, plan.settings)
+    reference = reference_de(DE)
+
+    sweep_job = wait(client, sweep.json()["id"])
+    assert sweep_job["state"] == "succeeded"
+    assert sweep_job["done"] + sweep_job["failed"] == len(plan.designs)
+    assert sweep_job["failed"] == int(np.count_nonzero(~expected.ok))
+    ok = np.where(expected.ok, expected.fitness_m, -np.inf)
+    assert sweep_job["roads"][0]["best"]["fitness_m"] == pytest.approx(ok.max(), rel=1e-12)
+
+    items = client.get(f"/v1/jobs/{sweep_job['id']}/evaluations").json()["items"]
+    by_candidate = {e["candidate"]: e for e in items}
+    assert sorted(by_candidate) == list(range(len(plan.designs)))
+    for i, e in by_candidate.items():
+        assert e["status"] == expected.status[i]
+        if e["status"] == "ok":
+            assert e["fitness_m"] == pytest.approx(expected.fitness_m[i], rel=1e-12)
+    csv = client.get(f"/v1/jobs/{sweep_job['id']}/evaluations", params={"format": "csv"}).text
+    assert len(csv.strip().splitlines()) == len(plan.designs) + 1
+
+    de_job = wait(client, de.json()["id"])
+    assert de_job["state"] == "succeeded"
+    assert de_job["done"] + de_job["failed"] == reference.n_evals
+    best = client.get(f"/v1/jobs/{de_job['id']}/best").json()["roads"][0]["best"]
+    assert best["fitness_m"] == pytest.approx(reference.best_f, rel=1e-12)
+    assert [best["a2"], best["l2"], best["rws"]] == pytest.approx(reference.best_x.tolist(), rel=1e-12)
+
+
+def test_de_survives_three_sigkills(server: Server, tmp_path: Path) -> None:
+    client = server.start()
+    job_id = client.post("/v1/jobs", json=LONG_DE).json()["id"]
+    total = client.get(f"/v1/jobs/{job_id}").json()["total"]
+    reference = reference_de(LONG_DE)
+    for kill in range(3):
+        target = total * (kill + 1) // 4
+        deadline = time.monotonic() + 120
+        while True:
+            job = client.get(f"/v1/jobs/{job_id}").json()
+            if job["done"] + job["failed"] >= target or job["state"] in TERMINAL or time.monotonic() > deadline:
+                break
+            time.sleep(0.05)
+        assert job["state"] == "running", job
+        server.kill()
+        client = server.start()
+        assert client.get(f"/v1/jobs/{job_id}").json()["state"] in ("interrupted", "running")
+    job = wait(client, job_id)
+    assert job["state"] == "succeeded"
+
+    with sqlite3.connect(tmp_path / "e2e.db") as db:
+        slots = db.execute("SELECT step, candidate FROM evaluations WHERE job_id = ?", (job_id,)).fetchall()
+        population = db.execute(
+            "SELECT population FROM generations WHERE job_id = ? ORDER BY generation DESC LIMIT 1", (job_id,)
+        ).fetchone()[0]
+    assert len(slots) == len(set(slots)) == reference.n_evals == job["done"] + job["failed"]
+    assert np.array_equal(np.array(json.loads(population)), reference.population)
+    best = job["roads"][0]["best"]
+    assert best["fitness_m"] == reference.best_f
+    assert [best["a2"], best["l2"], best["rws"]] == reference.best_x.tolist()

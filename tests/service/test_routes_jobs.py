@@ -1,0 +1,131 @@
+"""/v1/jobs: submit, idempotency, list, get, cancel, results (fake evaluation stream)."""
+
+from __future__ import annotations
+
+import csv
+import io
+
+from fastapi.testclient import TestClient
+from svc_helpers import DE, SWEEP, FakeStream, wait_done
+
+
+def test_sweep_runs_and_streams_results(client: TestClient) -> None:
+    r = client.post("/v1/jobs", json=SWEEP)
+    assert r.status_code == 201, r.text
+    job = r.json()
+    assert r.headers["location"] == f"/v1/jobs/{job['id']}"
+    assert job["total"] == 4 * 3 * 2
+    done = wait_done(client, job["id"])
+    assert done["state"] == "succeeded"
+    assert (done["done"], done["failed"]) == (24, 0)
+    assert [road["name"] for road in done["roads"]] == ["flat", "sine:0.025:3"]
+    best_flat = done["roads"][0]["best"]
+    assert best_flat["l2"] == 0.1 and round(best_flat["a2_deg"]) == 60
+
+    page = client.get(f"/v1/jobs/{job['id']}/evaluations", params={"limit": 10}).json()
+    assert len(page["items"]) == 10 and page["next_cursor"]
+    rest = client.get(f"/v1/jobs/{job['id']}/evaluations", params={"cursor": page["next_cursor"]}).json()
+    assert len(rest["items"]) == 14 and rest["next_cursor"] is None
+    ids = [e["id"] for e in page["items"] + rest["items"]]
+    assert ids == sorted(set(ids))
+
+    text = client.get(f"/v1/jobs/{job['id']}/evaluations", params={"format": "csv", "road": "flat"})
+    assert text.headers["content-type"].startswith("text/csv")
+    rows = list(csv.DictReader(io.StringIO(text.text)))
+    assert len(rows) == 12 and {row["road"] for row in rows} == {"flat"}
+
+    best = client.get(f"/v1/jobs/{job['id']}/best").json()
+    assert best["roads"][0]["best"]["id"] == best_flat["id"]
+
+
+def test_result_cache_spans_jobs(client: TestClient, fake: FakeStream) -> None:
+    first = wait_done(client, client.post("/v1/jobs", json=SWEEP).json()["id"])
+    simulated = fake.simulated
+    second = wait_done(client, client.post("/v1/jobs", json=SWEEP).json()["id"])
+    assert fake.simulated == simulated
+    assert (second["done"], second["cached"]) == (24, 24)
+    assert second["roads"][0]["best"]["fitness_m"] == first["roads"][0]["best"]["fitness_m"]
+
+
+def test_de_job_and_best_is_never_a_failure(client: TestClient, fake: FakeStream) -> None:
+    fake.fail_above_l2 = 0.1
+    job = wait_done(client, client.post("/v1/jobs", json=DE).json()["id"])
+    assert job["state"] == "succeeded"
+    assert job["total"] == job["done"] + job["failed"] == 6 * 5
+    assert job["failed"] > 0
+    failed = [e for e in client.get(f"/v1/jobs/{job['id']}/evaluations").json()["items"] if e["status"] == "failed"]
+    assert failed and all(e["reason"] == "fake divergence" and e["fitness_m"] is None for e in failed)
+    best = job["roads"][0]["best"]
+    assert best["status"] == "ok" and best["l2"] <= 0.1
+
+
+def test_robust_de_scores_every_road(client: TestClient) -> None:
+    spec = {"kind": "robust-de", "roads": ["flat", "sine:0.025:3"], "de": {"np": 5, "iters": 2},
+            "aggregate": "worst"}
+    job = wait_done(client, client.post("/v1/jobs", json=spec).json()["id"])
+    assert job["state"] == "succeeded" and job["done"] == 2 * 5 * 3
+    robust = client.get(f"/v1/jobs/{job['id']}/best").json()["robust_best"]
+    assert robust["aggregate"] == "worst" and robust["generation"] == 3
+    assert robust["score_m"] <= min(r["best"]["fitness_m"] for r in job["roads"])
+
+
+def test_idempotency_key(client: TestClient) -> None:
+    headers = {"Idempotency-Key": "abc"}
+    first = client.post("/v1/jobs", json=SWEEP, headers=headers)
+    again = client.post("/v1/jobs", json=SWEEP, headers=headers)
+    assert (first.status_code, again.status_code) == (201, 200)
+    assert again.json()["id"] == first.json()["id"]
+    other = client.post("/v1/jobs", json={**SWEEP, "seed": 9}, headers=headers)
+    assert other.status_code == 422
+    assert other.json()["type"].endswith("idempotency-key-reused")
+    assert len(client.get("/v1/jobs").json()["items"]) == 1
+
+
+def test_list_filters_and_paginates(client: TestClient) -> None:
+    ids = [wait_done(client, client.post("/v1/jobs", json=spec).json()["id"])["id"] for spec in (SWEEP, DE, SWEEP)]
+    page = client.get("/v1/jobs", params={"limit": 2}).json()
+    assert [j["id"] for j in page["items"]] == ids[::-1][:2]
+    last = client.get("/v1/jobs", params={"limit": 2, "cursor": page["next_cursor"]}).json()
+    assert [j["id"] for j in last["items"]] == [ids[0]] and last["next_cursor"] is None
+    assert [j["id"] for j in client.get("/v1/jobs", params={"kind": "de"}).json()["items"]] == [ids[1]]
+    assert client.get("/v1/jobs", params={"state": "running"}).json()["items"] == []
+
+
+def test_cancel_is_idempotent_and_stops_dispatch(client: TestClient, fake: FakeStream) -> None:
+    fake.gate.clear()
+    job = client.post("/v1/jobs", json=SWEEP).json()
+    first = client.post(f"/v1/jobs/{job['id']}/cancel")
+    fake.gate.set()
+    again = client.post(f"/v1/jobs/{job['id']}/cancel")
+    assert first.status_code == again.status_code == 200
+    assert first.json()["state"] == again.json()["state"] == "cancelled"
+    final = wait_done(client, job["id"])
+    assert final["state"] == "cancelled" and final["done"] < 24
+    assert client.post("/v1/jobs/999/cancel").status_code == 404
+
+
+def test_events_stream_until_the_end(client: TestClient) -> None:
+    job = client.post("/v1/jobs", json=SWEEP).json()
+    with client.stream("GET", f"/v1/jobs/{job['id']}/events") as r:
+        assert r.headers["content-type"].startswith("text/event-stream")
+        body = "".join(r.iter_text())
+    assert "event: progress" in body and "event: end" in body
+    assert '"state":"succeeded"' in body.replace(" ", "")
+
+
+def test_roads_and_health(client: TestClient) -> None:
+    roads = client.get("/v1/roads").json()
+    assert len(roads) == 23 and roads[0]["name"] == "flat"
+    health = client.get("/v1/health").json()
+    assert health["status"] == "ok" and health["executor"] == "serial"
+
+
+def test_concurrent_jobs_share_the_executor_round_robin(client: TestClient, fake: FakeStream) -> None:
+    fake.gate.clear()
+    a = client.post("/v1/jobs", json=SWEEP).json()["id"]
+    b = client.post("/v1/jobs", json=SWEEP | {"seed": 1, "roads": ["bump:0.01:0.5", "flat"]}).json()["id"]
+    fake.gate.set()
+    wait_done(client, a), wait_done(client, b)
+    ids_a = [e["id"] for e in client.get(f"/v1/jobs/{a}/evaluations").json()["items"]]
+    ids_b = [e["id"] for e in client.get(f"/v1/jobs/{b}/evaluations").json()["items"]]
+    assert min(ids_b) < max(ids_a) and min(ids_a) < max(ids_b)  # interleaved, not one after the other

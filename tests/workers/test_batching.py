@@ -1,0 +1,60 @@
+"""The adaptive batch-size rule as a pure function."""
+
+import math
+
+import pytest
+
+from workers.batching import BatchSizer, batch_size
+
+
+def overhead_fraction(b: int, per_design_s: float, overhead_s: float) -> float:
+    return overhead_s / (b * per_design_s)
+
+
+@pytest.mark.parametrize(
+    ("per_design_s", "overhead_s"), [(1.6, 0.002), (0.01, 0.002), (0.001, 0.002), (1e-4, 0.0015)]
+)
+def test_smallest_batch_with_overhead_under_5_percent(per_design_s: float, overhead_s: float) -> None:
+    b = batch_size(remaining=10**6, num_workers=2, per_design_s=per_design_s, overhead_s=overhead_s)
+    assert overhead_fraction(b, per_design_s, overhead_s) <= 0.05 + 1e-12
+    assert b == 1 or overhead_fraction(b - 1, per_design_s, overhead_s) > 0.05
+
+
+def test_slow_simulations_go_one_per_task() -> None:
+    assert batch_size(remaining=400, num_workers=2, per_design_s=1.6, overhead_s=0.002) == 1
+
+
+def test_cap_leaves_four_waves_for_every_worker() -> None:
+    # cheap designs would want huge batches; the cap keeps 4 batches per worker
+    b = batch_size(remaining=400, num_workers=2, per_design_s=1e-6, overhead_s=0.01)
+    assert b == 400 // (2 * 4)
+
+
+@pytest.mark.parametrize("remaining", [1, 2, 7])
+def test_few_designs_still_give_batches_of_one(remaining: int) -> None:
+    assert batch_size(remaining=remaining, num_workers=8, per_design_s=1e-6, overhead_s=1.0) == 1
+
+
+def test_nothing_remaining() -> None:
+    assert batch_size(remaining=0, num_workers=2, per_design_s=1.0, overhead_s=0.0) == 0
+
+
+def test_unknown_compute_time_uses_the_cap() -> None:
+    assert batch_size(remaining=80, num_workers=2, per_design_s=0.0, overhead_s=0.01) == 10
+
+
+def test_sizer_probes_then_sizes_from_measurements() -> None:
+    sizer = BatchSizer(num_workers=2)
+    assert sizer.next_size(1000) == 1                          # probe
+    sizer.observe(1, round_trip_s=1.010, busy_s=1.0, compute_s=0.9)   # cold: 0.1 s warm-up
+    assert sizer.overhead_s == pytest.approx(0.010)
+    assert sizer.next_size(1000) == math.ceil(0.010 / (0.05 * 0.9))
+    sizer.observe(1, round_trip_s=0.902, busy_s=0.9, compute_s=0.9)   # warm: smaller overhead wins
+    assert sizer.overhead_s == pytest.approx(0.002)
+    assert sizer.next_size(1000) == 1
+
+
+def test_sizer_ignores_negative_overhead_from_clock_noise() -> None:
+    sizer = BatchSizer(num_workers=1)
+    sizer.observe(4, round_trip_s=0.99, busy_s=1.0, compute_s=1.0)
+    assert sizer.overhead_s == 0.0

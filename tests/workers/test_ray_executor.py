@@ -1,0 +1,102 @@
+"""Ray executor on one small local Ray shared by this module (num_cpus=2)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("ray")
+
+import workers
+from engine.api import BatchResult, SimSettings
+from engine.model.road import Road
+from tests.workers import toyfns
+from tests.workers.test_executors import assert_same
+from workers import WorkerLostError, evaluate_all, make_executor
+from workers.evaluate import stream_rows
+from workers.serial import SerialExecutor
+
+pytestmark = pytest.mark.slow
+
+try:
+    from engine import evaluate as engine_evaluate
+except ImportError:
+    engine_evaluate = None
+
+
+@pytest.fixture(scope="module")
+def ray_executor() -> Iterator[workers.Executor]:
+    with pytest.MonkeyPatch.context() as env:
+        env.delenv("RAY_ADDRESS", raising=False)   # start a local Ray, never join another
+        executor = make_executor("ray", num_workers=2, max_retries=2)
+    with executor:
+        yield executor
+    import ray
+
+    assert not ray.is_initialized()
+
+
+def test_map_batches_yields_every_batch_once(ray_executor: workers.Executor) -> None:
+    assert ray_executor.num_workers == 2
+    batches = [list(range(i, i + 3)) for i in range(0, 30, 3)]
+    got = dict(ray_executor.map_batches(toyfns.add, batches, shared=(100,)))
+    assert got == {i: [x + 100 for x in b] for i, b in enumerate(batches)}
+
+
+def test_results_stream_before_the_last_batch_finishes(ray_executor: workers.Executor) -> None:
+    start = time.perf_counter()
+    stream = ray_executor.map_batches(toyfns.sleep_then_add, [[i] for i in range(6)], shared=(0.3,))
+    next(stream)
+    first = time.perf_counter() - start
+    list(stream)
+    assert first < time.perf_counter() - start - 0.4
+
+
+def test_identical_results_serial_and_ray(ray_executor: workers.Executor) -> None:
+    designs = toyfns.designs(30)
+
+    def run(executor: workers.Executor) -> BatchResult:
+        parts = sorted(stream_rows(executor, toyfns.toy_result, designs, (3.0,)), key=lambda p: p[0][0])
+        return BatchResult.concat([result for _, result in parts])
+
+    assert_same(run(SerialExecutor()), run(ray_executor))
+
+
+def test_task_error_propagates_unretried(ray_executor: workers.Executor) -> None:
+    with pytest.raises(ValueError, match="bug in task"):
+        list(ray_executor.map_batches(toyfns.raise_value_error, [[1]]))
+
+
+def test_killed_worker_batch_is_evaluated_exactly_once(ray_executor: workers.Executor, tmp_path: Path) -> None:
+    """A Ray worker exits in the middle of a batch; Ray retries it; every design appears once."""
+    designs = toyfns.designs(24)
+    marked = designs[9, 0]                         # batch 2 (rows 8-11), third design
+    log = tmp_path / "evaluated.log"
+    shared = (marked, str(tmp_path / "crashed"), str(log))
+    parts = list(stream_rows(ray_executor, toyfns.crash_once, designs, shared, batch_size=4))
+    assert (tmp_path / "crashed").exists()
+    assert sorted(np.concatenate([rows for rows, _ in parts]).tolist()) == list(range(24))
+    assert_same(BatchResult.concat([r for _, r in sorted(parts, key=lambda p: p[0][0])]),
+                toyfns.toy_result(designs))
+    evaluated = [float(a2) for a2 in log.read_text().split()]
+    assert evaluated.count(designs[8, 0]) == 2      # evaluated before the crash, then again
+
+
+def test_worker_lost_after_max_retries(ray_executor: workers.Executor) -> None:
+    with pytest.raises(WorkerLostError):
+        list(ray_executor.map_batches(toyfns.always_crash, [[1]]))
+
+
+@pytest.mark.skipif(engine_evaluate is None, reason="engine.evaluate is not importable yet")
+def test_real_engine_identical_across_executors(ray_executor: workers.Executor) -> None:
+    designs = np.array([[np.pi / 4, 0.10, 0.08], [np.pi, 0.05, 0.10], [1.5 * np.pi, 0.15, 0.12]])
+    road, settings = Road.parse("sine:0.04:3"), SimSettings(duration=0.2)
+    serial = evaluate_all(SerialExecutor(), designs, road, settings)
+    assert len(serial) == 3
+    with make_executor("process", num_workers=2) as pool:
+        assert_same(serial, evaluate_all(pool, designs, road, settings))
+    assert_same(serial, evaluate_all(ray_executor, designs, road, settings))

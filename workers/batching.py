@@ -1,0 +1,72 @@
+"""Adaptive batch size: keep per-task overhead under 5 % while every worker has work.
+
+The rule (docs/workers.md, "Batching"):
+
+1. **Probe.** Until a batch has come back, batches hold ``probe_size`` designs (1), so the
+   first wave gives every worker a small task.
+2. **Measure.** For each finished batch of ``n`` designs: ``compute`` is the time ``fn`` ran
+   in the worker, ``busy`` adds the one-off warm-up, and ``round_trip`` runs from handing the
+   batch to the executor to receiving its result. Per-design time ``c`` is total compute over
+   total designs; per-task overhead ``o`` is the *smallest* ``round_trip - busy`` seen (the
+   least-queued task; cold-start tasks only overestimate it, and later tasks lower it).
+3. **Size.** Overhead fraction ``o / (b c) <= 0.05`` needs ``b >= o / (0.05 c)``; take the
+   smallest such ``b``, but at most ``remaining // (num_workers * 4)`` (at least 1), so at
+   least four waves remain: every worker gets work, the tail balances, and progress streams.
+   When both cannot hold, giving every worker work wins.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+TARGET_OVERHEAD = 0.05   # overhead / compute per task
+MIN_WAVES = 4            # batches per worker that must remain
+PROBE_SIZE = 1           # designs per batch before any measurement
+
+
+def batch_size(
+    *,
+    remaining: int,
+    num_workers: int,
+    per_design_s: float,
+    overhead_s: float,
+    target: float = TARGET_OVERHEAD,
+    min_waves: int = MIN_WAVES,
+) -> int:
+    """Designs for the next batch (>= 1 while ``remaining`` > 0; 0 when nothing remains)."""
+    if remaining <= 0:
+        return 0
+    cap = max(1, remaining // (max(1, num_workers) * min_waves))
+    if per_design_s <= 0.0:
+        return cap
+    needed = math.ceil(max(0.0, overhead_s) / (target * per_design_s))
+    return max(1, min(needed, cap))
+
+
+@dataclass
+class BatchSizer:
+    """Running estimates of per-design compute and per-task overhead (rule in the module doc)."""
+
+    num_workers: int
+    probe_size: int = PROBE_SIZE
+    designs_done: int = 0
+    compute_s: float = 0.0
+    overhead_s: float = math.inf
+
+    def observe(self, n_designs: int, round_trip_s: float, busy_s: float, compute_s: float) -> None:
+        """Record one finished batch."""
+        self.designs_done += n_designs
+        self.compute_s += compute_s
+        self.overhead_s = min(self.overhead_s, max(0.0, round_trip_s - busy_s))
+
+    def next_size(self, remaining: int) -> int:
+        """Designs for the next batch."""
+        if self.designs_done == 0:
+            return min(self.probe_size, max(0, remaining))
+        return batch_size(
+            remaining=remaining,
+            num_workers=self.num_workers,
+            per_design_s=self.compute_s / self.designs_done,
+            overhead_s=self.overhead_s,
+        )

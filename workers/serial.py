@@ -1,0 +1,23 @@
+"""In-process executor: the default, the test double, and the debugging mode."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Iterator
+from typing import Any
+
+from workers.base import ClosingMixin
+
+
+class SerialExecutor(ClosingMixin):
+    """Runs batches one after another in the calling process."""
+
+    num_workers: int = 1
+
+    def map_batches(
+        self, fn: Callable[..., Any], batches: Iterable[Any], shared: tuple[Any, ...] = ()
+    ) -> Iterator[tuple[int, Any]]:
+        for index, batch in enumerate(batches):
+            yield index, fn(batch, *shared)
+
+    def close(self) -> None:
+        """Nothing to release."""

@@ -1,0 +1,39 @@
+"""Worker-side wrapper: optional one-off warm-up per process, then ``fn`` timed.
+
+Imported in every worker process; it must stay free of engine and Ray imports.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+_warmed_up: set[str] = set()  # warm-ups already run in this process
+
+
+@dataclass(frozen=True)
+class Timed:
+    """A batch's result with its in-worker times [s]; ``busy_s`` includes any warm-up."""
+
+    result: Any
+    busy_s: float
+    compute_s: float
+
+
+def call_timed(
+    fn: Callable[..., Any], warmup: Callable[[], None] | None, batch: Any, *shared: Any
+) -> Timed:
+    """Run ``warmup()`` once per process (e.g. load Numba's disk cache), then ``fn(batch, *shared)``."""
+    start = time.perf_counter()
+    if warmup is not None:
+        name = getattr(warmup, "__qualname__", None)
+        key = f"{warmup.__module__}.{name}" if name else repr(warmup)
+        if key not in _warmed_up:
+            warmup()
+            _warmed_up.add(key)
+    begin = time.perf_counter()
+    result = fn(batch, *shared)
+    end = time.perf_counter()
+    return Timed(result, busy_s=end - start, compute_s=end - begin)
