@@ -132,6 +132,26 @@ def first_call_latency(method: str) -> tuple[float, float]:
     return times[0], times[1]
 
 
+def cli_evaluate_cost(n_extra: int = 100, repeat: int = 3) -> tuple[float, float]:
+    """(median wall s of `finaldrive evaluate` on 1 design, on 1 + n_extra designs)."""
+    rng = np.random.default_rng(7)
+    rows = ["a2_deg,l2,rws", "195.3,0.037,0.088"]
+    rows += [f"{rng.uniform(0, 360):.3f},{rng.uniform(0, 0.2):.4f},{rng.uniform(0.05, 0.15):.4f}" for _ in range(n_extra)]
+    exe = shutil.which("finaldrive") or "finaldrive"
+    with tempfile.TemporaryDirectory() as tmp:
+        one, many = Path(tmp) / "one.csv", Path(tmp) / "many.csv"
+        one.write_text("\n".join(rows[:2]) + "\n")
+        many.write_text("\n".join(rows) + "\n")
+        walls: dict[Path, list[float]] = {one: [], many: []}
+        for _ in range(repeat):
+            for path in (one, many):
+                t0 = time.perf_counter()
+                subprocess.run([exe, "evaluate", "--designs", str(path), "--road", "sine:0.04:3"],
+                               check=True, capture_output=True)
+                walls[path].append(time.perf_counter() - t0)
+    return statistics.median(walls[one]), statistics.median(walls[many])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5)
@@ -160,6 +180,10 @@ def main() -> None:
         m["1 process sims/s"], m["2 processes sims/s"] = one, two
         print(f"throughput: 1 process {one:.1f} sims/s, 2 processes {two:.1f} sims/s (x{two / one:.2f})")
         report["methods"][method] = m  # type: ignore[index]
+    one, many = cli_evaluate_cost()
+    report["cli evaluate 1 / 101 s"] = [one, many]
+    print(f"\nfinaldrive evaluate (default method): 1 design {one:.2f} s, 101 designs {many:.2f} s "
+          f"(+{(many - one) / 100 * 1000:.1f} ms a design; budget 7 ms)")
     if args.json:
         print(json.dumps(report, indent=2))
 

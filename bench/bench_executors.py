@@ -2,13 +2,14 @@
 
     python -m bench.bench_executors [--n 400] [--duration 3.5] [--repeat 3] [--workers 2]
 
-Real engine, road ``sine:0.04:3``, default ``SimSettings`` (``--duration`` overrides the
-simulated time), designs drawn uniformly from the paper's Table 8 search space with a fixed
-seed. Each executor is started once and warmed up (compiled code loaded in every worker)
-before the timed runs, whose start-up time is printed separately; the timed runs are
-interleaved across executors so that changes in machine load affect each alike. Ray runs locally on
-``--workers`` CPUs (``RAY_ADDRESS`` is ignored). The machine may be shared: the load
-average is printed with the results.
+Real engine, road ``sine:0.04:3``, default ``SimSettings`` (the fast method; ``--duration``
+overrides the simulated time), designs drawn uniformly from the paper's Table 8 search
+space with a fixed seed. Each executor is started once and warmed up (compiled code loaded
+in every worker) before the timed runs, whose start-up time is printed separately; the
+timed runs are interleaved across executors so that changes in machine load affect each
+alike. Ray runs locally on ``--workers`` CPUs (``RAY_ADDRESS`` is ignored). The machine
+may be shared: the load average is printed with the results. Run it on a quiet machine
+(docs/workers.md, "Results").
 """
 
 from __future__ import annotations
@@ -31,13 +32,6 @@ from workers import Executor, evaluate_all, make_executor  # noqa: E402
 
 ROAD = "sine:0.04:3"
 BOUNDS = np.array([[0.0, 2 * np.pi], [0.0, 0.2], [0.05, 0.15]])   # a2 [rad], L2 [m], R_WS [m]
-
-
-def require_engine() -> None:
-    try:
-        from engine import evaluate  # noqa: F401
-    except ImportError as error:
-        sys.exit(f"bench_executors: engine.evaluate is not importable yet ({error}); nothing to measure")
 
 
 def cpu_model() -> str:
@@ -91,11 +85,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--n", type=int, default=400, help="designs per run")
     parser.add_argument("--duration", type=float, default=None, help="simulated time [s] (default: SimSettings)")
     parser.add_argument("--repeat", type=int, default=3, help="timed runs per executor (median reported)")
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="process-pool and Ray workers")
+    parser.add_argument("--workers", type=int, default=2, help="process-pool and Ray workers (default 2)")
     parser.add_argument("--executors", default="serial,process,ray", help="comma-separated kinds")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
-    require_engine()
     os.environ.pop("RAY_ADDRESS", None)
 
     settings = SimSettings() if args.duration is None else SimSettings(duration=args.duration)

@@ -85,7 +85,7 @@ class SimSettings:
     max_constraint_residual: float = 1.0e-3  # max|Phi| beyond which the run has diverged
     max_airborne_time: float = 0.5   # s a wheel may stay off the road before the run fails
     series: bool = False             # keep time series (Fig. 13 quantities)
-    series_stride: int = 10          # keep every n-th step in the series
+    series_stride: int = 10          # series rows every stride * dt (fast: steps land there too)
     tyre_longitudinal: bool = True   # False only for verification (energy balance)
 
     def __post_init__(self) -> None:

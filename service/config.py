@@ -34,6 +34,8 @@ class Settings(BaseSettings):
     events_poll_seconds: float = Field(0.5, gt=0, description="SSE progress poll interval")
     status_cache_seconds: float = Field(0.25, ge=0, description="max age of a cached GET /v1/jobs/{id} (0: off)")
     auto_create_db: bool = Field(True, description="create the schema in an empty database")
+    data_dir: str | None = Field(None, description="where the service writes recordings "
+                                 "(default: finaldrive-data beside the SQLite file, else ./finaldrive-data)")
 
 
 @lru_cache

@@ -10,7 +10,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_validator
 
-JobKind = Literal["sweep", "de", "robust-de"]
+JobKind = Literal["sweep", "de", "robust-de", "paper-study"]
 JobStateName = Literal["queued", "running", "succeeded", "failed", "cancelled", "interrupted"]
 
 _STRICT = ConfigDict(extra="forbid")
@@ -23,7 +23,8 @@ class SimulationSpec(BaseModel):
 
     duration: float = Field(3.5, gt=0, le=60, description="simulated time [s]")
     dt: float = Field(1.0e-3, gt=0, le=0.01, description="time step [s]")
-    method: Literal["reference", "fast"] = "reference"
+    method: Literal["reference", "fast"] = Field(
+        "fast", description="fast (default, validated against the paper's method) or reference")
 
 
 class DESpec(BaseModel):
@@ -77,7 +78,8 @@ class Bounds(BaseModel):
 
 
 class JobSpec(BaseModel):
-    """A job: a sweep over a design grid, or a DE (per road, or robust over all roads)."""
+    """A job: a sweep over a design grid, a DE (per road, or robust over all roads), or a
+    paper-study (the sweep and the per-road DE on the same roads, under one job)."""
 
     model_config = _STRICT
 
@@ -86,9 +88,9 @@ class JobSpec(BaseModel):
         min_length=1, max_length=64,
         description="preset names, groups (paper, sine, bump) or specs (flat, sine:H:LAMBDA, bump:H:SIGMA[:MU])",
     )
-    grid: str | None = Field(None, max_length=500, description='sweep only: "table9" or a grid spec')
-    bounds: Bounds | None = Field(None, description="de / robust-de only (default: Table 8)")
-    de: DESpec | None = Field(None, description="de / robust-de only (default: Table 10)")
+    grid: str | None = Field(None, max_length=500, description='sweep / paper-study: "table9" or a grid spec')
+    bounds: Bounds | None = Field(None, description="de / robust-de / paper-study (default: Table 8)")
+    de: DESpec | None = Field(None, description="de / robust-de / paper-study (default: Table 10)")
     aggregate: Literal["mean", "worst"] | None = Field(None, description="robust-de only (default mean)")
     seed: int = Field(0, ge=0, le=2**32 - 1)
     settings: SimulationSpec = Field(default_factory=SimulationSpec)
@@ -100,18 +102,18 @@ class JobSpec(BaseModel):
             for name in ("bounds", "de", "aggregate"):
                 if getattr(self, name) is not None:
                     raise ValueError(f"{name}: not allowed for a sweep")
-        elif self.grid is not None:
+        elif self.grid is not None and self.kind != "paper-study":
             raise ValueError(f"grid: not allowed for {self.kind}")
-        if self.kind == "de" and self.aggregate is not None:
+        if self.kind in ("de", "paper-study") and self.aggregate is not None:
             raise ValueError("aggregate: only for robust-de")
         return self
 
     def normalised(self) -> JobSpec:
         """The spec with every default filled in (what is stored and hashed)."""
         fill: dict[str, Any] = {}
-        if self.kind == "sweep":
+        if self.kind in ("sweep", "paper-study"):
             fill["grid"] = self.grid or "table9"
-        else:
+        if self.kind != "sweep":
             fill["bounds"] = self.bounds or Bounds()
             fill["de"] = self.de or DESpec()
             if self.kind == "robust-de":
@@ -123,7 +125,7 @@ class EvaluationOut(BaseModel):
     id: int
     road_index: int
     road: str
-    step: int = Field(description="DE generation (0 = initial population); 0 for sweeps")
+    step: int = Field(description="DE generation (0 = initial population); 0 for sweeps, -1 for a paper-study's sweep")
     candidate: int = Field(description="row in the sweep grid or the DE generation")
     a2: float = Field(description="[rad]")
     a2_deg: float
@@ -223,3 +225,54 @@ class Problem(BaseModel):
     detail: str
     instance: str | None = None
     errors: list[ProblemItem] | None = None
+
+
+RecordingStatus = Literal["queued", "running", "succeeded", "failed"]
+
+
+class RecordingDesign(BaseModel):
+    """A geometry to record (a2 in degrees)."""
+
+    model_config = _STRICT
+
+    a2_deg: float = Field(ge=-720, le=720)
+    l2: float = Field(ge=0, le=0.5, description="[m]")
+    rws: float = Field(gt=0, le=0.5, description="[m]")
+    label: str | None = Field(None, max_length=80)
+
+
+class RecordingRequest(BaseModel):
+    """A Rerun recording: a job's best design and/or explicit designs, side by side on one road."""
+
+    model_config = _STRICT
+
+    job_id: int | None = Field(None, ge=1, le=2**63 - 1, description="record this job's best design (on `road`) first")
+    road: str | None = Field(None, min_length=1, max_length=500,
+                             description="road spec or preset; default: the job's first road")
+    designs: list[RecordingDesign] = Field(default_factory=list, max_length=4)
+    duration: float = Field(3.5, gt=0, le=10, description="simulated time [s]")
+    fps: Literal[10, 20, 25, 50, 100] = Field(50, description="frames per simulated second")
+
+    @model_validator(mode="after")
+    def _something(self) -> RecordingRequest:
+        if self.job_id is None and not self.designs:
+            raise ValueError("give job_id, designs, or both")
+        if self.job_id is None and self.road is None:
+            raise ValueError("road: required without job_id")
+        if len(self.designs) + (self.job_id is not None) > 4:
+            raise ValueError("at most 4 geometries per recording")
+        return self
+
+
+class RecordingOut(BaseModel):
+    id: int
+    status: RecordingStatus
+    job_id: int | None
+    road: str
+    designs: list[RecordingDesign] = Field(description="what is recorded, top to bottom")
+    duration: float
+    fps: int
+    frames: int = Field(description="frames on the sim_time timeline (duration x fps + 1)")
+    error: str | None
+    file: str | None = Field(description="download path, once succeeded")
+    created_at: datetime

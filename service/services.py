@@ -21,6 +21,7 @@ from service.api.status_cache import StatusCache
 from service.config import Settings
 from service.db.engine import Database
 from service.db.migrate import check_revision, head_revision, is_empty, upgrade
+from service.jobs.recordings import RecordingProducer, data_dir
 from service.jobs.runner import EvalStream, JobRunner
 
 if TYPE_CHECKING:
@@ -38,8 +39,11 @@ class Services:
     schema_revision: str
     engine_version: str
     status_cache: StatusCache
+    recorder: RecordingProducer | None = None
 
     def close(self) -> None:
+        if self.recorder is not None:
+            self.recorder.stop()
         self.runner.stop()
         if self.executor is not None:
             self.executor.close()
@@ -71,8 +75,11 @@ def start_services(settings: Settings, stream: EvalStream | None = None) -> Serv
         stream = executor_stream(executor, settings.batch_size)
     runner = JobRunner(db, stream, engine_version=ENGINE_VERSION, sweep_chunk=settings.sweep_chunk)
     runner.start()
+    recorder = RecordingProducer(db, data_dir(settings))
+    recorder.start()
     return Services(
-        settings, db, runner, executor, head_revision(), ENGINE_VERSION, StatusCache(settings.status_cache_seconds)
+        settings, db, runner, executor, head_revision(), ENGINE_VERSION, StatusCache(settings.status_cache_seconds),
+        recorder,
     )
 
 

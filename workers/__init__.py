@@ -9,14 +9,15 @@ from __future__ import annotations
 from typing import Literal
 
 from workers.base import Executor, WorkerLostError
-from workers.evaluate import evaluate_all, evaluate_stream
+from workers.evaluate import evaluate_all, evaluate_roads_stream, evaluate_stream
 from workers.process import ProcessExecutor
 from workers.serial import SerialExecutor
 
 ExecutorKind = Literal["serial", "process", "ray"]
 
 __all__ = [
-    "Executor", "ExecutorKind", "WorkerLostError", "evaluate_all", "evaluate_stream", "make_executor",
+    "Executor", "ExecutorKind", "WorkerLostError", "evaluate_all", "evaluate_roads_stream", "evaluate_stream",
+    "make_executor",
 ]
 
 

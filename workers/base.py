@@ -33,7 +33,14 @@ class WorkerLostError(RuntimeError):
 
 @runtime_checkable
 class Executor(Protocol):
-    """Runs batches of work, in-process or in worker processes."""
+    """Runs batches of work, in-process or in worker processes.
+
+    Thread safety: an executor serves **one** ``map_batches`` stream at a time. Open a
+    stream, consume or close it, then open the next; never share one executor between
+    threads (or interleave two open streams in one thread). The process pool enforces
+    this (a second open stream raises ``RuntimeError``); give each concurrent job its own
+    executor.
+    """
 
     num_workers: int
 

@@ -4,6 +4,11 @@ Never fork: a forked child shares the parent's Ray sockets and threads (Ray's
 ``patterns/fork-new-processes``). Each worker process receives ``shared`` once, through the
 pool initializer; the pool is kept between ``map_batches`` calls and rebuilt only when
 ``shared`` changes or a worker dies.
+
+Workers ignore SIGINT (Ctrl-C reaches the whole process group; the parent alone decides
+to stop and closes the pool), and a watchdog thread in each worker exits the process
+when its parent is gone (parent pid changed, e.g. after the parent was SIGKILLed), so
+workers are never left orphaned.
 """
 
 from __future__ import annotations
@@ -12,6 +17,9 @@ import hashlib
 import multiprocessing
 import os
 import pickle
+import signal
+import threading
+import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -20,13 +28,25 @@ from typing import Any
 
 from workers.base import IN_FLIGHT_PER_WORKER, ClosingMixin, WorkerLostError
 
+#: How often a worker checks that its parent is alive [s].
+PARENT_POLL_S = 0.5
+
 _shared: tuple[Any, ...] = ()
 
 
-def _init_worker(shared: tuple[Any, ...]) -> None:
-    """Pool initializer: keep this map call's shared arguments in the worker process."""
+def _init_worker(shared: tuple[Any, ...], parent_pid: int) -> None:
+    """Pool initializer: keep the shared arguments, ignore Ctrl-C, watch the parent."""
     global _shared
     _shared = shared
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_watch_parent, args=(parent_pid,), name="parent-watchdog", daemon=True).start()
+
+
+def _watch_parent(parent_pid: int) -> None:
+    """Exit this worker at once when its parent process is gone (it was re-parented)."""
+    while os.getppid() == parent_pid:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)
 
 
 def _run(fn: Callable[..., Any], batch: Any) -> Any:
@@ -40,6 +60,10 @@ class ProcessExecutor(ClosingMixin):
     batches are resubmitted. Every batch in flight when the pool broke counts one attempt,
     since the pool cannot tell which one killed it; a batch that exceeds ``max_retries``
     raises :class:`WorkerLostError`.
+
+    Not thread-safe: one ``map_batches`` stream at a time per executor (a second stream
+    started while one is open, from any thread, raises ``RuntimeError``). Give each
+    concurrent job its own executor, or use Ray.
     """
 
     def __init__(self, num_workers: int | None = None, max_retries: int = 3) -> None:
@@ -49,9 +73,22 @@ class ProcessExecutor(ClosingMixin):
         self.max_retries = max_retries
         self._pool: ProcessPoolExecutor | None = None
         self._pool_key: bytes | None = None
+        self._busy = threading.Lock()  # held while a map_batches stream is open
 
     def map_batches(
         self, fn: Callable[..., Any], batches: Iterable[Any], shared: tuple[Any, ...] = ()
+    ) -> Iterator[tuple[int, Any]]:
+        if not self._busy.acquire(blocking=False):
+            raise RuntimeError(
+                "ProcessExecutor runs one map_batches stream at a time; give each concurrent job its own executor"
+            )
+        try:
+            yield from self._map(fn, batches, shared)
+        finally:
+            self._busy.release()
+
+    def _map(
+        self, fn: Callable[..., Any], batches: Iterable[Any], shared: tuple[Any, ...]
     ) -> Iterator[tuple[int, Any]]:
         self._ensure_pool(shared)
         source = enumerate(batches)
@@ -133,7 +170,7 @@ class ProcessExecutor(ClosingMixin):
             max_workers=self.num_workers,
             mp_context=multiprocessing.get_context("spawn"),
             initializer=_init_worker,
-            initargs=(shared,),
+            initargs=(shared, os.getpid()),
         )
 
     def _shutdown_pool(self) -> None:

@@ -23,15 +23,15 @@ class Timed:
 
 
 def call_timed(
-    fn: Callable[..., Any], warmup: Callable[[], None] | None, batch: Any, *shared: Any
+    fn: Callable[..., Any], warmup: Callable[..., None] | None, batch: Any, *shared: Any
 ) -> Timed:
-    """Run ``warmup()`` once per process (e.g. load Numba's disk cache), then ``fn(batch, *shared)``."""
+    """Run ``warmup(*shared)`` once per process (e.g. load Numba's disk cache), then ``fn(batch, *shared)``."""
     start = time.perf_counter()
     if warmup is not None:
         name = getattr(warmup, "__qualname__", None)
         key = f"{warmup.__module__}.{name}" if name else repr(warmup)
         if key not in _warmed_up:
-            warmup()
+            warmup(*shared)
             _warmed_up.add(key)
     begin = time.perf_counter()
     result = fn(batch, *shared)

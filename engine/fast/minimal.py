@@ -20,6 +20,7 @@ import numpy as np
 from engine.model import params as P
 from engine.model.forces import radial_tyre_force
 from engine.model.jit import jit
+from engine.model.linalg import cholesky_in_place, cholesky_solve
 from engine.model.road_height import road_height
 from engine.model.tyre import (
     deformation_rate, effective_radius, magic_formula, magic_formula_slope, transient_slip,
@@ -148,42 +149,6 @@ def _add_body(M, h, F, J, a, m, g):
 
 
 @jit
-def cholesky_in_place(A: np.ndarray) -> None:
-    """A (symmetric positive definite, upper triangle filled) -> its lower Cholesky factor."""
-    n = A.shape[0]
-    for j in range(n):
-        for i in range(j + 1, n):
-            A[i, j] = A[j, i]
-    for j in range(n):
-        s = A[j, j]
-        for k in range(j):
-            s -= A[j, k] * A[j, k]
-        A[j, j] = math.sqrt(s)
-        for i in range(j + 1, n):
-            s = A[i, j]
-            for k in range(j):
-                s -= A[i, k] * A[j, k]
-            A[i, j] = s / A[j, j]
-        for i in range(j):
-            A[i, j] = 0.0
-
-
-@jit
-def cholesky_solve_small(L: np.ndarray, b: np.ndarray, x: np.ndarray) -> None:
-    n = b.shape[0]
-    for i in range(n):
-        s = b[i]
-        for k in range(i):
-            s -= L[i, k] * x[k]
-        x[i] = s / L[i, i]
-    for i in range(n - 1, -1, -1):
-        s = x[i]
-        for k in range(i + 1, n):
-            s -= L[k, i] * x[k]
-        x[i] = s / L[i, i]
-
-
-@jit
 def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, want_jac, out, aux, L, b, c_row, ws):
     """y' for y = (z, z', u); returns a failure code (0 = ok).
 
@@ -303,7 +268,7 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, want_jac, out, aux, L, b,
     zdd = out[N_DOF:ZU]
     for i in range(N_DOF):
         F[i] -= h[i]
-    cholesky_solve_small(M, F, zdd)
+    cholesky_solve(M, F, zdd)
     out[:N_DOF] = zd
     out[ZU] = deformation_rate(u, sigma, vsx, vx)                      # (42)
     alpha_dd = alpha_c

@@ -22,10 +22,10 @@ import numpy as np
 from engine.fast.minimal import (
     A_ALPHA_DOT, A_FX, A_FX_U, A_FZ_FRONT, A_FZ_REAR, A_KAPPA, A_RE, A_TAUT, A_TAUT_RATE,
     A_TENSION,
-    N_AUX, N_DOF, N_STATE, ZBETA, ZPHI, ZTHETA, ZU, ZX1, cholesky_solve_small, design_constants,
-    fast_rhs,
+    N_AUX, N_DOF, N_STATE, ZBETA, ZPHI, ZTHETA, ZU, ZX1, design_constants, fast_rhs,
 )
 from engine.model.jit import jit
+from engine.model.linalg import cholesky_solve
 from engine.model.tyre import magic_formula, relaxation_length
 from engine.solver.reference import (
     FRONT_AIRBORNE, N_SERIES, NONFINITE, OK, REAR_AIRBORNE,
@@ -152,7 +152,7 @@ def run_fast(y0, p, kind, rp, longitudinal, dt_out, n_out, tol, h_max, max_air_t
             k_out += 1
         # eq. (41) closed with this state's values; f1 moved to the new sigma*
         new_sigma = relaxation_length(aux[A_FX], aux[A_KAPPA], aux[A_FZ_REAR], p)
-        cholesky_solve_small(L, b, v)                     # M^-1 b
+        cholesky_solve(L, b, v)                     # M^-1 b
         vx = y[N_DOF + ZX1] + b[ZPHI] * y[N_DOF + ZPHI]
         if new_sigma != sigma:
             u = y[ZU]

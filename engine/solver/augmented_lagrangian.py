@@ -15,22 +15,7 @@ from engine.model import params as P
 from engine.model.constraints import jacobian, phi, phiq_dot_qdot
 from engine.model.coordinates import N_CONSTRAINTS, N_COORDS
 from engine.model.jit import jit
-
-
-@jit
-def cholesky_solve(L: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
-    """Solve L L^T x = b (L lower triangular)."""
-    n = b.shape[0]
-    for i in range(n):
-        s = b[i]
-        for k in range(i):
-            s -= L[i, k] * out[k]
-        out[i] = s / L[i, i]
-    for i in range(n - 1, -1, -1):
-        s = out[i]
-        for k in range(i + 1, n):
-            s -= L[k, i] * out[k]
-        out[i] = s / L[i, i]
+from engine.model.linalg import cholesky_solve
 
 
 @jit

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from service.api.routes import events, health, jobs, results, roads
+from service.api.routes import events, health, jobs, plots, recordings, results, roads
 
 api_router = APIRouter(prefix="/v1")
-for module in (jobs, results, events, roads, health):
+for module in (jobs, results, events, roads, health, recordings, plots):
     api_router.include_router(module.router)

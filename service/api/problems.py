@@ -88,6 +88,7 @@ def documented(*statuses: int) -> dict[int | str, dict[str, Any]]:
         400: "the body could not be read (not UTF-8 JSON)",
         401: "missing or wrong bearer token (only when FINALDRIVE_API_TOKEN is set)",
         404: "no such job",
+        409: "the resource is not ready for this (e.g. a recording still being produced)",
         413: "request body larger than FINALDRIVE_MAX_BODY_BYTES",
         422: "invalid request; `errors` names each field and the reason",
     }

@@ -12,7 +12,8 @@ import sys
 from collections.abc import Sequence
 
 #: Modules that add commands, in the order their commands appear in ``--help``.
-COMMAND_MODULES: tuple[str, ...] = ("service.cli.engine_cmds", "service.cli.server_cmds")
+COMMAND_MODULES: tuple[str, ...] = ("service.cli.engine_cmds", "service.cli.server_cmds", "service.cli.study_paper_cmds",
+                                   "service.cli.study_cmds", "service.cli.client_cmds")
 
 
 class UsageError(Exception):

@@ -164,11 +164,23 @@ def run_simulate(args: argparse.Namespace) -> int:
     summary.update({"a2_deg": design.a2_deg, "l2": design.l2, "rws": design.rws, "road": road.spec})
     if args.series and result.series is not None:
         _write_series(Path(args.series), result.series)
+    if args.record and result.ok:
+        from service.recording import record
+
+        label = f"a2={design.a2_deg:g} L2={design.l2:g} Rws={design.rws:g}"
+        try:
+            record(args.record, [(label, design)], road, duration=settings.duration, fps=args.fps,
+                   base=settings, vehicle=vehicle)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+        summary["record"] = args.record
     if args.json:
         print_json(summary)
     else:
         for key in ("status", "reason", "distance_m", "squat_ratio", "slack_mm", "fitness_m", "chain_length_m", "wall_s"):
             print(f"{key:>15}: {summary[key]}")
+        if "record" in summary:
+            print(f"{'record':>15}: {summary['record']}")
     return 0 if result.ok else 1
 
 
@@ -276,6 +288,8 @@ def register(sub: Any) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--series", metavar="FILE.csv", help="write the time series (Fig. 13 quantities)")
     p.add_argument("--stride", type=int, default=10, help="keep every n-th step in the series (default 10)")
+    p.add_argument("--record", metavar="FILE.rrd", help="also write a Rerun recording (open with `rerun FILE.rrd`)")
+    p.add_argument("--fps", type=int, default=50, help="--record: frames per simulated second (default 50)")
     p.set_defaults(run=run_simulate)
 
     p = sub.add_parser("evaluate", help="simulate a CSV of designs (a2_deg,l2,rws) in this process")

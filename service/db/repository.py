@@ -11,7 +11,7 @@ from typing import Any
 from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
-from service.db.models import ACTIVE_STATES, EvalStatus, Evaluation, Generation, Job, JobRoad, JobState
+from service.db.models import ACTIVE_STATES, EvalStatus, Evaluation, Generation, Job, JobRoad, JobState, Recording
 
 #: Rows per ``IN (...)`` query, well under SQLite's variable limit.
 _IN_CHUNK = 500
@@ -90,7 +90,7 @@ def roads_of(session: Session, job_ids: Sequence[int]) -> dict[int, list[tuple[J
         .where(JobRoad.job_id.in_(job_ids))
         .order_by(JobRoad.job_id, JobRoad.road_index)
     )
-    for road, best in session.execute(query).tuples():
+    for road, best in session.execute(query):
         out[road.job_id].append((road, best))
     return out
 
@@ -150,9 +150,11 @@ def set_running_to(session: Session, job_ids: Sequence[int], state: JobState) ->
 
 
 # ---------------------------------------------------------------------- evaluations
-def stored_slots(session: Session, job_id: int) -> set[tuple[int, int]]:
-    """(road_index, candidate) of a sweep's stored evaluations."""
+def stored_slots(session: Session, job_id: int, *, step: int | None = None) -> set[tuple[int, int]]:
+    """(road_index, candidate) of a sweep's stored evaluations (only those at ``step`` if given)."""
     query = select(Evaluation.road_index, Evaluation.candidate).where(Evaluation.job_id == job_id)
+    if step is not None:
+        query = query.where(Evaluation.step == step)
     return {(r, c) for r, c in session.execute(query)}
 
 
@@ -232,3 +234,28 @@ def last_generations(session: Session, job_id: int) -> dict[int, Generation]:
         latest, (Generation.run == latest.c.run) & (Generation.generation == latest.c.g)
     ).where(Generation.job_id == job_id)
     return {g.run: g for g in session.scalars(query)}
+
+
+# ---------------------------------------------------------------------- recordings
+def create_recording(session: Session, job_id: int | None, spec: dict[str, Any]) -> Recording:
+    recording = Recording(job_id=job_id, spec=spec, status="queued", created_at=utcnow())
+    session.add(recording)
+    session.flush()
+    return recording
+
+
+def set_recording(session: Session, recording_id: int, status: str, *, path: str | None = None,
+                  error: str | None = None) -> None:
+    """Move a recording to ``status``; a failure's message is kept in ``spec["error"]``."""
+    recording = session.get(Recording, recording_id)
+    assert recording is not None
+    recording.status = status
+    recording.path = path
+    if error is not None:
+        recording.spec = {**recording.spec, "error": error}
+
+
+def unfinished_recording_ids(session: Session) -> list[int]:
+    query = select(Recording.id).where(Recording.status.in_(["queued", "running"])).order_by(Recording.id)
+    return list(session.scalars(query))
+

@@ -17,8 +17,9 @@ from engine.api import SimSettings
 from engine.model.road import Road
 from engine.vehicle import Vehicle, default_vehicle
 
-#: SimSettings fields that only choose what is returned, not the result.
-_OUTPUT_ONLY = frozenset({"series", "series_stride"})
+#: SimSettings fields that only choose what is returned, not the result. (series_stride is
+#: not one: the fast path's steps land on its output times, series_stride x dt.)
+_OUTPUT_ONLY = frozenset({"series"})
 DESIGN_DECIMALS = 12
 
 

@@ -9,6 +9,8 @@ and write results themselves, all in the runner's thread:
 - de / robust-de: ask -> evaluate (robust: on every road, scored by ``aggregate``) ->
   tell; the generation's evaluations and the optimiser state are committed together, and
   a resumed run continues from its last stored generation.
+- paper-study: the sweep (stored with ``step = SWEEP_STEP``, so its slots never meet the
+  DE's generations) on every road, then the DE on each road; one job, one progress count.
 
 Cache hits (and duplicates within a request) are stored with ``cached=True`` and are
 never sent to the executor.
@@ -41,6 +43,9 @@ from service.jobs.plan import JobPlan
 
 Sink = Callable[[list[EvalRow]], None]
 
+#: ``step`` of a paper-study's sweep evaluations (DE generations are 0, 1, ...).
+SWEEP_STEP = -1
+
 
 @dataclass(frozen=True)
 class EvalRequest:
@@ -68,14 +73,23 @@ class JobContext:
 
 
 def make_driver(ctx: JobContext) -> Driver:
-    return sweep_driver(ctx) if ctx.plan.kind == "sweep" else de_driver(ctx)
+    if ctx.plan.kind == "sweep":
+        return sweep_driver(ctx)
+    if ctx.plan.kind == "paper-study":
+        return paper_study_driver(ctx)
+    return de_driver(ctx)
 
 
-def sweep_driver(ctx: JobContext) -> Driver:
+def paper_study_driver(ctx: JobContext) -> Driver:
+    yield from sweep_driver(ctx, step=SWEEP_STEP)
+    yield from de_driver(ctx)
+
+
+def sweep_driver(ctx: JobContext, step: int = 0) -> Driver:
     designs = ctx.plan.designs
     assert designs is not None
     with ctx.db.read() as session:
-        done = stored_slots(session, ctx.job_id)
+        done = stored_slots(session, ctx.job_id, step=step)
 
     def commit(rows: list[EvalRow]) -> None:
         with ctx.db.write() as session:
@@ -86,7 +100,7 @@ def sweep_driver(ctx: JobContext) -> Driver:
         missing = np.array([c for c in range(len(designs)) if (r, c) not in done], dtype=int)
         for start in range(0, len(missing), ctx.sweep_chunk):
             candidates = missing[start:start + ctx.sweep_chunk]
-            yield from evaluate_rows(ctx, r, 0, candidates, designs[candidates], prefix, commit)
+            yield from evaluate_rows(ctx, r, step, candidates, designs[candidates], prefix, commit)
 
 
 def de_driver(ctx: JobContext) -> Driver:
@@ -99,7 +113,7 @@ def de_driver(ctx: JobContext) -> Driver:
             de, generation = DifferentialEvolution.from_state(stored.state), stored.generation
         else:
             de, generation = plan.new_optimiser(run), 0
-        road_indices = [run] if plan.kind == "de" else list(range(len(plan.roads)))
+        road_indices = list(range(len(plan.roads))) if plan.kind == "robust-de" else [run]
         prefixes = {r: ctx.prefix(r) for r in road_indices}
         while not de.done:
             x = de.ask()
@@ -111,7 +125,7 @@ def de_driver(ctx: JobContext) -> Driver:
             for row in rows:
                 if row.fitness_m is not None:
                     table[position[row.road_index], row.candidate] = row.fitness_m
-            de.tell(table[0] if plan.kind == "de" else aggregate(table, plan.aggregate))
+            de.tell(aggregate(table, plan.aggregate) if plan.kind == "robust-de" else table[0])
             generation += 1
             with ctx.db.write() as session:
                 add_evaluations(session, ctx.job_id, rows)

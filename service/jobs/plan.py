@@ -12,6 +12,7 @@ from engine.api import SimSettings
 from engine.model.road import Road
 from engine.optimize.de import DifferentialEvolution
 from engine.study.presets import as_road, resolve_roads, road_label
+from engine.study.space import periodic_mask
 from engine.study.sweep import parse_grid, table9_grid
 from engine.vehicle import Vehicle, load_vehicle_dict
 from service.schemas import DESpec, JobSpec
@@ -34,38 +35,45 @@ class NamedRoad:
 
 @dataclass(frozen=True)
 class JobPlan:
-    kind: Literal["sweep", "de", "robust-de"]
+    """A resolved job; a ``paper-study`` has both a sweep grid and a per-road DE."""
+
+    kind: Literal["sweep", "de", "robust-de", "paper-study"]
     roads: tuple[NamedRoad, ...]
     settings: SimSettings
     vehicle: Vehicle | None
     seed: int
-    designs: np.ndarray | None = None          # sweep: (n, 3) rows
-    lower: np.ndarray | None = None            # de: search box, engine units
+    designs: np.ndarray | None = None          # sweep / paper-study: (n, 3) rows
+    lower: np.ndarray | None = None            # de / paper-study: search box, engine units
     upper: np.ndarray | None = None
     de: DESpec | None = None
     aggregate: Literal["mean", "worst"] = "mean"
 
     @property
     def n_runs(self) -> int:
-        """Independent DE runs: one per road for ``de``, one for ``robust-de``."""
-        return len(self.roads) if self.kind == "de" else 1
+        """Independent DE runs: one per road for ``de`` and ``paper-study``, one for ``robust-de``."""
+        return 1 if self.kind == "robust-de" else len(self.roads)
 
     def evals_per_run(self) -> int:
         assert self.de is not None
         planned = self.de.np * (self.de.iters + 1)
         return min(planned, self.de.max_evals) if self.de.max_evals else planned
 
+    def sweep_total(self) -> int:
+        """Evaluations of the sweep part (0 for a DE)."""
+        return 0 if self.designs is None else len(self.designs) * len(self.roads)
+
+    def de_total(self) -> int:
+        """Evaluations the DE part plans (0 for a sweep)."""
+        return 0 if self.de is None else self.evals_per_run() * len(self.roads)
+
     def total(self) -> int:
         """Evaluations the job plans (DE with patience may stop earlier)."""
-        if self.kind == "sweep":
-            assert self.designs is not None
-            return len(self.designs) * len(self.roads)
-        return self.evals_per_run() * len(self.roads)
+        return self.sweep_total() + self.de_total()
 
     def new_optimiser(self, run: int) -> DifferentialEvolution:
         assert self.de is not None and self.lower is not None and self.upper is not None
         return DifferentialEvolution(
-            self.lower, self.upper, periodic=[True, False, False], pop_size=self.de.np,
+            self.lower, self.upper, periodic=periodic_mask(self.lower, self.upper), pop_size=self.de.np,
             f=self.de.f, cp=self.de.cp, mp=self.de.mp, mr_fraction=self.de.mr_fraction,
             max_iter=self.de.iters, max_evals=self.de.max_evals, patience=self.de.patience,
             seed=self.seed + run,
@@ -99,12 +107,14 @@ def build_plan(spec: JobSpec) -> JobPlan:
         except ValueError as exc:
             raise PlanError(("vehicle",), str(exc)) from None
     base = JobPlan(kind=spec.kind, roads=tuple(roads), settings=settings, vehicle=vehicle, seed=spec.seed)
-    if spec.kind == "sweep":
+    if spec.kind in ("sweep", "paper-study"):
         try:
             designs = table9_grid() if spec.grid in (None, "table9") else parse_grid(spec.grid)
         except ValueError as exc:
             raise PlanError(("grid",), str(exc)) from None
-        return replace(base, designs=np.asarray(designs, dtype=float))
+        base = replace(base, designs=np.asarray(designs, dtype=float))
+        if spec.kind == "sweep":
+            return base
     assert spec.bounds is not None and spec.de is not None
     b = spec.bounds
     lower = np.array([math.radians(b.a2_deg[0]), b.l2_m[0], b.rws_m[0]])

@@ -24,7 +24,9 @@ from service.schemas import JobSpec
 SIM = {"duration": 0.3}
 SWEEP = {"kind": "sweep", "roads": ["flat"], "grid": "a2_deg=0:270:90,l2=0.05|0.15,rws=0.09", "settings": SIM}
 DE = {"kind": "de", "roads": ["sine:0.02:3"], "de": {"np": 6, "iters": 3}, "seed": 7, "settings": SIM}
-LONG_DE = {"kind": "de", "roads": ["flat"], "de": {"np": 8, "iters": 14}, "seed": 11, "settings": SIM}
+# the paper's method, so the job runs long enough (about 2 s) to be killed three times
+LONG_DE = {"kind": "de", "roads": ["flat"], "de": {"np": 8, "iters": 14}, "seed": 11,
+           "settings": {**SIM, "method": "reference"}}
 TERMINAL = {"succeeded", "failed", "cancelled"}
 
 

@@ -158,7 +158,7 @@ def test_worker_lost_after_max_retries() -> None:
 def toy_engine(monkeypatch: pytest.MonkeyPatch) -> None:
     """Serial runs in-process, so the engine call can be replaced by a toy."""
     monkeypatch.setattr(workers.evaluate, "run_engine", lambda d, road, settings, vehicle: toyfns.toy_result(d))
-    monkeypatch.setattr(workers.evaluate, "warm_up_engine", lambda: None)
+    monkeypatch.setattr(workers.evaluate, "warm_up_engine", lambda *shared: None)
 
 
 def test_evaluate_all_in_input_order_with_progress(toy_engine: None) -> None:

@@ -1,0 +1,117 @@
+"""/v1/recordings: Rerun recordings of designs, produced in the background, downloaded by id."""
+
+from __future__ import annotations
+
+import math
+from datetime import UTC
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Path, Response
+from fastapi.responses import FileResponse
+
+from service.api.deps import MAX_ID, ServicesDep
+from service.api.problems import ApiProblem, documented, validation_problem
+from service.api.routes.jobs import load_job
+from service.api.security import MutationAuth
+from service.db.models import Job, Recording
+from service.db.repository import create_recording
+from service.jobs.recordings import data_dir, recording_file
+from service.schemas import JobOut, RecordingDesign, RecordingOut, RecordingRequest
+
+router = APIRouter(prefix="/recordings", tags=["recordings"])
+
+RecordingId = Annotated[int, Path(ge=1, le=MAX_ID, description="recording id")]
+
+
+def _job_best(job: JobOut, road: str | None) -> tuple[str, RecordingDesign]:
+    """(road spec, best design) of a job on ``road`` (name, spec or index; default its first road)."""
+    chosen = job.roads[0] if road is None else next(
+        (r for r in job.roads if road in (r.name, r.spec, str(r.index))), None)
+    if chosen is None:
+        names = ", ".join(r.name for r in job.roads)
+        raise validation_problem(("body", "road"), f"job {job.id} has no road {road!r} (its roads: {names})")
+    rb = job.robust_best
+    if rb is not None:
+        return chosen.spec, RecordingDesign(a2_deg=rb.a2_deg, l2=rb.l2, rws=rb.rws, label=f"job {job.id} best")
+    if chosen.best is None:
+        raise ApiProblem(409, f"job {job.id} has no successful evaluation on road {chosen.name!r} yet",
+                         slug="no-best-design")
+    b = chosen.best
+    return chosen.spec, RecordingDesign(a2_deg=b.a2_deg, l2=b.l2, rws=b.rws, label=f"job {job.id} best")
+
+
+def _spec(request: RecordingRequest, services: Any) -> dict[str, Any]:
+    """The concrete spec stored and produced: road, designs with labels, timing, method."""
+    from engine.study.presets import resolve_roads
+
+    designs = list(request.designs)
+    method, dt, vehicle, road = "fast", 1.0e-3, None, request.road
+    if request.job_id is not None:
+        job = load_job(services, request.job_id)
+        road, best = _job_best(job, request.road)
+        designs.insert(0, best)
+        method, dt, vehicle = job.spec.settings.method, job.spec.settings.dt, job.spec.vehicle
+    assert road is not None
+    try:
+        items = resolve_roads(road)
+    except ValueError as exc:
+        raise validation_problem(("body", "road"), str(exc)) from None
+    if len(items) != 1:
+        raise validation_problem(("body", "road"), f"{road!r} names {len(items)} roads; give one")
+    if abs(round(1.0 / (request.fps * dt)) * request.fps * dt - 1.0) > 1e-9:
+        raise validation_problem(("body", "fps"), f"fps must divide 1/dt = {1 / dt:g} Hz")
+    labelled = [d.model_copy(update={"label": d.label or f"a2={d.a2_deg:g} L2={d.l2:g} Rws={d.rws:g}"})
+                for d in designs]
+    return {"road": road, "designs": [d.model_dump() for d in labelled], "duration": request.duration,
+            "fps": request.fps, "method": method, "dt": dt, "vehicle": vehicle}
+
+
+def _out(r: Recording) -> RecordingOut:
+    s = r.spec
+    return RecordingOut(
+        id=r.id, status=r.status, job_id=r.job_id, road=s["road"],  # type: ignore[arg-type]
+        designs=[RecordingDesign(**d) for d in s["designs"]], duration=s["duration"], fps=s["fps"],
+        frames=math.ceil(s["duration"] * s["fps"] - 1e-9) + 1, error=s.get("error"),
+        file=f"/v1/recordings/{r.id}/file" if r.status == "succeeded" else None,
+        created_at=r.created_at.replace(tzinfo=UTC),
+    )
+
+
+def _load(services: Any, recording_id: int) -> Recording:
+    with services.db.read() as session:
+        row = session.get(Recording, recording_id)
+    if row is None:
+        raise ApiProblem(404, f"recording {recording_id} does not exist", slug="not-found")
+    return row
+
+
+@router.post("", status_code=202, response_model=RecordingOut, dependencies=[MutationAuth],
+             responses=documented(400, 401, 404, 409, 413, 422),
+             summary="Request a recording (produced in the background; poll GET until succeeded)")
+def create(request: RecordingRequest, services: ServicesDep, response: Response) -> RecordingOut:
+    spec = _spec(request, services)
+    with services.db.write() as session:
+        job_id = request.job_id if request.job_id is not None and session.get(Job, request.job_id) else None
+        row = create_recording(session, job_id, spec)
+    assert services.recorder is not None
+    services.recorder.submit(row.id)
+    response.headers["Location"] = f"/v1/recordings/{row.id}"
+    return _out(row)
+
+
+@router.get("/{recording_id}", response_model=RecordingOut, responses=documented(404, 422),
+            summary="A recording's status")
+def get(recording_id: RecordingId, services: ServicesDep) -> RecordingOut:
+    return _out(_load(services, recording_id))
+
+
+@router.get("/{recording_id}/file", response_class=FileResponse, responses=documented(404, 409, 422),
+            summary="Download a finished recording (.rrd, open with `rerun FILE`)")
+def file(recording_id: RecordingId, services: ServicesDep) -> FileResponse:
+    row = _load(services, recording_id)
+    if row.status != "succeeded" or row.path is None:
+        raise ApiProblem(409, f"recording {recording_id} is {row.status}, not ready", slug="not-ready")
+    path = recording_file(data_dir(services.settings), recording_id)
+    if not path.is_file():
+        raise ApiProblem(404, f"the file of recording {recording_id} is gone from the server", slug="not-found")
+    return FileResponse(path, media_type="application/octet-stream", filename=f"finaldrive-recording-{recording_id}.rrd")

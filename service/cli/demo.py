@@ -1,0 +1,111 @@
+"""``finaldrive demo``: a local service in a subprocess, a small DE through it, the best design.
+
+The server (``finaldrive serve``) runs on a free 127.0.0.1 port with ``--db`` (default
+./finaldrive.db) and the chosen executor (default Ray); its log goes to
+./finaldrive-demo.log. It is stopped with SIGTERM (then SIGKILL after 30 s) on every exit path.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from service.cli.client_cmds import EXIT_FAILED, EXIT_OK, client_command, follow
+from service.cli.engine_cmds import print_json
+
+LOG = Path("finaldrive-demo.log")
+START_TIMEOUT_S = 120.0
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def start_server(port: int, db: str, executor: str, log: Path) -> subprocess.Popen[bytes]:
+    cmd = [sys.executable, "-m", "service.cli", "serve", "--host", "127.0.0.1", "--port", str(port),
+           "--db", db, "--executor", executor]
+    with log.open("ab") as out:
+        return subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT)
+
+
+def wait_healthy(client: Any, proc: subprocess.Popen[bytes], timeout: float = START_TIMEOUT_S) -> dict[str, Any]:
+    from service.client import ClientError
+
+    deadline = time.monotonic() + timeout
+    while True:
+        if proc.poll() is not None:
+            raise RuntimeError(f"the service exited with code {proc.returncode} (see {LOG})")
+        try:
+            return dict(client.health())
+        except ClientError:
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"the service did not answer /v1/health within {timeout:g} s (see {LOG})") from None
+            time.sleep(0.25)
+
+
+def stop_server(proc: subprocess.Popen[bytes], timeout: float = 30.0) -> None:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def demo_spec(args: argparse.Namespace) -> dict[str, Any]:
+    return {"kind": "de", "roads": [args.road], "de": {"np": args.np, "iters": args.iters}, "seed": 1,
+            "settings": {"method": "fast", "duration": 3.5}}
+
+
+def run_demo(args: argparse.Namespace) -> int:
+    from service.client import ServiceClient
+
+    port = args.port or free_port()
+    url = f"http://127.0.0.1:{port}"
+    print(f"starting the service at {url} ({args.executor} executor, {args.db}; log: {LOG})", file=sys.stderr)
+    proc = start_server(port, args.db, args.executor, LOG)
+    try:
+        with ServiceClient(url) as client:
+            try:
+                health = wait_healthy(client, proc)
+            except RuntimeError as exc:
+                print(f"finaldrive: error: {exc}", file=sys.stderr)
+                return EXIT_FAILED
+            print(f"service up: engine {health['engine_version']}, executor {health['executor']}", file=sys.stderr)
+            return _run_job(args, client)
+    finally:
+        print("stopping the service", file=sys.stderr)
+        stop_server(proc)
+
+
+@client_command
+def _run_job(args: argparse.Namespace, client: Any) -> int:
+    start = time.monotonic()
+    job = client.submit(demo_spec(args))
+    print(f"job {job['id']}: DE (NP {args.np}, {args.iters} generations) on {args.road}, "
+          f"{job['total']} simulations", file=sys.stderr)
+    job = follow(client, job["id"])
+    if job["state"] != "succeeded":
+        print(f"finaldrive: error: job {job['id']} {job['state']}: {job.get('error') or ''}", file=sys.stderr)
+        return EXIT_FAILED
+    best = job["roads"][0]["best"]
+    result = {"job": job["id"], "road": job["roads"][0]["spec"], "a2_deg": best["a2_deg"], "l2": best["l2"],
+              "rws": best["rws"], "fitness_m": best["fitness_m"], "distance_m": best["distance_m"],
+              "simulations": job["done"] + job["failed"], "wall_s": round(time.monotonic() - start, 1)}
+    if args.json:
+        print_json(result)
+    else:
+        print(f"best geometry on {result['road']} (job {result['job']}, {result['simulations']} simulations, "
+              f"{result['wall_s']} s):")
+        print(f"  a2 = {best['a2_deg']:.1f} deg   L2 = {best['l2']:.4f} m   R_WS = {best['rws']:.4f} m")
+        print(f"  fitness = {best['fitness_m']:.3f} m   distance = {best['distance_m']:.3f} m")
+    return EXIT_OK

@@ -1,0 +1,182 @@
+"""Rerun recordings (.rrd) of simulated designs: the only module that imports rerun.
+
+One recording holds one or more geometries on the same road, one above the other
+(``/world/g1``, ``/world/g2``, ...; the road is drawn under each), and their Fig. 13 time
+series under ``/plots/<quantity>/g<k>``. The timeline ``sim_time`` has one frame per series
+row: ``duration * fps + 1`` frames. Rerun's 2D views draw y downwards, so each ``/world/g<k>``
+carries a transform that flips y (a transform on the view's origin itself would not apply);
+the logged points are the engine's coordinates unchanged.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from engine import Design, Road, SimSettings, Vehicle, default_vehicle, simulate
+from service.scene import ROW_OFFSET_M, Run, frame, road_strip, tyre_forces
+
+APPLICATION_ID = "finaldrive"
+TIMELINE = "sim_time"
+#: (series key, entity name, legend unit) of the Fig. 13 plots.
+PLOTS: tuple[tuple[str, str, str], ...] = (
+    ("distance", "distance", "m"),
+    ("chain_tension", "chain_tension", "N"),
+    ("squat_ratio", "squat_ratio", "-"),
+    ("fz_rear", "fz_rear", "N"),
+    ("fz_front", "fz_front", "N"),
+    ("kappa", "slip", "-"),
+    ("fx", "fx", "N"),
+)
+PARTS = ("chassis", "swingarm", "damper", "fork", "rear_wheel", "front_wheel",
+         "engine_sprocket", "wheel_sprocket", "chain")
+_COLOURS = ((31, 119, 180), (214, 39, 40), (44, 160, 44), (148, 103, 189))
+_PART_WIDTH = {"chassis": 0.012, "swingarm": 0.012, "fork": 0.01, "chain": 0.006}
+
+
+class RecordingError(RuntimeError):
+    """A geometry could not be simulated, so there is nothing to record."""
+
+
+def run_key(index: int) -> str:
+    """Entity name of the ``index``-th geometry (0-based): g1, g2, ..."""
+    return f"g{index + 1}"
+
+
+def series_settings(duration: float, fps: int, base: SimSettings | None = None) -> SimSettings:
+    """Settings whose series has one row per frame (``fps`` must divide 1/dt)."""
+    base = base or SimSettings()
+    stride = round(1.0 / (fps * base.dt))
+    if stride < 1 or abs(stride * fps * base.dt - 1.0) > 1e-9:
+        raise ValueError(f"fps must divide 1/dt = {1.0 / base.dt:g} Hz, got {fps}")
+    return replace(base, duration=duration, series=True, series_stride=stride)
+
+
+def simulate_runs(designs: Sequence[tuple[str, Design]], road: Road, settings: SimSettings,
+                  vehicle: Vehicle | None = None) -> list[Run]:
+    """Simulate each (label, design) with series; :class:`RecordingError` if one fails."""
+    runs = []
+    for label, design in designs:
+        result = simulate(design, road, settings, vehicle)
+        if not result.ok or result.series is None:
+            raise RecordingError(f"{label}: the simulation failed: {result.reason}")
+        runs.append(Run(label, design, result.series))
+    return runs
+
+
+def blueprint() -> rrb.Blueprint:
+    """The 2D mechanism on the left, the Fig. 13 plots in a grid on the right."""
+    plots = [rrb.TimeSeriesView(origin=f"/plots/{name}", name=f"{name} [{unit}]") for _, name, unit in PLOTS]
+    return rrb.Blueprint(
+        rrb.Horizontal(rrb.Spatial2DView(origin="/world", name="Mechanism"), rrb.Grid(*plots), column_shares=[3, 2]),
+        collapse_panels=True,
+    )
+
+
+def write_recording(path: str | Path, runs: Sequence[Run], road: Road, *, name: str,
+                    recording_id: str | None = None, vehicle: Vehicle | None = None) -> None:
+    """Write ``runs`` (all on ``road``, same time rows) to ``path``; closes the file."""
+    vehicle = vehicle or default_vehicle()
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
+    try:
+        rec.save(str(path), default_blueprint=blueprint())
+        rec.send_recording_name(name)
+        rec.send_property("road", rr.AnyValues(spec=road.spec))
+        for i, run in enumerate(runs):
+            _log_run(rec, run, run_key(i), i, road, vehicle)
+    finally:
+        rec.disconnect()
+
+
+def _log_run(rec: rr.RecordingStream, run: Run, key: str, index: int, road: Road, vehicle: Vehicle) -> None:
+    colour = _COLOURS[index % len(_COLOURS)]
+    d = run.design
+    offset = -index * ROW_OFFSET_M
+    root = f"/world/{key}"
+    rec.send_property(key, rr.AnyValues(label=run.label, a2_deg=d.a2_deg, l2_m=d.l2, rws_m=d.rws))
+    rec.log(root, rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)  # into the view's y-down space
+    rec.log(f"{root}/road", rr.LineStrips2D([road_strip(road, [run], offset)], radii=0.004, colors=(90, 90, 90),
+                                            labels=[run.label], show_labels=True), static=True)
+    t = run.series["t"]
+    times = rr.TimeColumn(TIMELINE, duration=t)
+    for series_key, name, unit in PLOTS:
+        path = f"/plots/{name}/{key}"
+        rec.log(path, rr.SeriesLines(names=f"{run.label} [{unit}]", colors=colour, widths=2), static=True)
+        rec.send_columns(path, indexes=[times], columns=rr.Scalars.columns(scalars=run.series[series_key]))
+    r_es = d.rws / vehicle["sprocket_ratio"]
+    for k, tk in enumerate(t):
+        rec.set_time(TIMELINE, duration=float(tk))
+        for part, strips in frame(run, k, r_es, offset).items():
+            rec.log(f"{root}/{part}", rr.LineStrips2D(strips, radii=_PART_WIDTH.get(part, 0.006), colors=colour))
+        origins, vectors = tyre_forces(run, k, offset)
+        rec.log(f"{root}/tyre_forces", rr.Arrows2D(origins=origins, vectors=vectors, radii=0.008,
+                                                   colors=(230, 120, 0), labels=["Fz", "Fx", "Fz"]))
+
+
+def record(path: str | Path, designs: Sequence[tuple[str, Design]], road: Road, *, duration: float = 3.5,
+           fps: int = 50, base: SimSettings | None = None, vehicle: Vehicle | None = None,
+           recording_id: str | None = None) -> list[Run]:
+    """Simulate ``designs`` on ``road`` and write them side by side to ``path``."""
+    settings = series_settings(duration, fps, base)
+    runs = simulate_runs(designs, road, settings, vehicle)
+    name = " vs ".join(label for label, _ in designs) + f" on {road.spec}"
+    write_recording(path, runs, road, name=name, recording_id=recording_id, vehicle=vehicle)
+    return runs
+
+
+def scene_at(path: str | Path, t: float) -> tuple[dict[str, list[np.ndarray]], list[tuple[np.ndarray, np.ndarray]]]:
+    """What a finished .rrd shows under ``/world`` at ``t`` [s]: line strips per entity and
+    tyre-force arrows (origins, vectors), read back from the file (for a matplotlib render)."""
+    from rerun.chunk import RrdReader
+
+    strips: dict[str, list[np.ndarray]] = {}
+    arrows: list[tuple[np.ndarray, np.ndarray]] = []
+    target = round(t * 1e9)
+    for chunk in RrdReader(str(path)).stream().to_chunks():
+        if not chunk.entity_path.startswith("/world/"):
+            continue
+        batch = chunk.to_record_batch()
+        row = 0
+        if not chunk.is_static:
+            times = np.asarray(batch.column(TIMELINE).cast("int64").to_pylist())
+            row = int(np.argmin(np.abs(times - target)))
+            if abs(times[row] - target) > 1e6:  # not in this chunk
+                continue
+        names = batch.schema.names
+        if "LineStrips2D:strips" in names:
+            strips[chunk.entity_path] = [np.asarray(s) for s in batch.column("LineStrips2D:strips")[row].as_py()]
+        elif "Arrows2D:vectors" in names:
+            arrows.append((np.asarray(batch.column("Arrows2D:origins")[row].as_py()),
+                           np.asarray(batch.column("Arrows2D:vectors")[row].as_py())))
+    return strips, arrows
+
+
+def read_rows(path: str | Path) -> dict[str, list[object]]:
+    """The temporal chunks of a finished .rrd as record batches, by entity path."""
+    from rerun.chunk import RrdReader
+
+    out: dict[str, list[object]] = {}
+    for chunk in RrdReader(str(path)).stream().to_chunks():
+        if not chunk.is_static:
+            out.setdefault(chunk.entity_path, []).append(chunk.to_record_batch())
+    return out
+
+
+def frame_count(path: str | Path, entity: str) -> int:
+    """Time rows logged on ``entity``."""
+    return sum(batch.num_rows for batch in read_rows(path).get(entity, []))  # type: ignore[attr-defined]
+
+
+def scalars_of(path: str | Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
+    """(t [s], value) of one series entity, in time order."""
+    t, v = [], []
+    for batch in read_rows(path).get(entity, []):
+        t.extend(batch.column(TIMELINE).cast("int64").to_pylist())  # type: ignore[attr-defined]
+        v.extend(x[0] for x in batch.column("Scalars:scalars").to_pylist())  # type: ignore[attr-defined]
+    order = np.argsort(t, kind="stable")
+    return np.asarray(t, float)[order] * 1e-9, np.asarray(v, float)[order]

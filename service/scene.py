@@ -1,0 +1,84 @@
+"""The 2D scene of a simulated motorcycle, frame by frame, as plain numpy (no drawing library).
+
+Shared by the Rerun recording (service/recording.py) and the matplotlib frame render
+(service/plots.py), so both show exactly the same lines. Points are the natural
+coordinates of engine/model/coordinates.py, in metres; ``offset`` shifts a run vertically
+so that several geometries can ride the same road one above the other.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from engine.api import Design
+from engine.model import coordinates as C
+from engine.model.road import Road
+
+#: Tyre force arrows: metres of arrow per newton.
+FORCE_SCALE_M_PER_N = 1.0 / 5000.0
+#: Vertical distance between geometries shown side by side [m].
+ROW_OFFSET_M = 1.6
+_CIRCLE = np.linspace(0.0, 2.0 * np.pi, 49)
+
+
+@dataclass(frozen=True)
+class Run:
+    """One simulated geometry: its label, design and engine series (``series=True``)."""
+
+    label: str
+    design: Design
+    series: dict[str, np.ndarray]
+
+
+def _pt(q: np.ndarray, k: int, dy: float) -> np.ndarray:
+    return np.array([q[C.point_x(k)], q[C.point_y(k)] + dy])
+
+
+def circle(centre: np.ndarray, radius: float) -> np.ndarray:
+    return centre + radius * np.column_stack([np.cos(_CIRCLE), np.sin(_CIRCLE)])
+
+
+def _mark(centre: np.ndarray, radius: float, angle: float) -> np.ndarray:
+    """A radius drawn at ``angle``: shows the body's rotation."""
+    return np.array([centre, centre + radius * np.array([np.cos(angle), np.sin(angle)])])
+
+
+def frame(run: Run, k: int, r_es: float, offset: float = 0.0) -> dict[str, list[np.ndarray]]:
+    """Line strips (each an (n, 2) array) of every part at series row ``k``.
+
+    The front wheel has no spin coordinate in the model; its mark turns as if it rolled
+    without slip (front axle travel / tyre radius).
+    """
+    s = run.series
+    q = s["q"][k]
+    p = {i: _pt(q, i, offset) for i in range(1, C.N_POINTS + 1)}
+    rt, ft = float(q[C.RT]), float(q[C.FT])
+    front_roll = -(s["q"][k][C.X13] - s["q"][0][C.X13]) / ft
+    return {
+        "chassis": [np.array([p[1], p[2], p[3], p[4], p[5], p[1]])],
+        "swingarm": [np.array([p[1], p[7], p[6]])],
+        "damper": [np.array([p[3], p[7]])],
+        "fork": [np.array([p[4], p[5], p[12], p[13]])],
+        "rear_wheel": [circle(p[6], rt), _mark(p[6], rt, float(q[C.BETA]))],
+        "front_wheel": [circle(p[13], ft), _mark(p[13], ft, front_roll)],
+        "engine_sprocket": [circle(p[2], r_es), _mark(p[2], r_es, float(q[C.ALPHA]))],
+        "wheel_sprocket": [circle(p[6], run.design.rws), _mark(p[6], run.design.rws, float(q[C.BETA]))],
+        "chain": [np.array([p[10], p[11]])],
+    }
+
+
+def tyre_forces(run: Run, k: int, offset: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Arrow origins and vectors [m]: rear Fz, rear Fx, front Fz at the contact points."""
+    s, q = run.series, run.series["q"][k]
+    rear, front = _pt(q, 14, offset), _pt(q, 15, offset)
+    vectors = np.array([[0.0, s["fz_rear"][k]], [s["fx"][k], 0.0], [0.0, s["fz_front"][k]]])
+    return np.array([rear, rear, front]), vectors * FORCE_SCALE_M_PER_N
+
+
+def road_strip(road: Road, runs: list[Run], offset: float = 0.0) -> np.ndarray:
+    """The road profile under every run's travel, with a margin either side."""
+    xs = np.concatenate([r.series["q"][:, [C.X14, C.X15]].ravel() for r in runs])
+    x = np.linspace(xs.min() - 1.0, xs.max() + 1.0, 600)
+    return np.column_stack([x, road.height_at(x) + offset])

@@ -1,0 +1,53 @@
+"""PNG plots: the public functions and GET /v1/jobs/{id}/plots/{name}.png."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+from fastapi.testclient import TestClient
+from svc_helpers import DE, SWEEP, wait_done
+
+from engine.study.sweep import parse_grid
+from service import plots
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def is_png(data: bytes) -> bool:
+    return data.startswith(PNG) and len(data) > 10_000
+
+
+def test_sweep_map_grid_and_scatter(tmp_path: Path) -> None:
+    grid = parse_grid("a2_deg=0:350:10,l2=0:0.2:0.02,rws=0.093")
+    values = 20 + np.cos(grid[:, 0] - 3.3) * grid[:, 1]
+    values[5] = math.nan  # a failed design stays blank
+    plots.sweep_map_png(tmp_path / "grid.png", grid, values, title="grid", best=(3.3, 0.2))
+    plots.sweep_map_png(tmp_path / "few.png", grid[::37], values[::37], title="scatter", value_label="fitness [m]")
+    assert is_png((tmp_path / "grid.png").read_bytes()) and is_png((tmp_path / "few.png").read_bytes())
+
+
+def test_de_history_and_series(tmp_path: Path) -> None:
+    history = [{"generation": g, "best_f": 20 + 0.1 * g, "mean_f": 19 + 0.2 * g} for g in range(1, 6)]
+    population = np.column_stack([np.linspace(0, 6, 8), np.linspace(0, 0.2, 8), np.full(8, 0.09), np.arange(8.0)])
+    plots.de_history_png(tmp_path / "de.png", history, population, title="de")
+    t = np.linspace(0, 1, 50)
+    series = {key: np.sin(t * k) for k, (key, _) in enumerate(plots.SERIES_PANELS, start=1)} | {"t": t}
+    plots.series_png(tmp_path / "s.png", [("one", series), ("two", {k: v * 2 for k, v in series.items()})], title="s")
+    assert is_png((tmp_path / "de.png").read_bytes()) and is_png((tmp_path / "s.png").read_bytes())
+
+
+def test_plot_routes(client: TestClient) -> None:
+    sweep = client.post("/v1/jobs", json=SWEEP).json()
+    de = client.post("/v1/jobs", json=DE).json()
+    wait_done(client, sweep["id"])
+    wait_done(client, de["id"])
+    for url in (f"/v1/jobs/{sweep['id']}/plots/sweep-map.png?road=1&value=distance",
+                f"/v1/jobs/{sweep['id']}/plots/sweep-map.png", f"/v1/jobs/{de['id']}/plots/de-history.png"):
+        r = client.get(url)
+        assert r.status_code == 200 and r.headers["content-type"] == "image/png" and is_png(r.content), url
+    assert client.get(f"/v1/jobs/{sweep['id']}/plots/de-history.png").status_code == 409
+    assert client.get(f"/v1/jobs/{sweep['id']}/plots/sweep-map.png?road=moon").status_code == 422
+    assert client.get("/v1/jobs/999/plots/sweep-map.png").status_code == 404
+    assert client.get(f"/v1/jobs/{sweep['id']}/plots/pie.png").status_code == 422

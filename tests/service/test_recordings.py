@@ -1,0 +1,132 @@
+"""Rerun recordings: the .rrd read back (entities, frames, values), and the /v1/recordings API."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from rerun.chunk import RrdReader
+from svc_helpers import FakeStream, wait_done
+
+from engine import Design, Road, SimSettings, simulate
+from service.config import Settings
+from service.main import create_app
+from service.recording import PARTS, PLOTS, frame_count, record, scalars_of, series_settings
+
+ROAD = Road.parse("sine:0.04:3")
+DURATION, FPS = 0.4, 50
+DESIGNS = [("geometry 1", Design.from_deg(0.0, 0.0, 0.093)), ("geometry 2", Design.from_deg(270.0, 0.15, 0.15))]
+
+
+def verify(path: Path) -> None:
+    """``rerun rrd verify`` exits 0 (analytics off first, so no banner or network)."""
+    exe = shutil.which("rerun")
+    assert exe is not None
+    subprocess.run([exe, "analytics", "disable"], capture_output=True, check=False)
+    done = subprocess.run([exe, "rrd", "verify", str(path)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+
+
+@pytest.fixture(scope="module")
+def rrd(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("rrd") / "two.rrd"
+    record(path, DESIGNS, ROAD, duration=DURATION, fps=FPS)
+    return path
+
+
+def test_two_geometries_every_part_every_frame(rrd: Path) -> None:
+    frames = round(DURATION * FPS) + 1
+    for key in ("g1", "g2"):
+        for part in (*PARTS, "tyre_forces"):
+            assert frame_count(rrd, f"/world/{key}/{part}") == frames, part
+        for _, name, _ in PLOTS:
+            assert frame_count(rrd, f"/plots/{name}/{key}") == frames, name
+    reader = RrdReader(str(rrd))
+    assert [r.application_id for r in reader.recordings()] == ["finaldrive"]
+    assert reader.blueprints(), "the default blueprint is stored"
+    static = {c.entity_path for c in reader.stream().to_chunks() if c.is_static}
+    assert {"/world/g1", "/world/g2", "/world/g1/road", "/world/g2/road"} <= static
+    verify(rrd)
+
+
+def test_series_equal_the_engines(rrd: Path) -> None:
+    for i, (_, design) in enumerate(DESIGNS):
+        series = simulate(design, ROAD, series_settings(DURATION, FPS)).series
+        assert series is not None
+        for key, name, _ in PLOTS:
+            t, values = scalars_of(rrd, f"/plots/{name}/g{i + 1}")
+            np.testing.assert_allclose(t, series["t"], atol=1e-9)
+            np.testing.assert_allclose(values, series[key], rtol=1e-12, atol=1e-12)
+
+
+def test_fps_must_divide_the_step_rate() -> None:
+    with pytest.raises(ValueError, match="fps must divide"):
+        series_settings(1.0, 7, SimSettings())
+
+
+@pytest.fixture
+def client(tmp_path: Path) -> TestClient:
+    settings = Settings(db_url=f"sqlite:///{tmp_path / 'r.db'}", data_dir=str(tmp_path / "data"), status_cache_seconds=0)
+    with TestClient(create_app(settings, stream=FakeStream())) as c:
+        yield c
+
+
+def wait_recording(client: TestClient, rid: int, timeout: float = 60) -> dict:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        body = client.get(f"/v1/recordings/{rid}").json()
+        if body["status"] in ("succeeded", "failed"):
+            return body
+        time.sleep(0.05)
+    raise AssertionError(body)
+
+
+def test_api_records_a_jobs_best_beside_a_design(client: TestClient, tmp_path: Path) -> None:
+    job = client.post("/v1/jobs", json={"kind": "sweep", "roads": ["sine:0.04:3"],
+                                        "grid": "a2_deg=0:90:90,l2=0.05,rws=0.09"}).json()
+    wait_done(client, job["id"])
+    r = client.post("/v1/recordings", json={"job_id": job["id"], "duration": 0.2, "fps": 25,
+                                            "designs": [{"a2_deg": 270, "l2": 0.15, "rws": 0.15}]})
+    assert r.status_code == 202 and r.headers["Location"] == f"/v1/recordings/{r.json()['id']}"
+    body = wait_recording(client, r.json()["id"])
+    assert body["status"] == "succeeded", body
+    assert [d["label"] for d in body["designs"]] == [f"job {job['id']} best", "a2=270 L2=0.15 Rws=0.15"]
+    assert body["road"] == "sine:0.04:3" and body["frames"] == 6 and "path" not in body
+    download = client.get(body["file"])
+    assert download.status_code == 200
+    assert download.headers["content-disposition"] == f'attachment; filename="finaldrive-recording-{body["id"]}.rrd"'
+    out = tmp_path / "dl.rrd"
+    out.write_bytes(download.content)
+    assert frame_count(out, "/world/g2/chain") == 6
+    verify(out)
+
+
+def test_api_errors(client: TestClient) -> None:
+    assert client.get("/v1/recordings/99").status_code == 404
+    assert client.get("/v1/recordings/99/file").status_code == 404
+    no_road = client.post("/v1/recordings", json={"designs": [{"a2_deg": 0, "l2": 0, "rws": 0.09}]})
+    assert no_road.status_code == 422 and "road" in no_road.json()["detail"]
+    bad_road = client.post("/v1/recordings", json={"road": "moon", "designs": [{"a2_deg": 0, "l2": 0, "rws": 0.09}]})
+    assert bad_road.status_code == 422 and bad_road.json()["detail"].startswith("body.road: unknown road")
+    assert client.post("/v1/recordings", json={"job_id": 42}).status_code == 404
+    failing = client.post("/v1/recordings", json={"road": "flat", "duration": 0.2,
+                                                   "designs": [{"a2_deg": 190, "l2": 0.5, "rws": 0.5}]}).json()
+    body = wait_recording(client, failing["id"])  # sprockets too close for a chain: fails, the service goes on
+    assert body["status"] == "failed" and "cannot carry a chain" in body["error"]
+    assert client.get(f"/v1/recordings/{body['id']}/file").status_code == 409
+
+
+def test_scene_read_back_matches_the_engine(rrd: Path) -> None:
+    from engine.model import coordinates as C
+    from service.recording import scene_at
+
+    strips, arrows = scene_at(rrd, 0.2)
+    assert {f"/world/g1/{p}" for p in PARTS} <= set(strips) and len(arrows) == 2
+    q = simulate(DESIGNS[0][1], ROAD, series_settings(DURATION, FPS)).series["q"][10]  # t = 0.2 s
+    chain = [[q[C.X10], q[C.Y10]], [q[C.X11], q[C.Y11]]]
+    np.testing.assert_allclose(strips["/world/g1/chain"][0], chain, atol=1e-6)  # stored as float32

@@ -1,0 +1,154 @@
+"""The local study commands: optimize, sweep, roads (JSON shape, budgets, CSV, errors, Ctrl-C)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import workers.evaluate
+from engine.api import BatchResult, SimResult
+from service.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+TOY = ["--np", "6", "--iters", "2", "--duration", "0.2"]
+
+
+def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    code = main(argv)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def run_json(argv: list[str], capsys: pytest.CaptureFixture[str]) -> dict:
+    code, out, _ = run([*argv, "--json"], capsys)
+    assert code == 0
+    return json.loads(out)
+
+
+def test_optimize_toy_budget_json(capsys: pytest.CaptureFixture[str]) -> None:
+    r = run_json(["optimize", "--road", "sine-h4cm-l3m", *TOY, "--executor", "serial"], capsys)
+    assert r["evaluations"] == r["designs_evaluated"] == 6 * (2 + 1)
+    assert r["failed"] == 0 and r["generations"] == 2 and len(r["history"]) == 3
+    best = r["best"]
+    assert 0 <= best["a2_deg"] < 360 and 0 <= best["l2"] <= 0.2 and 0.05 <= best["rws"] <= 0.15
+    assert best["fitness_m"] == pytest.approx(r["history"][-1]["best_f"]) and best["distance_m"] > 0
+    assert r["per_road"][0]["paper"]["a2_deg"] == pytest.approx(192.2)
+
+
+def test_same_seed_same_best_serial_and_process(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["optimize", "--road", "flat", *TOY, "--seed", "7"]
+    serial = run_json([*argv, "--executor", "serial"], capsys)
+    process = run_json([*argv, "--executor", "process", "--workers", "2"], capsys)
+    assert serial["best"] == process["best"] and serial["history"] == process["history"]
+
+
+def test_robust_optimize_over_roads(capsys: pytest.CaptureFixture[str]) -> None:
+    r = run_json(["optimize", "--roads", "flat,sine:0.04:3", "--objective", "worst", *TOY,
+                  "--executor", "serial", "--bounds", "a2_deg=90:270,rws=0.08:0.1"], capsys)
+    assert r["objective"] == "worst" and r["evaluations"] == 2 * 18 and r["designs_evaluated"] == 18
+    assert 90 <= r["best"]["a2_deg"] <= 270 and 0.08 <= r["best"]["rws"] <= 0.1
+    on_roads = [road["best_design"]["fitness_m"] for road in r["per_road"]]
+    assert r["best"]["fitness_m"] == pytest.approx(min(on_roads))
+    assert all(road["best_seen"]["fitness_m"] >= road["best_design"]["fitness_m"] for road in r["per_road"])
+
+
+def test_failed_simulations_are_counted_and_never_best(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Designs with L2 > 0.1 fail (and would have the largest fitness if they did not)."""
+    def fake(designs: np.ndarray, road: object, settings: object, vehicle: object) -> BatchResult:
+        results = [SimResult("failed", "toy", math.nan, math.nan, math.nan, math.nan, 1.0, 0.0) if l2 > 0.1
+                   else SimResult("ok", "", l2, 1.0, 0.0, l2, 1.0, 0.0) for _, l2, _ in designs]
+        return BatchResult.from_results(designs, results)
+
+    monkeypatch.setattr(workers.evaluate, "run_engine", fake)
+    r = run_json(["optimize", "--road", "flat", *TOY, "--executor", "serial"], capsys)
+    assert r["failed"] == sum(h["n_failed"] for h in r["history"]) > 0
+    assert r["best"]["l2"] <= 0.1 and r["best"]["fitness_m"] == pytest.approx(r["best"]["l2"])
+
+
+def test_sweep_grid_writes_one_csv_row_per_design(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "results.csv"
+    r = run_json(["sweep", "--road", "flat", "--grid", "a2_deg=0:300:60,l2=0|0.1", "--rws", "0.09",
+                  "--duration", "0.2", "--executor", "serial", "--out", str(out)], capsys)
+    rows = list(csv.DictReader(out.open()))
+    assert len(rows) == r["designs"] == r["evaluations"] == 6 * 2
+    assert {row["road"] for row in rows} == {"flat"} and {float(row["rws"]) for row in rows} == {0.09}
+    assert max(float(row["fitness_m"]) for row in rows) == pytest.approx(r["best"]["fitness_m"])
+
+
+def test_sweep_several_roads_reports_each_road(capsys: pytest.CaptureFixture[str]) -> None:
+    r = run_json(["sweep", "--roads", "flat,sine-h2cm-l3m", "--grid", "a2_deg=0|180,l2=0.05,rws=0.093",
+                  "--duration", "0.2", "--executor", "serial"], capsys)
+    assert r["evaluations"] == 4 and [p["road"] for p in r["per_road"]] == ["flat", "sine-h2cm-l3m"]
+    assert r["objective"] == "mean" and r["best"]["a2_deg"] in (0.0, 180.0)
+
+
+def test_text_output_is_the_best_design(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run(["optimize", "--road", "flat", *TOY, "--executor", "serial"], capsys)
+    assert code == 0 and out.startswith("best: a2 = ") and "evaluations: 18 (0 failed)" in out
+    assert err == ""                                      # no progress when stderr is not a terminal
+
+
+def test_roads_json_lists_the_23_presets(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(["roads", "--json"], capsys)
+    roads = json.loads(out)
+    assert code == 0 and len(roads) == 23
+    assert roads[0] == {"name": "flat", "spec": "flat", "description": "flat road (Table 11)",
+                        "paper": roads[0]["paper"]} and roads[0]["paper"]["fitness_m"] > 20
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["optimize", "--road", "cobbles"], "cobbles"),
+    (["optimize", "--road", "flat", "--np", "3"], "--np"),
+    (["optimize", "--road", "flat", "--bounds", "l2=0.2:0.1"], "l2"),
+    (["optimize", "--road", "flat", "--max-evals", "10"], "--max-evals"),
+    (["optimize", "--road", "paper"], "--roads"),
+    (["sweep", "--road", "flat", "--grid", "l2=0:0.1:-1"], "step"),
+    (["sweep", "--roads", "flat,nowhere"], "nowhere"),
+    (["sweep", "--road", "flat", "--executor", "threads"], "executor"),
+])
+def test_bad_arguments_exit_2_with_one_line(argv: list[str], fragment: str, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run(argv, capsys)
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and err.startswith("finaldrive: error:") and fragment in err
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc")
+def test_ctrl_c_stops_cleanly_without_orphans() -> None:
+    """SIGINT to the process group (a terminal's Ctrl-C): exit 130, one message, no worker left."""
+    cmd = [sys.executable, "-m", "service.cli", "sweep", "--road", "flat", "--duration", "0.5",
+           "--executor", "process", "--workers", "2", "--progress"]
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        assert proc.stderr is not None
+        proc.stderr.readline()                            # the first progress line: workers are running
+        children = subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True).stdout.split()
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130 and err.strip().endswith("finaldrive: interrupted")
+    assert "Traceback" not in err
+    deadline = time.monotonic() + 5
+    while any(_running(pid) for pid in children) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert children and not any(_running(pid) for pid in children)
+
+
+def _running(pid: str) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
