@@ -1,5 +1,6 @@
-"""The ``finaldrive`` command line.
+"""finaldrive: motorcycle final-drive geometry by multibody simulation on uneven roads.
 
+The command line.
 Each command group lives in its own module exposing ``register(subparsers)``; ``main`` wires
 them together. Bad arguments exit with code 2 and one line on stderr.
 """

@@ -11,7 +11,7 @@ Produced by the tool, not by hand. The study ran through the job service:
 
 ```sh
 finaldrive db upgrade --db sqlite:///./finaldrive.db
-FINALDRIVE_NUM_WORKERS=2 finaldrive serve --executor process --db sqlite:///./finaldrive.db &   # or --executor ray
+finaldrive serve --db sqlite:///./finaldrive.db &              # a local Ray on all cores (the default executor)
 finaldrive study paper --server http://127.0.0.1:8000          # submits kind "paper-study", follows progress
 finaldrive report paper-study {job} --out docs/paper-study.md --db sqlite:///./finaldrive.db
 ```

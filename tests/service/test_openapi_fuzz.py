@@ -28,7 +28,7 @@ CHECKS = [not_a_server_error, status_code_conformance, content_type_conformance,
 @pytest.fixture(scope="module")
 def app(tmp_path_factory: pytest.TempPathFactory) -> Iterator[FastAPI]:
     db = Path(tmp_path_factory.mktemp("fuzz")) / "fuzz.db"
-    config = Settings(db_url=f"sqlite:///{db}", max_job_evaluations=500, events_poll_seconds=0.01,
+    config = Settings(db_url=f"sqlite:///{db}", executor="serial", max_job_evaluations=500, events_poll_seconds=0.01,
                       api_token=SecretStr("fuzz-token"))
     application = create_app(config, stream=FakeStream(batch_size=64))
     with TestClient(application):  # runs the lifespan; schemathesis calls the started app
