@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import os
-import platform
 import random
 import signal
 import socket
@@ -29,22 +28,11 @@ from pathlib import Path
 
 import httpx
 
+from service.machine import describe
+
 #: The Table 9 sweep on all 23 roads at full duration: it keeps both cores busy for minutes,
 #: longer than any measurement window.
 SWEEP = {"kind": "sweep", "roads": ["paper"], "grid": "table9"}
-
-
-def machine() -> str:
-    cpu = platform.processor() or "unknown cpu"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    load = ", load average %.1f %.1f %.1f" % os.getloadavg() if hasattr(os, "getloadavg") else ""
-    return f"{platform.system()} {platform.machine()}, {os.cpu_count()} cores ({cpu}), Python {platform.python_version()}{load}"
 
 
 def free_port() -> int:
@@ -109,7 +97,7 @@ async def bench(url: str, clients: int, seconds: float, interval: float) -> None
         await client.post(f"{path}/cancel")
     ms = sorted(x * 1000 for x in latencies)
     q = statistics.quantiles(ms, n=100)
-    print(f"machine: {machine()}")
+    print(f"machine: {describe()}")
     pace = f"each waiting {interval:g} s between requests" if interval else "closed loop"
     print(f"{len(ms)} GET {path} in {seconds:g} s from {clients} clients ({pace}) = {len(ms) / seconds:.0f} req/s, "
           f"{len(errors)} errors; sweep progress during the run: {final['done'] + final['failed']}/{final['total']}")

@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import shutil
 import statistics
 import subprocess
@@ -30,21 +29,10 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from engine import Design, Road, SimSettings, evaluate, simulate  # noqa: E402
+from service.machine import describe  # noqa: E402
 
 TABLE11 = Design.from_deg(195.3, 0.037, 0.088)
 ROADS = ("flat", "sine:0.04:3", "sine:0.04:2", "bump:0.04:0.2")
-
-
-def machine() -> str:
-    cpu = "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}, Python {platform.python_version()}"
 
 
 def settings_for(method: str, **kw: object) -> SimSettings:
@@ -161,7 +149,7 @@ def main() -> None:
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     n_batch = 20 if args.quick else args.batch
-    report: dict[str, object] = {"machine": machine(), "methods": {}}
+    report: dict[str, object] = {"machine": describe(), "methods": {}}
     print(f"machine: {report['machine']}")
     for method in args.methods.split(","):
         m: dict[str, object] = {}

@@ -28,20 +28,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # run as a script
 
 from engine.api import BatchResult, SimSettings  # noqa: E402
 from engine.model.road import Road  # noqa: E402
+from service.machine import describe  # noqa: E402
 from workers import Executor, evaluate_all, make_executor  # noqa: E402
 
 ROAD = "sine:0.04:3"
 BOUNDS = np.array([[0.0, 2 * np.pi], [0.0, 0.2], [0.05, 0.15]])   # a2 [rad], L2 [m], R_WS [m]
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def sample_designs(n: int, seed: int) -> np.ndarray:
@@ -93,7 +84,7 @@ def main(argv: list[str] | None = None) -> None:
 
     settings = SimSettings() if args.duration is None else SimSettings(duration=args.duration)
     road, designs = Road.parse(ROAD), sample_designs(args.n, args.seed)
-    print(f"machine: {cpu_model()}, {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}")
+    print(f"machine: {describe()}")
     print(f"python {platform.python_version()}, road {ROAD}, {args.n} designs, duration {settings.duration} s, "
           f"dt {settings.dt} s, method {settings.method}, repeat {args.repeat}", flush=True)
 

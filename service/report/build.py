@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from service.machine import cpu_model
 from service.report import analysis as A
 from service.report.data import StudyData
 from service.report.markdown import render
@@ -31,15 +32,7 @@ class ReportFiles:
 
 def machine() -> dict[str, Any]:
     """The host generating the report (the lead runs study and report on the same machine)."""
-    cpu = platform.processor() or "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return {"cpu": cpu, "logical_cores": os.cpu_count(), "os": platform.platform(terse=True),
+    return {"cpu": cpu_model(), "logical_cores": os.cpu_count(), "os": platform.platform(terse=True),
             "python": platform.python_version()}
 
 
