@@ -72,3 +72,11 @@ def test_console_script_is_installed():
     out = subprocess.run([exe, "geometry", "--a2-deg", "0", "--l2", "0",
                           "--rws", "0.093", "--json"], capture_output=True, text=True, check=True)
     assert json.loads(out.stdout)["squat_ratio"] > 1
+
+
+def test_a_closed_pipe_ends_quietly():
+    exe = shutil.which("finaldrive")
+    assert exe
+    proc = subprocess.run(f"{exe} roads | head -1", shell=True, capture_output=True, text=True)
+    assert proc.stdout.startswith("name")
+    assert "Traceback" not in proc.stderr
