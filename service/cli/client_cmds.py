@@ -432,7 +432,7 @@ def register(sub: Any) -> None:
 
     p = sub.add_parser("jobs", help="list the service's jobs, newest first")
     p.add_argument("--state", choices=("queued", "running", "succeeded", "failed", "cancelled", "interrupted"))
-    p.add_argument("--kind", choices=("sweep", "de", "robust-de"))
+    p.add_argument("--kind", choices=("sweep", "de", "robust-de", "paper-study"))
     p.add_argument("--limit", type=int, default=20)
     _common(p)
     p.set_defaults(run=run_jobs)
