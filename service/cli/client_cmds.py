@@ -19,6 +19,7 @@ from typing import Any, TextIO
 
 from service.cli import UsageError
 from service.cli.engine_cmds import print_json, road_from_arg
+from service.cli.study_cmds import add_de_args
 
 EXIT_OK = 0
 EXIT_FAILED = 1          # the thing asked for failed (a simulation, a recording)
@@ -410,18 +411,10 @@ def register(sub: Any) -> None:
     p.add_argument("--road", action="append", help="a road (repeatable): preset, group or spec")
     p.add_argument("--roads", action="append", help="comma-separated roads or a group (paper, sine, bump)")
     p.add_argument("--grid", help='sweep: "table9" (default) or e.g. "a2_deg=0:350:10,l2=0:0.2:0.02,rws=0.093"')
-    p.add_argument("--np", type=int, default=50, help="DE population size (default 50)")
-    p.add_argument("--iters", type=int, default=50, help="DE generations after the first (default 50)")
-    p.add_argument("--f", type=float, default=0.6, help="DE weight F (default 0.6)")
-    p.add_argument("--cp", type=float, default=0.6, help="DE crossover probability (default 0.6)")
-    p.add_argument("--mp", type=float, default=0.1, help="DE mutation probability (default 0.1)")
-    p.add_argument("--mr", type=float, default=0.2, help="DE mutation range as a fraction of each range (default 0.2)")
+    add_de_args(p)
     p.add_argument("--bounds", metavar="SPEC", help="DE box: a2_deg=LO:HI,l2=LO:HI,rws=LO:HI (default Table 8)")
     p.add_argument("--vehicle", metavar="FILE", help="vehicle parameter file (JSON, as engine/data/vehicle.json)")
-    p.add_argument("--patience", type=int, help="DE: stop after this many generations without improvement")
-    p.add_argument("--max-evals", type=int, help="DE: evaluation budget per run")
     p.add_argument("--objective", choices=("mean", "worst"), default="mean", help="robust-de aggregate")
-    p.add_argument("--seed", type=int, default=0)
     p.add_argument("--duration", type=float, default=3.5, help="simulated time [s] (default 3.5)")
     p.add_argument("--dt", type=float, help="time step [s]")
     p.add_argument("--method", choices=("fast", "reference"), default="fast", help="engine (default fast)")

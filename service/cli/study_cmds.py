@@ -439,12 +439,8 @@ def run_roads(args: argparse.Namespace) -> int:
 
 # --- registration -----------------------------------------------------------------------------
 
-def register(sub: Any) -> None:
-    p = sub.add_parser("optimize", help="the paper's DE on one road, or a robust DE over several roads (local)",
-                       description="Differential evolution (Table 10 defaults) over the Table 8 box. --road: the "
-                                   "paper's per-road optimisation; --roads: one design scored on every road "
-                                   "(--objective mean|worst). Failed simulations score NaN and are counted.")
-    add_road_args(p)
+def add_de_args(p: argparse.ArgumentParser) -> None:
+    """The DE options (Table 10 defaults), shared by ``optimize`` and ``submit``."""
     p.add_argument("--np", type=int, default=50, help="population size NP (default 50, >= 4)")
     p.add_argument("--iters", type=int, default=50, help="generations after the initial population (default 50)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -454,6 +450,15 @@ def register(sub: Any) -> None:
     p.add_argument("--mr", type=float, default=0.2, help="mutation range MR as a fraction of each range (default 0.2)")
     p.add_argument("--patience", type=int, default=None, help="stop after N generations without improvement")
     p.add_argument("--max-evals", type=int, default=None, help="design evaluation budget (>= --np)")
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("optimize", help="the paper's DE on one road, or a robust DE over several roads (local)",
+                       description="Differential evolution (Table 10 defaults) over the Table 8 box. --road: the "
+                                   "paper's per-road optimisation; --roads: one design scored on every road "
+                                   "(--objective mean|worst). Failed simulations score NaN and are counted.")
+    add_road_args(p)
+    add_de_args(p)
     p.add_argument("--bounds", default=None, metavar="SPEC",
                    help="override Table 8: a2_deg=LO:HI,l2=LO:HI,rws=LO:HI (any subset; default "
                         "a2_deg=0:360,l2=0:0.2,rws=0.05:0.15). a2 is periodic only over a full 360 deg")
