@@ -52,13 +52,14 @@ class FakeStream:
         )
 
 
-def wait_done(client: Any, job_id: int, timeout: float = 20.0) -> dict[str, Any]:
+def wait_done(client: Any, job_id: int, timeout: float = 20.0, poll: float = 0.02) -> dict[str, Any]:
+    """Poll GET /v1/jobs/{id} until the job reaches a terminal state."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         job = client.get(f"/v1/jobs/{job_id}").json()
         if job["state"] in TERMINAL:
             return job
-        time.sleep(0.02)
+        time.sleep(poll)
     raise AssertionError(f"job {job_id} did not finish: {job}")
 
 

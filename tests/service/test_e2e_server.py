@@ -20,6 +20,7 @@ import pytest
 from engine import evaluate
 from service.jobs.plan import build_plan
 from service.schemas import JobSpec
+from svc_helpers import wait_done
 
 SIM = {"duration": 0.3}
 SWEEP = {"kind": "sweep", "roads": ["flat"], "grid": "a2_deg=0:270:90,l2=0.05|0.15,rws=0.09", "settings": SIM}
@@ -73,14 +74,8 @@ def server(tmp_path: Path) -> Iterator[Server]:
         srv.kill()
 
 
-def wait(client: httpx.Client, job_id: int, timeout: float = 120) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        job = client.get(f"/v1/jobs/{job_id}").json()
-        if job["state"] in TERMINAL:
-            return job
-        time.sleep(0.1)
-    raise AssertionError(f"job {job_id} still {job['state']}")
+def wait(client: httpx.Client, job_id: int) -> dict[str, Any]:
+    return wait_done(client, job_id, timeout=120, poll=0.1)
 
 
 def reference_de(spec: dict[str, Any]) -> Any:
