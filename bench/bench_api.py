@@ -28,7 +28,7 @@ from pathlib import Path
 
 import httpx
 
-from service.machine import describe
+from finaldrive.service.machine import describe
 
 #: The Table 9 sweep on all 23 roads at full duration: it keeps both cores busy for minutes,
 #: longer than any measurement window.
@@ -44,7 +44,7 @@ def free_port() -> int:
 def start_server(db: Path, port: int, executor: str, log: Path) -> subprocess.Popen[bytes]:
     env = {**os.environ, "FINALDRIVE_DB_URL": f"sqlite:///{db}", "FINALDRIVE_EXECUTOR": executor,
            "FINALDRIVE_NUM_WORKERS": "1"}
-    cmd = [sys.executable, "-m", "uvicorn", "--factory", "service.main:create_app",
+    cmd = [sys.executable, "-m", "uvicorn", "--factory", "finaldrive.service.main:create_app",
            "--host", "127.0.0.1", "--port", str(port), "--log-level", "warning"]
     with log.open("wb") as out:
         return subprocess.Popen(cmd, env=env, stdout=out, stderr=subprocess.STDOUT)

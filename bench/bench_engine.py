@@ -28,8 +28,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from engine import Design, Road, SimSettings, evaluate, simulate  # noqa: E402
-from service.machine import describe  # noqa: E402
+from finaldrive.engine import Design, Road, SimSettings, evaluate, simulate  # noqa: E402
+from finaldrive.service.machine import describe  # noqa: E402
 
 TABLE11 = Design.from_deg(195.3, 0.037, 0.088)
 ROADS = ("flat", "sine:0.04:3", "sine:0.04:2", "bump:0.04:0.2")
@@ -96,7 +96,7 @@ _FIRST_CALL = """
 import time, sys
 t0 = time.perf_counter()
 sys.path.insert(0, {repo!r})
-from engine import Design, Road, SimSettings, simulate
+from finaldrive.engine import Design, Road, SimSettings, simulate
 r = simulate(Design.from_deg(195.3, 0.037, 0.088), Road.parse("flat"), SimSettings(method={method!r}, duration=0.1))
 assert r.ok
 print(time.perf_counter() - t0)

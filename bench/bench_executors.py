@@ -26,10 +26,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # run as a script from anywhere
 
-from engine.api import BatchResult, SimSettings  # noqa: E402
-from engine.model.road import Road  # noqa: E402
-from service.machine import describe  # noqa: E402
-from workers import Executor, evaluate_all, make_executor  # noqa: E402
+from finaldrive.engine.api import BatchResult, SimSettings
+from finaldrive.engine.model.road import Road
+from finaldrive.service.machine import describe
+from finaldrive.workers import Executor, evaluate_all, make_executor
 
 ROAD = "sine:0.04:3"
 BOUNDS = np.array([[0.0, 2 * np.pi], [0.0, 0.2], [0.05, 0.15]])   # a2 [rad], L2 [m], R_WS [m]

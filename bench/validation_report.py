@@ -13,10 +13,10 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from engine import Design, Road, SimSettings, default_vehicle, simulate  # noqa: E402
-from engine.calibrate import static_loads  # noqa: E402
-from engine.model.kinematics import design_squat_ratio  # noqa: E402
-from engine.simulate import pack_parameters  # noqa: E402
+from finaldrive.engine import Design, Road, SimSettings, default_vehicle, simulate  # noqa: E402
+from finaldrive.engine.calibrate import static_loads  # noqa: E402
+from finaldrive.engine.model.kinematics import design_squat_ratio  # noqa: E402
+from finaldrive.engine.simulation import pack_parameters  # noqa: E402
 
 TABLES = json.loads((REPO / "engine" / "data" / "paper_tables.json").read_text())
 

@@ -1,21 +1,121 @@
-"""finaldrive's simulation engine: the paper's 2D multibody motorcycle and its solver.
+"""finaldrive's simulation engine: the paper's 2D multibody motorcycle, its solvers, and studies.
 
-The public surface is small: ``simulate`` one design, ``evaluate`` a batch, and the values
-they take and return. Nothing here reads files or the environment except ``load_vehicle``.
+This module is the engine's one public interface (import contracts in pyproject.toml hold
+``finaldrive.workers`` and ``finaldrive.service`` to it): ``simulate`` one design,
+``evaluate`` a batch, the values they take and return, the vehicle, roads and the study layer.
+Names load on first use, so importing the facade costs nothing until a name is used.
+Nothing here reads files or the environment except ``load_vehicle``.
 """
 
-from engine.api import (
-    STATUS_FAILED, STATUS_OK, BatchResult, Design, DesignError, SimResult, SimSettings,
-)
-from engine.model.road import Road, RoadError
-from engine.simulate import evaluate, simulate
-from engine.vehicle import Vehicle, VehicleError, default_vehicle, load_vehicle, load_vehicle_dict
+if __name__ != "finaldrive.engine":  # never importable as a top-level `engine` (it would shadow others)
+    raise ImportError(f"this is finaldrive.engine; import it by that name, not as {__name__!r}")
+
+import importlib
+from typing import TYPE_CHECKING, Any
 
 #: Bumped whenever a change alters simulation results (part of the result-cache key).
 ENGINE_VERSION = "0.1.0"
 
-__all__ = [
-    "BatchResult", "Design", "DesignError", "ENGINE_VERSION", "Road", "RoadError",
-    "STATUS_FAILED", "STATUS_OK", "SimResult", "SimSettings", "Vehicle", "VehicleError",
-    "default_vehicle", "evaluate", "load_vehicle", "load_vehicle_dict", "simulate",
-]
+#: Public name -> module that defines it.
+_EXPORTS: dict[str, str] = {
+    **dict.fromkeys(("STATUS_FAILED", "STATUS_OK", "BatchResult", "Design", "DesignError", "Method", "SimResult",
+                     "SimSettings"), "finaldrive.engine.api"),
+    **dict.fromkeys(("evaluate", "simulate"), "finaldrive.engine.simulation"),
+    **dict.fromkeys(("Road", "RoadError"), "finaldrive.engine.model.road"),
+    **dict.fromkeys(("coordinate_index", "point_positions"), "finaldrive.engine.model.coordinates"),
+    **dict.fromkeys(("Vehicle", "VehicleError", "default_vehicle", "load_vehicle", "load_vehicle_dict"),
+                    "finaldrive.engine.vehicle"),
+    "static_geometry": "finaldrive.engine.geometry",
+    **dict.fromkeys(("StaticLoads", "calibration_design", "solve_chassis_cog", "solve_torque", "static_loads"),
+                    "finaldrive.engine.calibrate"),
+    "DifferentialEvolution": "finaldrive.engine.optimize",
+    **dict.fromkeys(("PRESETS", "GROUPS", "NamedRoad", "ProfileResolver", "paper_tables", "preset_group",
+                     "resolve_roads"), "finaldrive.engine.study.presets"),
+    **dict.fromkeys(("MAX_GRID_DESIGNS", "TABLE9_DEFAULT_RWS_M", "parse_grid", "product_grid", "table9_grid"),
+                    "finaldrive.engine.study.sweep"),
+    **dict.fromkeys(("DE_LIMITS", "Bounds", "DESettings", "SpaceError"), "finaldrive.engine.study.space"),
+    **dict.fromkeys(("OBJECTIVES", "Objective", "Regret", "aggregate", "best_per_road", "fitness_values", "regret",
+                     "score"), "finaldrive.engine.study.scoring"),
+    **dict.fromkeys(("DERun", "Request", "SweepRun"), "finaldrive.engine.study.runs"),
+    **dict.fromkeys(("PAPER_SWEEP_STEP", "STUDY_KINDS", "SWEEP_RUN", "PlanError", "Run", "StudyKind", "StudyPlan",
+                     "plan_study"), "finaldrive.engine.study.plan"),
+}
+
+__all__ = ["ENGINE_VERSION", *sorted(_EXPORTS)]
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'finaldrive.engine' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return list(__all__)
+
+
+if TYPE_CHECKING:
+    from finaldrive.engine.api import (
+        STATUS_FAILED,
+        STATUS_OK,
+        BatchResult,
+        Design,
+        DesignError,
+        Method,
+        SimResult,
+        SimSettings,
+    )
+    from finaldrive.engine.calibrate import (
+        StaticLoads,
+        calibration_design,
+        solve_chassis_cog,
+        solve_torque,
+        static_loads,
+    )
+    from finaldrive.engine.geometry import static_geometry
+    from finaldrive.engine.model.coordinates import coordinate_index, point_positions
+    from finaldrive.engine.model.road import Road, RoadError
+    from finaldrive.engine.optimize import DifferentialEvolution
+    from finaldrive.engine.simulation import evaluate, simulate
+    from finaldrive.engine.study.plan import (
+        PAPER_SWEEP_STEP,
+        STUDY_KINDS,
+        SWEEP_RUN,
+        PlanError,
+        Run,
+        StudyKind,
+        StudyPlan,
+        plan_study,
+    )
+    from finaldrive.engine.study.presets import (
+        GROUPS,
+        PRESETS,
+        NamedRoad,
+        ProfileResolver,
+        paper_tables,
+        preset_group,
+        resolve_roads,
+    )
+    from finaldrive.engine.study.runs import DERun, Request, SweepRun
+    from finaldrive.engine.study.scoring import (
+        OBJECTIVES,
+        Objective,
+        Regret,
+        aggregate,
+        best_per_road,
+        fitness_values,
+        regret,
+        score,
+    )
+    from finaldrive.engine.study.space import DE_LIMITS, Bounds, DESettings, SpaceError
+    from finaldrive.engine.study.sweep import (
+        MAX_GRID_DESIGNS,
+        TABLE9_DEFAULT_RWS_M,
+        parse_grid,
+        product_grid,
+        table9_grid,
+    )
+    from finaldrive.engine.vehicle import Vehicle, VehicleError, default_vehicle, load_vehicle, load_vehicle_dict

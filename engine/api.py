@@ -46,7 +46,7 @@ class Design:
             raise DesignError(f"rws must be > 0 m, got {self.rws}")
 
     @classmethod
-    def from_deg(cls, a2_deg: float, l2: float, rws: float) -> "Design":
+    def from_deg(cls, a2_deg: float, l2: float, rws: float) -> Design:
         return cls(math.radians(a2_deg), l2, rws)
 
     @property
@@ -111,7 +111,7 @@ class SimSettings:
         n = max(1, math.ceil(self.duration / self.dt - 1e-9))
         return n, self.duration / n
 
-    def with_(self, **changes: object) -> "SimSettings":
+    def with_(self, **changes: object) -> SimSettings:
         return replace(self, **changes)  # type: ignore[arg-type]
 
 
@@ -181,7 +181,7 @@ class BatchResult:
         )
 
     @classmethod
-    def from_results(cls, designs: np.ndarray, results: list[SimResult]) -> "BatchResult":
+    def from_results(cls, designs: np.ndarray, results: list[SimResult]) -> BatchResult:
         def col(name: str) -> np.ndarray:
             return np.array([getattr(r, name) for r in results], dtype=float)
 
@@ -194,7 +194,7 @@ class BatchResult:
         )
 
     @classmethod
-    def concat(cls, parts: "list[BatchResult]") -> "BatchResult":
+    def concat(cls, parts: list[BatchResult]) -> BatchResult:
         """Join batches in the given order."""
         if not parts:
             return cls.from_results(np.zeros((0, 3)), [])

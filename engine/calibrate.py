@@ -15,14 +15,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
-from engine.api import Design, SimSettings
-from engine.model import params as P
-from engine.model.coordinates import FT, RT, THETA, X14, X15
-from engine.model.mass import centre_of_mass
-from engine.model.road import Road
-from engine.simulate import pack_parameters, simulate
-from engine.solver.equilibrium import static_equilibrium
-from engine.vehicle import Vehicle
+from finaldrive.engine.api import Design, SimSettings
+from finaldrive.engine.fast.equilibrium import static_equilibrium
+from finaldrive.engine.model import params as P
+from finaldrive.engine.model.coordinates import FT, RT, THETA, X14, X15
+from finaldrive.engine.model.mass import centre_of_mass
+from finaldrive.engine.model.road import Road
+from finaldrive.engine.simulation import pack_parameters, simulate
+from finaldrive.engine.vehicle import Vehicle
 
 
 @dataclass(frozen=True)

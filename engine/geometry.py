@@ -5,12 +5,12 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from engine.api import Design, SimSettings
-from engine.model import params as P
-from engine.model.kinematics import taut_length
-from engine.model.road import Road
-from engine.simulate import prepare
-from engine.vehicle import Vehicle
+from finaldrive.engine.api import Design, SimSettings
+from finaldrive.engine.model import params as P
+from finaldrive.engine.model.kinematics import taut_length
+from finaldrive.engine.model.road import Road
+from finaldrive.engine.simulation import prepare
+from finaldrive.engine.vehicle import Vehicle
 
 
 def static_geometry(design: Design, vehicle: Vehicle) -> dict[str, Any]:

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from engine.model import params as P
+from finaldrive.engine.model import params as P
 
 #: Rules for each key: (lower bound, lower inclusive, upper bound). None = unbounded.
 _POSITIVE = (0.0, False, None)
@@ -27,20 +27,18 @@ _FRACTION = (0.0, True, 1.0)
 _ANY = (None, True, None)
 
 _RULES: dict[str, tuple[float | None, bool, float | None]] = {
-    **{k: _POSITIVE for k in ("L4", "L5", "L7", "L_SA", "rt0", "ft0", "L8")},
-    **{k: _NON_NEGATIVE for k in ("L3",)},
-    **{k: _ANY for k in ("a3", "a4", "a5", "theta0", "phi0", "chassis_cog_x", "chassis_cog_y")},
-    **{k: _POSITIVE for k in ("k_rs", "s_rs", "k_fs", "s_fs", "k_rt", "k_ft")},
-    **{k: _NON_NEGATIVE for k in ("c_rs", "c_fs", "c_rt", "c_ft")},
-    **{k: _POSITIVE for k in (
-        "m_chassis", "I_chassis", "m_swingarm", "I_swingarm", "m_sprocket", "I_sprocket",
-        "m_rear_wheel", "I_rear_wheel", "m_fork", "I_fork", "m_front_wheel")},
+    **dict.fromkeys(("L4", "L5", "L7", "L_SA", "rt0", "ft0", "L8"), _POSITIVE),
+    **dict.fromkeys(("L3",), _NON_NEGATIVE),
+    **dict.fromkeys(("a3", "a4", "a5", "theta0", "phi0", "chassis_cog_x", "chassis_cog_y"), _ANY),
+    **dict.fromkeys(("k_rs", "s_rs", "k_fs", "s_fs", "k_rt", "k_ft"), _POSITIVE),
+    **dict.fromkeys(("c_rs", "c_fs", "c_rt", "c_ft"), _NON_NEGATIVE),
+    **dict.fromkeys(("m_chassis", "I_chassis", "m_swingarm", "I_swingarm", "m_sprocket", "I_sprocket", "m_rear_wheel", "I_rear_wheel", "m_fork", "I_fork", "m_front_wheel"), _POSITIVE),
     "swingarm_cog_fraction": _FRACTION,
     "fork_cog_fraction": _FRACTION,
-    **{k: _ANY for k in ("pDx2", "pEx1", "pEx2", "pEx3", "pEx4", "pKx2", "pKx3")},
-    **{k: _POSITIVE for k in ("pCx1", "pDx1", "pKx1", "Fz0")},
+    **dict.fromkeys(("pDx2", "pEx1", "pEx2", "pEx3", "pEx4", "pKx2", "pKx3"), _ANY),
+    **dict.fromkeys(("pCx1", "pDx1", "pKx1", "Fz0"), _POSITIVE),
     "K_vlow0": _NON_NEGATIVE,
-    **{k: _POSITIVE for k in ("sigma_k0", "sigma_min", "eps_F", "V_low")},
+    **dict.fromkeys(("sigma_k0", "sigma_min", "eps_F", "V_low"), _POSITIVE),
     "torque": _ANY,
     "sprocket_ratio": _POSITIVE,
     "gravity": _POSITIVE,
@@ -83,7 +81,7 @@ class Vehicle:
         v = dict(self.values)
         return np.array([v[k] for k in P.VEHICLE_KEYS], dtype=float)
 
-    def replace(self, **changes: float) -> "Vehicle":
+    def replace(self, **changes: float) -> Vehicle:
         """A copy with some values changed (validated)."""
         d = self.to_dict()
         for key, value in changes.items():
@@ -170,5 +168,5 @@ def load_vehicle(path: str | Path) -> Vehicle:
 @lru_cache(maxsize=1)
 def default_vehicle() -> Vehicle:
     """The paper's motorcycle (engine/data/vehicle.json)."""
-    text = resources.files("engine").joinpath("data/vehicle.json").read_text()
+    text = resources.files("finaldrive.engine").joinpath("data/vehicle.json").read_text()
     return load_vehicle_dict(json.loads(text))

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from alembic import context
 
-from service.db.engine import make_engine
-from service.db.models import Base
+from finaldrive.service.db.engine import make_engine
+from finaldrive.service.db.models import Base
 
 config = context.config
 target_metadata = Base.metadata

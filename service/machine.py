@@ -23,5 +23,5 @@ def describe(load: bool = True) -> str:
     text = (f"{cpu_model()}, {os.cpu_count()} cores, {platform.system()} {platform.release()}, "
             f"Python {platform.python_version()}")
     if load and hasattr(os, "getloadavg"):
-        text += ", load average %.2f %.2f %.2f" % os.getloadavg()
+        text += ", load average {:.2f} {:.2f} {:.2f}".format(*os.getloadavg())
     return text

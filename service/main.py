@@ -10,12 +10,12 @@ from typing import Any
 import anyio
 from fastapi import FastAPI
 
-from service.api import problems
-from service.api.limits import BodySizeLimit
-from service.api.main import api_router
-from service.config import Settings, get_settings
-from service.jobs.runner import EvalStream
-from service.services import start_services
+from finaldrive.service.api import problems
+from finaldrive.service.api.limits import BodySizeLimit
+from finaldrive.service.api.main import api_router
+from finaldrive.service.config import Settings, get_settings
+from finaldrive.service.jobs.runner import EvalStream
+from finaldrive.service.services import start_services
 
 DESCRIPTION = """Simulate motorcycle final-drive designs on roads: parameter sweeps and differential
 evolution jobs, stored in a results database. Errors are `application/problem+json` documents.

@@ -17,13 +17,13 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import numpy as np  # noqa: E402
-from matplotlib.axes import Axes  # noqa: E402
-from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
-from engine import default_vehicle  # noqa: E402
-from service.scene import ROW_OFFSET_M  # noqa: E402
+from finaldrive.engine import default_vehicle
+from finaldrive.service.scene import ROW_OFFSET_M
 
 #: Fig. 13 panels: (series key, axis label).
 SERIES_PANELS: tuple[tuple[str, str], ...] = (

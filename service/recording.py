@@ -18,8 +18,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from engine import Design, Road, SimSettings, Vehicle, default_vehicle, simulate
-from service.scene import ROW_OFFSET_M, Run, frame, road_strip, tyre_forces
+from finaldrive.engine import Design, Road, SimSettings, Vehicle, default_vehicle, simulate
+from finaldrive.service.scene import ROW_OFFSET_M, Run, frame, road_strip, tyre_forces
 
 APPLICATION_ID = "finaldrive"
 TIMELINE = "sim_time"

@@ -12,9 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine.api import Design
-from engine.model import coordinates as C
-from engine.model.road import Road
+from finaldrive.engine import Design, Road, coordinate_index, point_positions
 
 #: Tyre force arrows: metres of arrow per newton.
 FORCE_SCALE_M_PER_N = 1.0 / 5000.0
@@ -32,8 +30,11 @@ class Run:
     series: dict[str, np.ndarray]
 
 
+_RT, _FT, _BETA, _ALPHA = (coordinate_index(n) for n in ("rt", "ft", "beta", "alpha"))
+
+
 def _pt(q: np.ndarray, k: int, dy: float) -> np.ndarray:
-    return np.array([q[C.point_x(k)], q[C.point_y(k)] + dy])
+    return point_positions(q)[k - 1] + np.array([0.0, dy])
 
 
 def circle(centre: np.ndarray, radius: float) -> np.ndarray:
@@ -53,18 +54,18 @@ def frame(run: Run, k: int, r_es: float, offset: float = 0.0) -> dict[str, list[
     """
     s = run.series
     q = s["q"][k]
-    p = {i: _pt(q, i, offset) for i in range(1, C.N_POINTS + 1)}
-    rt, ft = float(q[C.RT]), float(q[C.FT])
-    front_roll = -(s["q"][k][C.X13] - s["q"][0][C.X13]) / ft
+    p = {k + 1: xy + np.array([0.0, offset]) for k, xy in enumerate(point_positions(q))}
+    rt, ft = float(q[_RT]), float(q[_FT])
+    front_roll = -(point_positions(q)[12, 0] - point_positions(s["q"][0])[12, 0]) / ft
     return {
         "chassis": [np.array([p[1], p[2], p[3], p[4], p[5], p[1]])],
         "swingarm": [np.array([p[1], p[7], p[6]])],
         "damper": [np.array([p[3], p[7]])],
         "fork": [np.array([p[4], p[5], p[12], p[13]])],
-        "rear_wheel": [circle(p[6], rt), _mark(p[6], rt, float(q[C.BETA]))],
+        "rear_wheel": [circle(p[6], rt), _mark(p[6], rt, float(q[_BETA]))],
         "front_wheel": [circle(p[13], ft), _mark(p[13], ft, front_roll)],
-        "engine_sprocket": [circle(p[2], r_es), _mark(p[2], r_es, float(q[C.ALPHA]))],
-        "wheel_sprocket": [circle(p[6], run.design.rws), _mark(p[6], run.design.rws, float(q[C.BETA]))],
+        "engine_sprocket": [circle(p[2], r_es), _mark(p[2], r_es, float(q[_ALPHA]))],
+        "wheel_sprocket": [circle(p[6], run.design.rws), _mark(p[6], run.design.rws, float(q[_BETA]))],
         "chain": [np.array([p[10], p[11]])],
     }
 
@@ -79,6 +80,6 @@ def tyre_forces(run: Run, k: int, offset: float = 0.0) -> tuple[np.ndarray, np.n
 
 def road_strip(road: Road, runs: list[Run], offset: float = 0.0) -> np.ndarray:
     """The road profile under every run's travel, with a margin either side."""
-    xs = np.concatenate([r.series["q"][:, [C.X14, C.X15]].ravel() for r in runs])
+    xs = np.concatenate([point_positions(r.series["q"])[:, 13:15, 0].ravel() for r in runs])
     x = np.linspace(xs.min() - 1.0, xs.max() + 1.0, 600)
     return np.column_stack([x, road.height_at(x) + offset])

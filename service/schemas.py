@@ -1,4 +1,4 @@
-"""Request and response bodies of the REST API (pydantic; no database or engine imports).
+"""Request and response bodies of the REST API (pydantic; defaults from the engine's study layer).
 
 Units: SI, angles of designs in radians except where a name ends in ``_deg``.
 """
@@ -10,41 +10,56 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_validator
 
-JobKind = Literal["sweep", "de", "robust-de", "paper-study"]
+from finaldrive.engine import DE_LIMITS, DESettings, SimSettings, SpaceError, StudyKind
+from finaldrive.engine import Bounds as StudyBounds
+
+JobKind = StudyKind
 JobStateName = Literal["queued", "running", "succeeded", "failed", "cancelled", "interrupted"]
 
 _STRICT = ConfigDict(extra="forbid")
 
 
+_SIM = SimSettings()
+_DE = DESettings()
+_BOX = StudyBounds()
+
+
+def _de_field(name: str, description: str) -> Any:
+    lo, hi = DE_LIMITS[name]
+    return Field(getattr(_DE, name), ge=lo, le=hi, description=description)
+
+
 class SimulationSpec(BaseModel):
-    """How each design is simulated (a subset of engine.SimSettings)."""
+    """How each design is simulated (a subset of the engine's SimSettings, same defaults)."""
 
     model_config = _STRICT
 
-    duration: float = Field(3.5, gt=0, le=60, description="simulated time [s]")
-    dt: float = Field(1.0e-3, gt=0, le=0.01, description="time step [s]")
+    duration: float = Field(_SIM.duration, gt=0, le=60, description="simulated time [s]")
+    dt: float = Field(_SIM.dt, gt=0, le=0.01, description="time step [s]")
     method: Literal["reference", "fast"] = Field(
-        "fast", description="fast (default, validated against the paper's method) or reference")
+        _SIM.method, description="fast (default, validated against the paper's method) or reference")
 
 
 class DESpec(BaseModel):
-    """Differential evolution parameters (paper Table 10 defaults)."""
+    """Differential evolution parameters (defaults: the paper's Table 10)."""
 
     model_config = _STRICT
 
-    np: int = Field(50, ge=4, le=10_000, description="population size NP")
-    f: float = Field(0.6, ge=0, le=2, description="differential weight F")
-    cp: float = Field(0.6, ge=0, le=1, description="crossover probability CP")
-    mp: float = Field(0.1, ge=0, le=1, description="mutation probability MP")
-    mr_fraction: float = Field(0.2, ge=0, le=1, description="mutation range MR / (upper - lower)")
-    iters: int = Field(50, ge=0, le=100_000, description="generations after the initial population")
-    patience: int | None = Field(None, ge=1, description="stop after this many generations without improvement")
-    max_evals: int | None = Field(None, ge=1, description="evaluation budget per DE run (>= np)")
+    np: int = _de_field("np", "population size NP")
+    f: float = _de_field("f", "differential weight F")
+    cp: float = _de_field("cp", "crossover probability CP")
+    mp: float = _de_field("mp", "mutation probability MP")
+    mr_fraction: float = _de_field("mr_fraction", "mutation range MR / (upper - lower)")
+    iters: int = _de_field("iters", "generations after the initial population")
+    patience: int | None = _de_field("patience", "stop after this many generations without improvement")
+    max_evals: int | None = _de_field("max_evals", "evaluation budget per DE run (>= np)")
 
     @model_validator(mode="after")
-    def _budget(self) -> DESpec:
-        if self.max_evals is not None and self.max_evals < self.np:
-            raise ValueError(f"max_evals ({self.max_evals}) must be >= np ({self.np})")
+    def _valid(self) -> DESpec:
+        try:
+            DESettings(**self.model_dump())
+        except SpaceError as exc:
+            raise ValueError(str(exc)) from None
         return self
 
 
@@ -52,28 +67,20 @@ Interval = tuple[float, float]
 
 
 class Bounds(BaseModel):
-    """DE search box (paper Table 8 defaults); each entry is [lower, upper]."""
+    """DE search box (defaults: the paper's Table 8); each entry is [lower, upper]."""
 
     model_config = _STRICT
 
-    a2_deg: Interval = Field((0.0, 360.0), description="sprocket angle a2 [deg], periodic")
-    l2_m: Interval = Field((0.0, 0.2), description="pivot-to-sprocket distance L2 [m]")
-    rws_m: Interval = Field((0.05, 0.15), description="wheel sprocket radius R_WS [m]")
+    a2_deg: Interval = Field(_BOX.a2_deg, description="sprocket angle a2 [deg], periodic over a full turn")
+    l2_m: Interval = Field(_BOX.l2_m, description="pivot-to-sprocket distance L2 [m]")
+    rws_m: Interval = Field(_BOX.rws_m, description="wheel sprocket radius R_WS [m]")
 
     @model_validator(mode="after")
-    def _ordered(self) -> Bounds:
-        for name in ("a2_deg", "l2_m", "rws_m"):
-            lo, hi = getattr(self, name)
-            if not lo <= hi:
-                raise ValueError(f"{name}: lower bound {lo:g} is above upper bound {hi:g}")
-        if self.a2_deg[0] == self.a2_deg[1]:
-            raise ValueError("a2_deg: the periodic angle needs lower < upper")
-        if self.a2_deg[1] - self.a2_deg[0] > 360:
-            raise ValueError("a2_deg: the range may not exceed 360 deg")
-        if self.l2_m[0] < 0:
-            raise ValueError("l2_m: must be >= 0 m")
-        if self.rws_m[0] <= 0:
-            raise ValueError("rws_m: must be > 0 m")
+    def _valid(self) -> Bounds:
+        try:
+            StudyBounds(**self.model_dump())
+        except SpaceError as exc:
+            raise ValueError(str(exc)) from None
         return self
 
 

@@ -7,25 +7,22 @@ worker processes), torn down in reverse order.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 from collections.abc import Iterator
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from engine import ENGINE_VERSION
-from engine.api import BatchResult, SimSettings
-from engine.model.road import Road
-from engine.vehicle import Vehicle
-from service.api.status_cache import StatusCache
-from service.config import Settings
-from service.db.engine import Database
-from service.db.migrate import check_revision, head_revision, is_empty, upgrade
-from service.jobs.recordings import RecordingProducer, data_dir
-from service.jobs.runner import EvalStream, JobRunner
+from finaldrive.engine import ENGINE_VERSION, BatchResult, Road, SimSettings, Vehicle
+from finaldrive.service.config import Settings
+from finaldrive.service.db.engine import Database
+from finaldrive.service.db.migrate import check_revision, head_revision, is_empty, upgrade
+from finaldrive.service.jobs.recordings import RecordingProducer, data_dir
+from finaldrive.service.jobs.runner import EvalStream, JobRunner
+from finaldrive.service.status_cache import StatusCache
 
 if TYPE_CHECKING:
-    from workers import Executor
+    from finaldrive.workers import Executor
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +66,7 @@ def start_services(settings: Settings, stream: EvalStream | None = None) -> Serv
     db = open_database(settings)
     executor: Executor | None = None
     if stream is None:
-        from workers import make_executor
+        from finaldrive.workers import make_executor
 
         executor = make_executor(settings.executor, num_workers=settings.num_workers, address=settings.ray_address)
         stream = executor_stream(executor, settings.batch_size)
@@ -85,7 +82,7 @@ def start_services(settings: Settings, stream: EvalStream | None = None) -> Serv
 
 def executor_stream(executor: Executor, batch_size: int | None) -> EvalStream:
     """``workers.evaluate_stream`` bound to an executor and a batch size."""
-    from workers import evaluate_stream
+    from finaldrive.workers import evaluate_stream
 
     def stream(designs: np.ndarray, road: Road, sim: SimSettings, vehicle: Vehicle | None) -> Iterator[tuple[np.ndarray, BatchResult]]:
         return evaluate_stream(executor, designs, road, sim, vehicle, batch_size=batch_size)

@@ -6,12 +6,15 @@
 
 from __future__ import annotations
 
+if __name__ != "finaldrive.workers":  # never importable as a top-level `workers` (it would shadow others)
+    raise ImportError(f"this is finaldrive.workers; import it by that name, not as {__name__!r}")
+
 from typing import Literal
 
-from workers.base import Executor, WorkerLostError
-from workers.evaluate import evaluate_all, evaluate_roads_stream, evaluate_stream
-from workers.process import ProcessExecutor
-from workers.serial import SerialExecutor
+from finaldrive.workers.base import Executor, WorkerLostError
+from finaldrive.workers.evaluate import evaluate_all, evaluate_roads_stream, evaluate_stream
+from finaldrive.workers.process import ProcessExecutor
+from finaldrive.workers.serial import SerialExecutor
 
 ExecutorKind = Literal["serial", "process", "ray"]
 
@@ -42,7 +45,7 @@ def make_executor(
         return ProcessExecutor(num_workers=num_workers, max_retries=max_retries)
     if kind == "ray":
         try:
-            from workers.ray_executor import RayExecutor
+            from finaldrive.workers.ray_executor import RayExecutor
         except ImportError as error:
             raise ImportError(
                 "make_executor('ray') needs Ray: pip install 'ray[default]' "

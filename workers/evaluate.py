@@ -15,14 +15,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from engine.api import BatchResult, SimSettings
-from engine.model.road import Road
-from workers.base import Executor
-from workers.batching import BatchSizer
-from workers.task import Timed, call_timed
+from finaldrive.engine import BatchResult, Road, SimSettings
+from finaldrive.workers.base import Executor
+from finaldrive.workers.batching import BatchSizer
+from finaldrive.workers.task import Timed, call_timed
 
 if TYPE_CHECKING:
-    from engine.vehicle import Vehicle
+    from finaldrive.engine import Vehicle
 
 #: Design evaluated once per worker process to load the compiled engine (a Table 14 geometry).
 WARM_UP_DESIGN = (0.0, 0.0, 0.093)
@@ -32,7 +31,7 @@ WARM_UP_DURATION_S = 0.01
 
 def run_engine(designs: np.ndarray, road: Road, settings: SimSettings, vehicle: Vehicle | None) -> BatchResult:
     """``engine.evaluate`` on one road (imported in the worker)."""
-    from engine import evaluate
+    from finaldrive.engine import evaluate
 
     return evaluate(designs, road, settings, vehicle)
 

@@ -26,7 +26,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
-from workers.base import IN_FLIGHT_PER_WORKER, ClosingMixin, WorkerLostError
+from finaldrive.workers.base import IN_FLIGHT_PER_WORKER, ClosingMixin, WorkerLostError
 
 #: How often a worker checks that its parent is alive [s].
 PARENT_POLL_S = 0.5

@@ -18,7 +18,7 @@ from typing import Any
 import ray
 from ray.exceptions import LocalRayletDiedError, NodeDiedError, OutOfMemoryError, WorkerCrashedError
 
-from workers.base import IN_FLIGHT_PER_WORKER, ClosingMixin, WorkerLostError
+from finaldrive.workers.base import IN_FLIGHT_PER_WORKER, ClosingMixin, WorkerLostError
 
 _AUTH_MODE = "RAY_AUTH_MODE"
 

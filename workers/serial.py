@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
-from workers.base import ClosingMixin
+from finaldrive.workers.base import ClosingMixin
 
 
 class SerialExecutor(ClosingMixin):

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
-from engine import Design, Road, SimSettings, evaluate
-from engine.model import coordinates as C
-from engine.study.sweep import parse_grid
-from service import plots
-from service.recording import record, scene_at
+from finaldrive.engine import Design, Road, SimSettings, evaluate
+from finaldrive.engine.model import coordinates as C
+from finaldrive.engine.study.sweep import parse_grid
+from finaldrive.service import plots
+from finaldrive.service.recording import record, scene_at
 
 HERE = Path(__file__).resolve().parent
 ROAD = Road.parse("sine:0.04:3")
@@ -33,7 +33,7 @@ def recording_frame(t: float = 2.0) -> None:
         rrd = Path(tmp) / "table14.rrd"
         runs = record(rrd, TABLE14, ROAD)
         strips, arrows = scene_at(rrd, t)
-    k = int(round(t * 50))
+    k = round(t * 50)
     xs = [r.series["q"][k][[C.X6, C.X13]] for r in runs]
     plots.scene_png(HERE / "recording-frame.png", strips, arrows, xlim=(float(np.min(xs)) - 0.7, float(np.max(xs)) + 0.7),
                     title=f"One frame (t = {t:.2f} s) read back from the .rrd, sine:0.04:3; orange: tyre forces (1 m = 5 kN)\n"

@@ -17,13 +17,17 @@ import math
 
 import numpy as np
 
-from engine.model import params as P
-from engine.model.forces import radial_tyre_force
-from engine.model.jit import jit
-from engine.model.linalg import cholesky_in_place, cholesky_solve
-from engine.model.road_height import road_height
-from engine.model.tyre import (
-    deformation_rate, effective_radius, magic_formula, magic_formula_slope, transient_slip,
+from finaldrive.engine.model import params as P
+from finaldrive.engine.model.forces import radial_tyre_force
+from finaldrive.engine.model.jit import jit
+from finaldrive.engine.model.linalg import cholesky_in_place, cholesky_solve
+from finaldrive.engine.model.road_height import road_height
+from finaldrive.engine.model.tyre import (
+    deformation_rate,
+    effective_radius,
+    magic_formula,
+    magic_formula_slope,
+    transient_slip,
 )
 
 N_DOF = 6

@@ -19,17 +19,32 @@ import math
 
 import numpy as np
 
-from engine.fast.minimal import (
-    A_ALPHA_DOT, A_FX, A_FX_U, A_FZ_FRONT, A_FZ_REAR, A_KAPPA, A_RE, A_TAUT, A_TAUT_RATE,
+from finaldrive.engine.fast.minimal import (
+    A_ALPHA_DOT,
+    A_FX,
+    A_FX_U,
+    A_FZ_FRONT,
+    A_FZ_REAR,
+    A_KAPPA,
+    A_RE,
+    A_TAUT,
+    A_TAUT_RATE,
     A_TENSION,
-    N_AUX, N_DOF, N_STATE, ZBETA, ZPHI, ZTHETA, ZU, ZX1, design_constants, fast_rhs,
+    N_AUX,
+    N_DOF,
+    N_STATE,
+    ZBETA,
+    ZPHI,
+    ZTHETA,
+    ZU,
+    ZX1,
+    design_constants,
+    fast_rhs,
 )
-from engine.model.jit import jit
-from engine.model.linalg import cholesky_solve
-from engine.model.tyre import magic_formula, relaxation_length
-from engine.solver.reference import (
-    FRONT_AIRBORNE, N_SERIES, NONFINITE, OK, REAR_AIRBORNE,
-)
+from finaldrive.engine.model.jit import jit
+from finaldrive.engine.model.linalg import cholesky_solve
+from finaldrive.engine.model.tyre import magic_formula, relaxation_length
+from finaldrive.engine.outcome import FRONT_AIRBORNE, N_SERIES, NONFINITE, OK, REAR_AIRBORNE
 
 GAMMA = 1.0 + 1.0 / math.sqrt(2.0)
 #: Step-size control limits.

@@ -9,14 +9,50 @@ import math
 
 import numpy as np
 
-from engine.model import params as P
-from engine.model.coordinates import (
-    ALPHA, BETA, FS, FT, GAMMA, PHI, RS, RT, THETA,
-    X1, X2, X3, X4, X5, X6, X7, X8, X9, X10, X11, X12, X13, X14, X15,
-    Y1, Y2, Y3, Y4, Y5, Y6, Y7, Y8, Y9, Y10, Y11, Y12, Y13, Y14, Y15,
+from finaldrive.engine.model import params as P
+from finaldrive.engine.model.coordinates import (
+    ALPHA,
+    BETA,
+    FS,
+    FT,
+    GAMMA,
+    PHI,
+    RS,
+    RT,
+    THETA,
+    X1,
+    X2,
+    X3,
+    X4,
+    X5,
+    X6,
+    X7,
+    X8,
+    X9,
+    X10,
+    X11,
+    X12,
+    X13,
+    X14,
+    X15,
+    Y1,
+    Y2,
+    Y3,
+    Y4,
+    Y5,
+    Y6,
+    Y7,
+    Y8,
+    Y9,
+    Y10,
+    Y11,
+    Y12,
+    Y13,
+    Y14,
+    Y15,
 )
-from engine.model.jit import jit
-from engine.model.road_height import road_height
+from finaldrive.engine.model.jit import jit
+from finaldrive.engine.model.road_height import road_height
 
 
 @jit

@@ -6,6 +6,8 @@ Use the named constants below; never bare indices.
 
 from __future__ import annotations
 
+import numpy as np
+
 N_POINTS = 15
 N_COORDS = 39
 N_CONSTRAINTS = 33
@@ -48,6 +50,18 @@ BETA = 36   # wheel sprocket angle
 GAMMA = 37  # upper chain angle (angle of the radius to the tangent points)
 PHI = 38    # swingarm angle (absolute, from the horizontal)
 
-NAMES: tuple[str, ...] = tuple(
-    f"{axis}{k}" for k in range(1, N_POINTS + 1) for axis in ("x", "y")
-) + ("rs", "fs", "rt", "ft", "theta", "alpha", "beta", "gamma", "phi")
+NAMES: tuple[str, ...] = (*tuple(f"{axis}{k}" for k in range(1, N_POINTS + 1) for axis in ("x", "y")), "rs", "fs", "rt", "ft", "theta", "alpha", "beta", "gamma", "phi")
+
+
+def coordinate_index(name: str) -> int:
+    """Index in q of a coordinate named as in :data:`NAMES` (``"x13"``, ``"rt"``, ``"beta"``, ...)."""
+    try:
+        return NAMES.index(name)
+    except ValueError:
+        raise KeyError(f"no coordinate {name!r}; expected one of {', '.join(NAMES)}") from None
+
+
+def point_positions(q: np.ndarray) -> np.ndarray:
+    """Positions of points 1-15 from q (..., 39) as (..., 15, 2); entry k - 1 is point k (Fig. 3)."""
+    q = np.asarray(q, dtype=float)
+    return q[..., : 2 * N_POINTS].reshape((*q.shape[:-1], N_POINTS, 2))

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.model import params as P
-from engine.model.coordinates import ALPHA, BETA, FS, FT, RS, RT, THETA, X6
-from engine.model.jit import jit
-from engine.model.tyre import deformation_rate, effective_radius, magic_formula, transient_slip
+from finaldrive.engine.model import params as P
+from finaldrive.engine.model.coordinates import ALPHA, BETA, FS, FT, RS, RT, THETA, X6
+from finaldrive.engine.model.jit import jit
+from finaldrive.engine.model.tyre import deformation_rate, effective_radius, magic_formula, transient_slip
 
 # Slots of the auxiliary output vector filled by applied_forces.
 AUX_FX, AUX_FZ_REAR, AUX_FZ_FRONT, AUX_KAPPA, AUX_VSX, AUX_RE, AUX_DUDT = range(7)

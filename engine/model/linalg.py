@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from engine.model.jit import jit
+from finaldrive.engine.model.jit import jit
 
 
 @jit

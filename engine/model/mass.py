@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine.model import params as P
-from engine.model.coordinates import N_COORDS, X1, X2, X5, X6, X8, X9, X12, X13, Y13
+from finaldrive.engine.model import params as P
+from finaldrive.engine.model.coordinates import N_COORDS, X1, X2, X5, X6, X8, X9, X12, X13, Y13
 
 _ROT = np.array([[0.0, -1.0], [1.0, 0.0]])
 

@@ -105,7 +105,7 @@ class Road:
         return np.interp(x, self.xs, self.ys)
 
     @classmethod
-    def parse(cls, spec: str) -> "Road":
+    def parse(cls, spec: str) -> Road:
         """Parse ``flat``, ``sine:H:LAMBDA`` or ``bump:H:SIGMA[:MU]`` (SI units).
 
         User profiles are built with :meth:`from_points` (the engine does no file I/O).
@@ -130,7 +130,7 @@ class Road:
         )
 
     @classmethod
-    def from_points(cls, xs: "np.typing.ArrayLike", ys: "np.typing.ArrayLike", name: str = "user") -> "Road":
+    def from_points(cls, xs: np.typing.ArrayLike, ys: np.typing.ArrayLike, name: str = "user") -> Road:
         """A piecewise-linear road through (x, y) points, x increasing."""
         return cls(
             "profile",

@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 
-from engine.model.jit import jit
-from engine.model.road import BUMP, FLAT, PROFILE, SINE
+from finaldrive.engine.model.jit import jit
+from finaldrive.engine.model.road import BUMP, FLAT, PROFILE, SINE
 
 
 @jit

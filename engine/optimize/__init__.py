@@ -4,6 +4,6 @@
 ask/tell state machine; see docs/optimisation.md.
 """
 
-from engine.optimize.de import DifferentialEvolution
+from finaldrive.engine.optimize.de import DifferentialEvolution
 
 __all__ = ["DifferentialEvolution"]

@@ -267,7 +267,7 @@ class DifferentialEvolution:
         }
 
     @classmethod
-    def from_state(cls, state: dict[str, Any]) -> "DifferentialEvolution":
+    def from_state(cls, state: dict[str, Any]) -> DifferentialEvolution:
         """Rebuild an optimiser from :meth:`state` (also after a JSON round trip)."""
         if state.get("version") != STATE_VERSION:
             raise ValueError(f"unsupported DE state version {state.get('version')!r}")

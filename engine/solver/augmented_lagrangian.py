@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.model import params as P
-from engine.model.constraints import jacobian, phi, phiq_dot_qdot
-from engine.model.coordinates import N_CONSTRAINTS, N_COORDS
-from engine.model.jit import jit
-from engine.model.linalg import cholesky_solve
+from finaldrive.engine.model import params as P
+from finaldrive.engine.model.constraints import jacobian, phi, phiq_dot_qdot
+from finaldrive.engine.model.coordinates import N_CONSTRAINTS, N_COORDS
+from finaldrive.engine.model.jit import jit
+from finaldrive.engine.model.linalg import cholesky_solve
 
 
 @jit

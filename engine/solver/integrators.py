@@ -19,10 +19,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
 from numba import njit
 
-from engine.model.jit import jit
+from finaldrive.engine.model.jit import jit
 
 # Adams-Bashforth (63) and Adams-Moulton (64) coefficients, over 24.
 AB4 = (55.0, -59.0, 37.0, -9.0)

@@ -11,28 +11,28 @@ import math
 
 import numpy as np
 
-from engine.model.constraints import phi
-from engine.model.coordinates import ALPHA, BETA, N_CONSTRAINTS, N_COORDS, THETA, X1, X10, X11, Y10, Y11
-from engine.model.forces import (
-    AUX_DUDT, AUX_FX, AUX_FZ_FRONT, AUX_FZ_REAR, AUX_KAPPA, AUX_RE, N_AUX, applied_forces,
+from finaldrive.engine.model.constraints import phi
+from finaldrive.engine.model.coordinates import ALPHA, BETA, N_CONSTRAINTS, N_COORDS, THETA, X1, X10, X11, Y10, Y11
+from finaldrive.engine.model.forces import (
+    AUX_DUDT,
+    AUX_FX,
+    AUX_FZ_FRONT,
+    AUX_FZ_REAR,
+    AUX_KAPPA,
+    AUX_RE,
+    N_AUX,
+    applied_forces,
 )
-from engine.model.jit import jit
-from engine.model.tyre import relaxation_length
-from engine.solver.augmented_lagrangian import accelerations
-from engine.solver.integrators import RHS_FAILED, make_steppers
+from finaldrive.engine.model.jit import jit
+from finaldrive.engine.model.tyre import relaxation_length
+from finaldrive.engine.outcome import CORRECTOR, FRONT_AIRBORNE, N_SERIES, NONFINITE, OK, REAR_AIRBORNE, RESIDUAL
+from finaldrive.engine.solver.augmented_lagrangian import accelerations
+from finaldrive.engine.solver.integrators import RHS_FAILED, make_steppers
 
 N_STATE = 2 * N_COORDS + 1   # q, q', u
 U = 2 * N_COORDS             # index of the tyre deformation state u in y
 CHAIN_ROW = 29               # row of eq. (30): its multiplier is the chain tension
 
-# Failure codes of run_reference (0 = ok); engine.simulate turns them into reasons.
-OK, NONFINITE, RESIDUAL, CORRECTOR, REAR_AIRBORNE, FRONT_AIRBORNE = 0, 1, 2, 3, 4, 5
-
-# Columns of the time series (engine.simulate names them).
-SERIES_COLUMNS = ("t", "x1", "theta", "chain_tension", "fz_rear", "fz_front", "kappa",
-                  "fx", "effective_radius", "wheel_speed", "sprocket_speed", "taut_length",
-                  "tyre_u", "sigma", "residual")
-N_SERIES = len(SERIES_COLUMNS)
 _AUX_RESID = N_AUX  # slot after the force outputs: max|Phi| of the last evaluation
 
 

@@ -23,10 +23,11 @@ from __future__ import annotations
 import functools
 import importlib.resources
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from engine.model.road import DEFAULT_BUMP_CENTRE_M, Road, RoadError
+from finaldrive.engine.model.road import DEFAULT_BUMP_CENTRE_M, Road, RoadError
 
 #: Keys of a preset's paper reference row (Tables 11-13).
 PAPER_KEYS = ("a2_deg", "L2_m", "R_WS_m", "slack_mm", "SR", "fitness_m")
@@ -35,13 +36,16 @@ GROUPS = ("paper", "sine", "bump")
 
 
 @dataclass(frozen=True)
-class RoadPreset:
-    """A named road with the paper's optimum on it (``paper`` is None for user roads)."""
+class NamedRoad:
+    """A road with a name: a preset (with the paper's optimum on it) or a user's road.
+
+    ``name`` is the preset name, else the road's spec string; ``paper`` is None off the presets.
+    """
 
     name: str
     road: Road
-    paper: dict[str, float] | None
-    description: str
+    paper: dict[str, float] | None = None
+    description: str = ""
 
     @property
     def spec(self) -> str:
@@ -52,7 +56,7 @@ class RoadPreset:
 @functools.cache
 def paper_tables() -> dict[str, Any]:
     """The paper's tables as shipped in ``engine/data/paper_tables.json`` (do not mutate)."""
-    path = importlib.resources.files("engine") / "data" / "paper_tables.json"
+    path = importlib.resources.files("finaldrive.engine") / "data" / "paper_tables.json"
     return json.loads(path.read_text(encoding="utf-8"))
 
 
@@ -64,22 +68,22 @@ def _reference(row: dict[str, Any]) -> dict[str, float]:
     return {key: float(row[key]) for key in PAPER_KEYS}
 
 
-def _build() -> dict[str, RoadPreset]:
+def _build() -> dict[str, NamedRoad]:
     tables = paper_tables()
     presets = [
-        RoadPreset("flat", Road("flat"), _reference(tables["table11_flat"][0]),
+        NamedRoad("flat", Road("flat"), _reference(tables["table11_flat"][0]),
                    "flat road (Table 11)")
     ]
     for i, row in enumerate(tables["table12_sine"], start=1):
         h, lam = row["H_y_m"], row["lambda_m"]
-        presets.append(RoadPreset(
+        presets.append(NamedRoad(
             f"sine-h{_cm(h)}cm-l{lam:g}m", Road("sine", height=h, wavelength=lam),
             _reference(row),
             f"sinusoid H_y = {_cm(h)} cm, lambda = {lam:g} m (Table 12 row {i})",
         ))
     for i, row in enumerate(tables["table13_gaussian"], start=1):
         h, sigma = row["H_y_m"], row["sigma_m"]
-        presets.append(RoadPreset(
+        presets.append(NamedRoad(
             f"bump-h{_cm(h)}cm-s{_cm(sigma)}cm",
             Road("bump", height=h, sigma=sigma, mu=DEFAULT_BUMP_CENTRE_M),
             _reference(row),
@@ -90,10 +94,10 @@ def _build() -> dict[str, RoadPreset]:
 
 
 #: The 23 presets by name, in the paper's table order.
-PRESETS: dict[str, RoadPreset] = _build()
+PRESETS: dict[str, NamedRoad] = _build()
 
 
-def preset_group(name: str) -> list[RoadPreset]:
+def preset_group(name: str) -> list[NamedRoad]:
     """Presets of a group: ``paper`` (23), ``sine`` (16) or ``bump`` (6), in table order."""
     key = name.strip().lower()
     if key == "paper":
@@ -103,18 +107,23 @@ def preset_group(name: str) -> list[RoadPreset]:
     raise ValueError(f"unknown preset group {name!r}: expected one of {', '.join(GROUPS)}")
 
 
-def resolve_roads(text: str) -> list[RoadPreset | Road]:
+#: Turns the part after ``profile:`` into a road (the caller reads files or a database).
+ProfileResolver = Callable[[str], Road]
+
+
+def resolve_roads(text: str, profiles: ProfileResolver | None = None) -> list[NamedRoad]:
     """Roads from a comma-separated list of group names, preset names and road specs.
 
     ``"paper"``, ``"flat,sine-h4cm-l3m"``, ``"sine:0.04:3,bump:0.03:0.4:6"``. A road spec
-    equal to a preset's road resolves to that preset (so it carries the paper row).
-    Order is kept; repeated roads are dropped after their first occurrence. Raises
-    ValueError naming the bad item.
+    equal to a preset's road resolves to that preset (so it carries the paper row); any other
+    road is named by its spec. ``profile:NAME`` items are passed to ``profiles`` (the engine
+    reads no files). Order is kept; repeated roads are dropped after their first occurrence.
+    Raises ValueError naming the bad item.
     """
     if not isinstance(text, str) or not text.strip():
         raise ValueError("road list must be a non-empty string")
     by_road = {p.road: p for p in PRESETS.values()}
-    out: list[RoadPreset | Road] = []
+    out: list[NamedRoad] = []
     seen: set[Road] = set()
     for raw in text.split(","):
         item = raw.strip()
@@ -122,33 +131,27 @@ def resolve_roads(text: str) -> list[RoadPreset | Road]:
             raise ValueError(f"empty item in road list {text!r}")
         key = item.lower()
         if key in GROUPS:
-            found: list[RoadPreset | Road] = list(preset_group(key))
+            found = preset_group(key)
         elif key in PRESETS:
             found = [PRESETS[key]]
+        elif key.startswith("profile:"):
+            if profiles is None:
+                raise ValueError(f"road {item!r}: measured profiles are not available here")
+            road = profiles(item[len("profile:"):])
+            found = [NamedRoad(item, road)]
         elif ":" in item:
             try:
                 road = Road.parse(item)
             except RoadError as exc:
                 raise ValueError(f"bad road {item!r}: {exc}") from None
-            found = [by_road.get(road, road)]
+            found = [by_road.get(road, NamedRoad(road.spec, road))]
         else:
             raise ValueError(
                 f"unknown road {item!r}: expected a group ({', '.join(GROUPS)}), a preset "
-                "name (e.g. sine-h4cm-l3m) or a spec (flat, sine:H:LAMBDA, bump:H:SIGMA[:MU])"
+                "name (e.g. sine-h4cm-l3m), a spec (flat, sine:H:LAMBDA, bump:H:SIGMA[:MU]) or profile:..."
             )
         for entry in found:
-            road = entry.road if isinstance(entry, RoadPreset) else entry
-            if road not in seen:
-                seen.add(road)
+            if entry.road not in seen:
+                seen.add(entry.road)
                 out.append(entry)
     return out
-
-
-def as_road(item: RoadPreset | Road) -> Road:
-    """The :class:`Road` of a preset or a road."""
-    return item.road if isinstance(item, RoadPreset) else item
-
-
-def road_label(item: RoadPreset | Road) -> str:
-    """A short label: the preset name, else the road's spec string."""
-    return item.name if isinstance(item, RoadPreset) else item.spec

@@ -34,9 +34,6 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from engine.model.road import Road
-from engine.study.presets import RoadPreset, as_road, resolve_roads
-
 #: R_WS of the Table 9 sweep [m]: not stated in the paper; the mean of its 23 DE optima (section 5.3).
 TABLE9_DEFAULT_RWS_M = 0.093
 #: Table 9 axes.
@@ -89,27 +86,6 @@ def parse_grid(spec: str) -> np.ndarray:
     if n > MAX_GRID_DESIGNS:
         raise ValueError(f"grid has {n:,} designs, more than {MAX_GRID_DESIGNS:,}")
     return product_grid(a2, l2, rws)
-
-
-def plan_sweep(
-    roads: str | Sequence[RoadPreset | Road],
-    grid: str | np.ndarray | None = None,
-) -> list[tuple[Road, np.ndarray]]:
-    """One (road, designs) pair a road: the same grid on every road, roads in order.
-
-    ``roads``: a road list for :func:`resolve_roads` (``"paper"``) or presets/roads;
-    ``grid``: a spec for :func:`parse_grid`, an (n, 3) array, or None for Table 9.
-    """
-    items = resolve_roads(roads) if isinstance(roads, str) else list(roads)
-    if grid is None:
-        designs = table9_grid()
-    elif isinstance(grid, str):
-        designs = parse_grid(grid)
-    else:
-        designs = np.asarray(grid, dtype=float)
-        if designs.ndim != 2 or designs.shape[1] != 3:
-            raise ValueError(f"grid must have shape (n, 3), got {designs.shape}")
-    return [(as_road(item), designs.copy()) for item in items]
 
 
 # ---------------------------------------------------------------------- helpers

@@ -6,7 +6,7 @@ from typing import Annotated
 
 from fastapi import Depends, Path, Request
 
-from service.services import Services
+from finaldrive.service.services import Services
 
 
 def get_services(request: Request) -> Services:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from service.api.routes import events, health, jobs, plots, recordings, results, roads
+from finaldrive.service.api.routes import events, health, jobs, plots, recordings, results, roads
 
 api_router = APIRouter(prefix="/v1")
 for module in (jobs, results, events, roads, health, recordings, plots):

@@ -11,7 +11,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from service.schemas import Problem, ProblemItem
+from finaldrive.service.schemas import Problem, ProblemItem
 
 log = logging.getLogger(__name__)
 

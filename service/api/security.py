@@ -8,8 +8,8 @@ from typing import Annotated
 from fastapi import Depends
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
-from service.api.deps import ServicesDep
-from service.api.problems import ApiProblem
+from finaldrive.service.api.deps import ServicesDep
+from finaldrive.service.api.problems import ApiProblem
 
 _bearer = HTTPBearer(auto_error=False, description="FINALDRIVE_API_TOKEN, when the server sets one")
 
@@ -23,7 +23,8 @@ def require_token(
     given = credentials.credentials if credentials is not None else ""
     if not secrets.compare_digest(given.encode(), expected.get_secret_value().encode()):
         raise ApiProblem(
-            401, "a valid `Authorization: Bearer <token>` header is required",
+            401, "a valid `Authorization: Bearer <token>` header is required (the token is the server's "
+            "FINALDRIVE_API_TOKEN)",
             slug="unauthorized", headers={"WWW-Authenticate": "Bearer"},
         )
 

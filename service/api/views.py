@@ -8,9 +8,9 @@ from datetime import UTC, datetime
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from service.db.models import Evaluation, Generation, Job, JobRoad, JobState
-from service.db.repository import roads_of, utcnow
-from service.schemas import EvaluationOut, JobOut, JobSpec, RoadProgress, RobustBest
+from finaldrive.service.db.models import Evaluation, Generation, Job, JobRoad, JobState
+from finaldrive.service.db.repository import roads_of, utcnow
+from finaldrive.service.schemas import EvaluationOut, JobOut, JobSpec, RoadProgress, RobustBest
 
 
 def _aware(t: datetime | None) -> datetime | None:

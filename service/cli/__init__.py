@@ -1,8 +1,8 @@
 """finaldrive: motorcycle final-drive geometry by multibody simulation on uneven roads.
 
-The command line.
-Each command group lives in its own module exposing ``register(subparsers)``; ``main`` wires
-them together. Bad arguments exit with code 2 and one line on stderr.
+The command line. Each command group lives in its own module exposing ``register(subparsers)``;
+``main`` wires them together. Bad arguments and unreadable or unwritable files exit with code 2
+and one line on stderr, never a traceback.
 """
 
 from __future__ import annotations
@@ -12,24 +12,35 @@ import importlib
 import os
 import sys
 from collections.abc import Sequence
+from importlib.metadata import PackageNotFoundError, version
+
+from finaldrive.service.cli.common import UsageError, parser_options
 
 #: Modules that add commands, in the order their commands appear in ``--help``.
-COMMAND_MODULES: tuple[str, ...] = ("service.cli.engine_cmds", "service.cli.server_cmds", "service.cli.study_paper_cmds",
-                                   "service.cli.study_cmds", "service.cli.client_cmds")
+COMMAND_MODULES: tuple[str, ...] = tuple(f"finaldrive.service.cli.{name}" for name in (
+    "engine_cmds", "study_cmds", "server_cmds", "jobs_cmds", "media_cmds", "paper_cmds", "demo_cmds"))
 
-
-class UsageError(Exception):
-    """A bad argument: reported on one line, exit code 2."""
+__all__ = ["UsageError", "build_parser", "main"]
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # noqa: D102 - argparse hook
+    def error(self, message: str) -> None:  # argparse's hook: one line, exit code 2 (main)
         raise UsageError(message)
 
 
+def package_version() -> str:
+    try:
+        return version("finaldrive")
+    except PackageNotFoundError:  # running from a tree that was never installed
+        return "unknown"
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="finaldrive", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    doc = __doc__ or ""
+    parser = _Parser(prog="finaldrive", description=doc.splitlines()[0], **parser_options())
+    parser.add_argument("--version", action="version", version=f"finaldrive {package_version()}",
+                        help="print the version and exit")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
     return parser
@@ -50,6 +61,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         # the reader went away (e.g. `finaldrive roads | head`): stop quietly, as `cat` does
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
+    except OSError as exc:  # a file that could not be read or written after the arguments were checked
+        where = f" {exc.filename!r}" if exc.filename else ""
+        print(f"finaldrive: error:{where} {exc.strerror or exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -74,6 +74,6 @@ class Progress:
 def _clock(seconds: float) -> str:
     if not math.isfinite(seconds):
         return "--:--"
-    minutes, secs = divmod(int(round(seconds)), 60)
+    minutes, secs = divmod(round(seconds), 60)
     hours, minutes = divmod(minutes, 60)
     return f"{hours}:{minutes:02d}:{secs:02d}" if hours else f"{minutes:02d}:{secs:02d}"

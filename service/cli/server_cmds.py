@@ -10,27 +10,33 @@ import argparse
 import sys
 from typing import TYPE_CHECKING
 
+from finaldrive.service.cli.common import parser_options
+
 if TYPE_CHECKING:
-    from service.config import Settings
+    from finaldrive.service.config import Settings
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    serve = subparsers.add_parser("serve", help="run the REST job service")
-    serve.add_argument("--host", help="interface to bind (default 127.0.0.1, FINALDRIVE_HOST)")
-    serve.add_argument("--port", type=int, help="port (default 8000, FINALDRIVE_PORT)")
-    serve.add_argument("--db", metavar="URL", help="SQLAlchemy URL (default sqlite:///./finaldrive.db)")
-    serve.add_argument("--executor", choices=("serial", "process", "ray"), help="where simulations run")
+    from finaldrive.service.config import Settings
+
+    defaults = {name: field.default for name, field in Settings.model_fields.items()}
+    serve = subparsers.add_parser("serve", help="run the REST job service", **parser_options())
+    serve.add_argument("--host", help=f"interface to bind (default {defaults['host']}; FINALDRIVE_HOST)")
+    serve.add_argument("--port", type=int, help=f"port (default {defaults['port']}; FINALDRIVE_PORT)")
+    serve.add_argument("--db", metavar="URL", help=f"SQLAlchemy URL (default {defaults['db_url']}; FINALDRIVE_DB_URL)")
+    serve.add_argument("--executor", choices=("serial", "process", "ray"),
+                       help=f"where simulations run (default {defaults['executor']}; FINALDRIVE_EXECUTOR)")
     serve.set_defaults(run=run_serve)
 
-    db = subparsers.add_parser("db", help="manage the results database")
-    db_sub = db.add_subparsers(dest="db_command", required=True)
-    upgrade = db_sub.add_parser("upgrade", help="migrate the database schema to this version")
-    upgrade.add_argument("--db", metavar="URL", help="SQLAlchemy URL (default: FINALDRIVE_DB_URL or ./finaldrive.db)")
+    db = subparsers.add_parser("db", help="manage the results database", **parser_options())
+    db_sub = db.add_subparsers(dest="db_command", required=True, metavar="COMMAND")
+    upgrade = db_sub.add_parser("upgrade", help="migrate the database schema to this version", **parser_options())
+    upgrade.add_argument("--db", metavar="URL", help=f"SQLAlchemy URL (default {defaults['db_url']}; FINALDRIVE_DB_URL)")
     upgrade.set_defaults(run=run_db_upgrade)
 
 
 def _settings(args: argparse.Namespace) -> Settings:
-    from service.config import Settings
+    from finaldrive.service.config import Settings
 
     overrides = {
         "db_url": getattr(args, "db", None), "host": getattr(args, "host", None),
@@ -42,9 +48,9 @@ def _settings(args: argparse.Namespace) -> Settings:
 def run_serve(args: argparse.Namespace) -> int:
     import uvicorn
 
-    from service.db.migrate import SchemaMismatchError
-    from service.main import create_app
-    from service.services import open_database
+    from finaldrive.service.db.migrate import SchemaMismatchError
+    from finaldrive.service.main import create_app
+    from finaldrive.service.services import open_database
 
     settings = _settings(args)
     try:  # fail fast, with one line, before uvicorn starts
@@ -57,9 +63,10 @@ def run_serve(args: argparse.Namespace) -> int:
 
 
 def run_db_upgrade(args: argparse.Namespace) -> int:
-    from service.db.migrate import head_revision, upgrade
+    from finaldrive.service.db.engine import display_url
+    from finaldrive.service.db.migrate import head_revision, upgrade
 
     url = _settings(args).db_url
     upgrade(url)
-    print(f"database {url} is at schema revision {head_revision()}")
+    print(f"database {display_url(url)} is at schema revision {head_revision()}")
     return 0

@@ -23,6 +23,14 @@ POOL_SIZE = 40
 _WRITE = {"sqlite_begin": "IMMEDIATE"}
 
 
+def display_url(url: str) -> str:
+    """``url`` with any password masked, for logs and messages."""
+    try:
+        return make_url(url).render_as_string(hide_password=True)
+    except Exception:  # not a URL SQLAlchemy can parse: show nothing of it that could be secret
+        return "<database URL>"
+
+
 class Database:
     """An engine plus read and write session factories."""
 

@@ -6,6 +6,7 @@ The Alembic scripts live in the ``migrations`` package, so they ship with finald
 
 from __future__ import annotations
 
+from importlib import resources
 from pathlib import Path
 
 from alembic import command
@@ -14,7 +15,7 @@ from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from sqlalchemy import Engine, inspect
 
-import migrations
+from finaldrive.service.db.engine import display_url
 
 
 class SchemaMismatchError(RuntimeError):
@@ -23,7 +24,7 @@ class SchemaMismatchError(RuntimeError):
 
 def alembic_config(url: str) -> Config:
     """An Alembic config pointing at the packaged scripts and at ``url``."""
-    here = Path(migrations.__file__).resolve().parent
+    here = Path(str(resources.files("finaldrive.migrations")))  # named, not imported: migrations import the store
     config = Config(str(here / "alembic.ini"))
     config.set_main_option("script_location", str(here))
     config.set_main_option("sqlalchemy.url", url.replace("%", "%%"))
@@ -61,7 +62,7 @@ def check_revision(engine: Engine, url: str) -> None:
     if current is not None and current not in known:
         hint = "it was written by a newer finaldrive; upgrade finaldrive"
     else:
-        hint = f"run `finaldrive db upgrade --db {url}`"
+        hint = f"run `finaldrive db upgrade --db {display_url(url)}`"
     raise SchemaMismatchError(
-        f"database {url} is at schema revision {current or 'none'}, this finaldrive needs {head}: {hint}"
+        f"database {display_url(url)} is at schema revision {current or 'none'}, this finaldrive needs {head}: {hint}"
     )

@@ -25,7 +25,7 @@ from sqlalchemy import (
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 
-class JobState(str, enum.Enum):
+class JobState(enum.StrEnum):
     """Life cycle of a job; the last four are terminal except ``interrupted``."""
 
     queued = "queued"
@@ -40,7 +40,7 @@ TERMINAL_STATES = frozenset({JobState.succeeded, JobState.failed, JobState.cance
 ACTIVE_STATES = frozenset({JobState.queued, JobState.running, JobState.interrupted})
 
 
-class EvalStatus(str, enum.Enum):
+class EvalStatus(enum.StrEnum):
     ok = "ok"
     failed = "failed"
 

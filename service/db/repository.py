@@ -11,7 +11,16 @@ from typing import Any
 from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
-from service.db.models import ACTIVE_STATES, EvalStatus, Evaluation, Generation, Job, JobRoad, JobState, Recording
+from finaldrive.service.db.models import (
+    ACTIVE_STATES,
+    EvalStatus,
+    Evaluation,
+    Generation,
+    Job,
+    JobRoad,
+    JobState,
+    Recording,
+)
 
 #: Rows per ``IN (...)`` query, well under SQLite's variable limit.
 _IN_CHUNK = 500

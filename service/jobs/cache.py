@@ -13,9 +13,7 @@ from dataclasses import fields
 
 import numpy as np
 
-from engine.api import SimSettings
-from engine.model.road import Road
-from engine.vehicle import Vehicle, default_vehicle
+from finaldrive.engine import Road, SimSettings, Vehicle, default_vehicle
 
 #: SimSettings fields that only choose what is returned, not the result. (series_stride is
 #: not one: the fast path's steps land on its output times, series_stride x dt.)

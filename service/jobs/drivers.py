@@ -1,16 +1,15 @@
 """What each kind of job evaluates, as generators of evaluation requests.
 
 A driver yields :class:`EvalRequest` s; the runner evaluates each one (streaming batches
-to ``on_batch``) and then asks the driver for the next. Drivers read the store to resume
-and write results themselves, all in the runner's thread:
+to ``on_batch``) and then asks the driver for the next. The study's runs
+(finaldrive.engine.study) decide what to evaluate; drivers add the store: they resume
+from it and write results themselves, all in the runner's thread:
 
-- sweep: every (road, grid row) not yet stored, in chunks; each batch is committed as it
-  arrives.
-- de / robust-de: ask -> evaluate (robust: on every road, scored by ``aggregate``) ->
-  tell; the generation's evaluations and the optimiser state are committed together, and
-  a resumed run continues from its last stored generation.
-- paper-study: the sweep (stored with ``step = SWEEP_STEP``, so its slots never meet the
-  DE's generations) on every road, then the DE on each road; one job, one progress count.
+- a sweep run: every (road, grid row) not yet stored, in chunks; each batch is committed as
+  it arrives (a paper-study's sweep is stored with ``step = PAPER_SWEEP_STEP``);
+- a DE run: each generation on its roads, then the generation's evaluations and the
+  optimiser state are committed together; a resumed run continues from its last stored
+  generation.
 
 Cache hits (and duplicates within a request) are stored with ``cached=True`` and are
 never sent to the executor.
@@ -24,13 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine.api import STATUS_OK, BatchResult
-from engine.model.road import Road
-from engine.optimize.de import DifferentialEvolution
-from engine.study.robust import aggregate
-from service.db.engine import Database
-from service.db.models import EvalStatus, Evaluation
-from service.db.repository import (
+from finaldrive.engine import BatchResult, DERun, Request, Road, SweepRun, fitness_values
+from finaldrive.service.db.engine import Database
+from finaldrive.service.db.models import EvalStatus, Evaluation
+from finaldrive.service.db.repository import (
     EvalRow,
     add_evaluations,
     add_generation,
@@ -38,13 +34,10 @@ from service.db.repository import (
     last_generations,
     stored_slots,
 )
-from service.jobs.cache import context_prefix, design_keys
-from service.jobs.plan import JobPlan
+from finaldrive.service.jobs.cache import context_prefix, design_keys
+from finaldrive.service.jobs.plan import JobPlan
 
 Sink = Callable[[list[EvalRow]], None]
-
-#: ``step`` of a paper-study's sweep evaluations (DE generations are 0, 1, ...).
-SWEEP_STEP = -1
 
 
 @dataclass(frozen=True)
@@ -69,78 +62,61 @@ class JobContext:
 
     def prefix(self, road_index: int) -> str:
         p = self.plan
-        return context_prefix(p.roads[road_index].road, p.settings, p.vehicle, self.engine_version)
+        return context_prefix(p.study.roads[road_index].road, p.settings, p.vehicle, self.engine_version)
 
 
 def make_driver(ctx: JobContext) -> Driver:
-    if ctx.plan.kind == "sweep":
-        return sweep_driver(ctx)
-    if ctx.plan.kind == "paper-study":
-        return paper_study_driver(ctx)
-    return de_driver(ctx)
-
-
-def paper_study_driver(ctx: JobContext) -> Driver:
-    yield from sweep_driver(ctx, step=SWEEP_STEP)
-    yield from de_driver(ctx)
-
-
-def sweep_driver(ctx: JobContext, step: int = 0) -> Driver:
-    designs = ctx.plan.designs
-    assert designs is not None
+    """The job's runs, resumed from the store, one after another."""
+    study = ctx.plan.study
     with ctx.db.read() as session:
-        done = stored_slots(session, ctx.job_id, step=step)
+        sweep_done = stored_slots(session, ctx.job_id, step=study.sweep_step) if study.designs is not None else None
+        last = last_generations(session, ctx.job_id)
+    runs = study.runs(sweep_done=sweep_done, de_states={i: (g.state, g.generation) for i, g in last.items()})
+    for run in runs:
+        if isinstance(run, SweepRun):
+            yield from _sweep(ctx, run)
+        else:
+            yield from _de(ctx, run)
 
+
+def _sweep(ctx: JobContext, run: SweepRun) -> Driver:
     def commit(rows: list[EvalRow]) -> None:
         with ctx.db.write() as session:
             add_evaluations(session, ctx.job_id, rows)
 
-    for r in range(len(ctx.plan.roads)):
-        prefix = ctx.prefix(r)
-        missing = np.array([c for c in range(len(designs)) if (r, c) not in done], dtype=int)
-        for start in range(0, len(missing), ctx.sweep_chunk):
-            candidates = missing[start:start + ctx.sweep_chunk]
-            yield from evaluate_rows(ctx, r, step, candidates, designs[candidates], prefix, commit)
+    for request in run.take():
+        for start in range(0, len(request), ctx.sweep_chunk):
+            yield from evaluate_rows(ctx, request.part(np.arange(start, min(len(request), start + ctx.sweep_chunk))),
+                                     commit)
 
 
-def de_driver(ctx: JobContext) -> Driver:
-    plan = ctx.plan
-    with ctx.db.read() as session:
-        last = last_generations(session, ctx.job_id)
-    for run in range(plan.n_runs):
-        stored = last.get(run)
-        if stored is not None:
-            de, generation = DifferentialEvolution.from_state(stored.state), stored.generation
-        else:
-            de, generation = plan.new_optimiser(run), 0
-        road_indices = list(range(len(plan.roads))) if plan.kind == "robust-de" else [run]
-        prefixes = {r: ctx.prefix(r) for r in road_indices}
-        while not de.done:
-            x = de.ask()
-            rows: list[EvalRow] = []
-            for r in road_indices:
-                yield from evaluate_rows(ctx, r, generation, np.arange(len(x)), x, prefixes[r], rows.extend)
-            table = np.full((len(road_indices), len(x)), np.nan)
-            position = {r: i for i, r in enumerate(road_indices)}
+def _de(ctx: JobContext, run: DERun) -> Driver:
+    while not run.done:
+        rows: list[EvalRow] = []
+        requests = run.take()
+        for request in requests:
+            yield from evaluate_rows(ctx, request, rows.extend)
+        for request in requests:
+            fitness = np.full(len(request), np.nan)
+            position = {int(c): i for i, c in enumerate(request.candidates)}
             for row in rows:
-                if row.fitness_m is not None:
-                    table[position[row.road_index], row.candidate] = row.fitness_m
-            de.tell(aggregate(table, plan.aggregate) if plan.kind == "robust-de" else table[0])
-            generation += 1
-            with ctx.db.write() as session:
-                add_evaluations(session, ctx.job_id, rows)
-                add_generation(
-                    session, ctx.job_id, run=run, generation=generation, state=de.state(),
-                    population=de.population.tolist(), fitness=_nullable(de.fitness),
-                    best_f=_nullable([de.best_f])[0], n_evals=de.n_evals,
-                )
+                if row.road_index == request.road and row.fitness_m is not None:
+                    fitness[position[row.candidate]] = row.fitness_m
+            run.tell(request.road, request.step, request.candidates, fitness)
+        de = run.de
+        with ctx.db.write() as session:
+            add_evaluations(session, ctx.job_id, rows)
+            add_generation(
+                session, ctx.job_id, run=run.index, generation=run.generation, state=de.state(),
+                population=de.population.tolist(), fitness=_nullable(de.fitness),
+                best_f=_nullable([de.best_f])[0], n_evals=de.n_evals,
+            )
 
 
-def evaluate_rows(
-    ctx: JobContext, road_index: int, step: int, candidates: np.ndarray, designs: np.ndarray,
-    prefix: str, sink: Sink,
-) -> Driver:
+def evaluate_rows(ctx: JobContext, request: Request, sink: Sink) -> Driver:
     """Store cache hits at once; request the rest (once per distinct design) and store them."""
+    road_index, step, candidates, designs = request.road, request.step, request.candidates, request.designs
+    prefix = ctx.prefix(road_index)
     keys = design_keys(prefix, designs)
     with ctx.db.read() as session:
         hits = cached_evaluations(session, keys)
@@ -164,27 +140,28 @@ def evaluate_rows(
     todo = np.fromiter(first.values(), dtype=int)
 
     def on_batch(rows: np.ndarray, batch: BatchResult) -> None:
+        fitness = fitness_values(batch)
         out: list[EvalRow] = []
         for j, pos in enumerate(np.asarray(rows, dtype=int)):
             i = int(todo[pos])
             for n, target in enumerate([i, *copies.get(keys[i], [])]):
                 out.append(_row_from_result(
-                    batch, j, road_index, step, int(candidates[target]), designs[target], keys[i], n > 0
+                    batch, fitness, j, road_index, step, int(candidates[target]), designs[target], keys[i], n > 0
                 ))
         sink(out)
 
-    yield EvalRequest(ctx.plan.roads[road_index].road, designs[todo], on_batch)
+    yield EvalRequest(ctx.plan.study.roads[road_index].road, designs[todo], on_batch)
 
 
 def _row_from_result(
-    batch: BatchResult, j: int, road_index: int, step: int, candidate: int,
+    batch: BatchResult, fitness_values: np.ndarray, j: int, road_index: int, step: int, candidate: int,
     design: np.ndarray, key: str, cached: bool,
 ) -> EvalRow:
-    fitness = float(batch.fitness_m[j])
-    status, reason = batch.status[j], batch.reason[j]
-    if status == STATUS_OK and not math.isfinite(fitness):
-        status, reason = EvalStatus.failed.value, f"non-finite fitness ({fitness})"
-    ok = status == STATUS_OK
+    fitness = float(fitness_values[j])
+    ok = math.isfinite(fitness)
+    reason = batch.reason[j]
+    if not ok and not reason:
+        reason = f"non-finite fitness ({batch.fitness_m[j]})"
     return EvalRow(
         road_index=road_index, step=step, candidate=candidate,
         a2=float(design[0]), l2=float(design[1]), rws=float(design[2]),

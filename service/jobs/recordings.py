@@ -17,9 +17,9 @@ from typing import Any
 
 from sqlalchemy.engine import make_url
 
-from service.config import Settings
-from service.db.engine import Database
-from service.db.repository import set_recording, unfinished_recording_ids
+from finaldrive.service.config import Settings
+from finaldrive.service.db.engine import Database
+from finaldrive.service.db.repository import set_recording, unfinished_recording_ids
 
 log = logging.getLogger(__name__)
 
@@ -42,11 +42,10 @@ def recording_file(directory: Path, recording_id: int) -> Path:
 
 def produce(spec: dict[str, Any], path: Path) -> None:
     """Simulate the spec's designs and write the recording to ``path`` (atomically)."""
-    from engine import Design, SimSettings, load_vehicle_dict
-    from engine.study.presets import as_road, resolve_roads
-    from service.recording import record
+    from finaldrive.engine import Design, SimSettings, load_vehicle_dict, resolve_roads
+    from finaldrive.service.recording import record
 
-    road = as_road(resolve_roads(spec["road"])[0])
+    road = resolve_roads(spec["road"])[0].road
     designs = [(d["label"], Design.from_deg(d["a2_deg"], d["l2"], d["rws"])) for d in spec["designs"]]
     base = SimSettings(method=spec["method"], dt=spec["dt"])
     vehicle = load_vehicle_dict(spec["vehicle"]) if spec.get("vehicle") else None
@@ -83,7 +82,7 @@ class RecordingProducer:
             self._thread.join(timeout)
 
     def _loop(self) -> None:
-        from service.db.models import Recording
+        from finaldrive.service.db.models import Recording
 
         while (recording_id := self._queue.get()) is not None and not self._stopping.is_set():
             with self._db.write() as session:

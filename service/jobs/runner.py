@@ -19,15 +19,19 @@ from collections.abc import Callable, Iterator
 
 import numpy as np
 
-from engine.api import BatchResult, SimSettings
-from engine.model.road import Road
-from engine.vehicle import Vehicle
-from service.db.engine import Database
-from service.db.models import Job, JobState
-from service.db.repository import claim_job, finish_job, interrupt_running, set_running_to, unfinished_job_ids
-from service.jobs.drivers import Driver, EvalRequest, JobContext, make_driver
-from service.jobs.plan import build_plan
-from service.schemas import JobSpec
+from finaldrive.engine import BatchResult, Road, SimSettings, Vehicle
+from finaldrive.service.db.engine import Database
+from finaldrive.service.db.models import Job, JobState
+from finaldrive.service.db.repository import (
+    claim_job,
+    finish_job,
+    interrupt_running,
+    set_running_to,
+    unfinished_job_ids,
+)
+from finaldrive.service.jobs.drivers import Driver, EvalRequest, JobContext, make_driver
+from finaldrive.service.jobs.plan import build_plan
+from finaldrive.service.schemas import JobSpec
 
 log = logging.getLogger(__name__)
 

@@ -7,11 +7,11 @@ import json
 
 from sqlalchemy.exc import IntegrityError
 
-from service.db.engine import Database
-from service.db.models import Job
-from service.db.repository import create_job, job_by_idempotency_key
-from service.jobs.plan import PlanError, build_plan
-from service.schemas import JobSpec
+from finaldrive.service.db.engine import Database
+from finaldrive.service.db.models import Job
+from finaldrive.service.db.repository import create_job, job_by_idempotency_key
+from finaldrive.service.jobs.plan import PlanError, build_plan
+from finaldrive.service.schemas import JobSpec
 
 
 class IdempotencyKeyReused(Exception):
@@ -45,7 +45,7 @@ def submit_job(
             job = create_job(
                 session, kind=spec.kind, spec=spec.model_dump(mode="json"), request_hash=digest,
                 idempotency_key=idempotency_key, total=total,
-                roads=[(r.name, r.road.spec) for r in plan.roads],
+                roads=[(r.name, r.road.spec) for r in plan.study.roads],
             )
     except IntegrityError:  # a concurrent request with the same key won the race
         existing = _replay(db, idempotency_key or "", digest)

@@ -14,15 +14,15 @@ Definitions (stated in the report too):
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import Any
 
 import numpy as np
 from scipy.stats import spearmanr
 
-from engine.study.presets import PRESETS
-from engine.study.robust import aggregate, regret
-from service.report.data import StudyData
+from finaldrive.engine import PRESETS, aggregate, regret
+from finaldrive.service.report.data import StudyData
 
 #: ``step`` of the sweep part of a paper-study (service.jobs.drivers.SWEEP_STEP).
 SWEEP_STEP = -1
@@ -207,7 +207,7 @@ def conclusions(roads: list[dict[str, Any]], table14: dict[str, Any] | None, l2_
     rho_p = _spearman(heights, [r["sweep_distance"]["spread_p5_p95_m"] for r in sp])
     rho_slope = _spearman([r["max_slope"] for r in sp], spreads)
     levels = list(by_height.values())
-    monotone = all(b >= a for a, b in zip(levels, levels[1:], strict=False)) if len(levels) > 1 else None
+    monotone = all(b >= a for a, b in itertools.pairwise(levels)) if len(levels) > 1 else None
     c1 = {
         "spread_by_height_m": by_height, "spearman_height_spread": rho,
         "spearman_height_spread_p5_p95": rho_p, "spearman_slope_spread": rho_slope,

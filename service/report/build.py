@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from service.machine import cpu_model
-from service.report import analysis as A
-from service.report.data import StudyData
-from service.report.markdown import render
-from service.report.table14 import GEOMETRIES, run_table14
+from finaldrive.service.machine import cpu_model
+from finaldrive.service.report import analysis as A
+from finaldrive.service.report.data import StudyData
+from finaldrive.service.report.markdown import render
+from finaldrive.service.report.table14 import GEOMETRIES, run_table14
 
 
 @dataclass(frozen=True)
@@ -67,7 +67,7 @@ def write_paper_study(data: StudyData, out: Path, *, figures: bool = True) -> Re
 
 def _figures(data: StudyData, report: dict[str, Any], series: dict[str, Any], fig_dir: Path) -> dict[str, Path]:
     """Sweep map and DE history per road, Table 14 time series; keys ``map:i``, ``de:i``, ``table14``."""
-    from service.plots import de_history_png, series_png, sweep_map_png
+    from finaldrive.service.plots import de_history_png, series_png, sweep_map_png
 
     fig_dir.mkdir(parents=True, exist_ok=True)
     out: dict[str, Path] = {}

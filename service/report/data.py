@@ -72,8 +72,8 @@ def from_database(url: str, job_id: int) -> StudyData:
     from sqlalchemy import select
     from sqlalchemy.exc import OperationalError
 
-    from service.db.engine import Database
-    from service.db.models import Evaluation, Job, JobRoad
+    from finaldrive.service.db.engine import Database
+    from finaldrive.service.db.models import Evaluation, Job, JobRoad
 
     if url.startswith("sqlite:///") and not Path(url.removeprefix("sqlite:///")).is_file():
         raise StudyNotFound(f"no database file at {url}")
@@ -120,7 +120,7 @@ def from_server(base_url: str, job_id: int, *, client: httpx.Client | None = Non
             page = client.get(f"/v1/jobs/{job_id}/evaluations", params=params)
             page.raise_for_status()
             body = page.json()
-            rows.extend(tuple(e[c] for c in COLUMNS) + (e["status"], e["cached"]) for e in body["items"])
+            rows.extend((*tuple(e[c] for c in COLUMNS), e["status"], e["cached"]) for e in body["items"])
             cursor = body["next_cursor"]
             if cursor is None:
                 break

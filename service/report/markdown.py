@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from service.report import analysis as A
+from finaldrive.service.report import analysis as A
 
 _HOW = """\
 Produced by the tool, not by hand. The study ran through the job service:
@@ -37,7 +37,7 @@ def _yes(v: bool | None) -> str:
 def _table(header: list[str], rows: list[list[str]]) -> list[str]:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return lines + [""]
+    return [*lines, ""]
 
 
 def render(rep: dict[str, Any], figs: dict[str, str]) -> str:
@@ -148,7 +148,7 @@ def _disagreements(rep: dict[str, Any]) -> list[str]:
         out.append("- The sweep uses R_WS = 0.093 m (the paper does not say which R_WS its sweep used; 93 mm is "
                    "the mean of its 23 DE optima, section 5.3).")
     out.append("- Nothing was tuned to match these rows.")
-    return out + [""]
+    return [*out, ""]
 
 
 def _monotone(v: bool | None) -> str:

@@ -12,11 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from engine.api import Design, SimSettings
-from engine.model.road import Road
-from engine.simulate import simulate
-from engine.study.presets import paper_tables
-from engine.vehicle import load_vehicle_dict
+from finaldrive.engine import Design, Road, SimSettings, load_vehicle_dict, paper_tables, simulate
 
 ROAD_SPEC = "sine:0.04:3"
 #: (a2 [deg], L2 [m], R_WS [m]) as simulated here.

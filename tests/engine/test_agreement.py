@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine import Design, Road, SimSettings, simulate
+from finaldrive.engine import Design, Road, SimSettings, simulate
 
 N_DESIGNS = 20
 TIGHT = 2.5e-4

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine import Design, Road, SimSettings
-from engine.model import params as P
-from engine.model.constraints import jacobian, phi, phiq_dot_qdot
-from engine.model.coordinates import N_CONSTRAINTS, N_COORDS
-from engine.model.kinematics import assemble, chain_length, design_pose
-from engine.simulate import pack_parameters
+from finaldrive.engine import Design, Road, SimSettings
+from finaldrive.engine.model import params as P
+from finaldrive.engine.model.constraints import jacobian, phi, phiq_dot_qdot
+from finaldrive.engine.model.coordinates import N_CONSTRAINTS, N_COORDS
+from finaldrive.engine.model.kinematics import assemble, chain_length, design_pose
+from finaldrive.engine.simulation import pack_parameters
 
 ROADS = ["flat", "sine:0.04:2", "bump:0.04:0.2:0.3"]
 

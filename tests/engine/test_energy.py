@@ -6,15 +6,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine import Design, Road, SimSettings
-from engine.model import params as P
-from engine.fast import minimal
-from engine.fast.rosenbrock import run_fast
-from engine.model.coordinates import FS, FT, N_COORDS, RS, RT, Y1
-from engine.model.kinematics import pose_from_minimal
-from engine.model.mass import gravity_forces, mass_matrix
-from engine.simulate import MINIMAL_COORDS, prepare
-from engine.solver import reference
+from finaldrive.engine import Design, Road, SimSettings, outcome
+from finaldrive.engine.fast import minimal
+from finaldrive.engine.fast.rosenbrock import run_fast
+from finaldrive.engine.model import params as P
+from finaldrive.engine.model.coordinates import FS, FT, N_COORDS, RS, RT, Y1
+from finaldrive.engine.model.kinematics import pose_from_minimal
+from finaldrive.engine.model.mass import gravity_forces, mass_matrix
+from finaldrive.engine.simulation import MINIMAL_COORDS, prepare
+from finaldrive.engine.solver import reference
 
 DROP = 0.02
 
@@ -49,12 +49,12 @@ def test_energy_is_conserved_within_half_a_percent_of_the_drop(vehicle):
         y0, setup.p, kind, rp, mass_matrix(setup.p), gravity_forces(setup.p), False, settings.dt, 1000, 4, 0.7,
         settings.corrector_tol, settings.corrector_max_iter, settings.lambda_tol,
         settings.lambda_max_iter, 1e-3, 10**6, 1, True)
-    assert code == reference.OK
+    assert code == outcome.OK
     e = np.array([_energy(s[:N_COORDS], s[N_COORDS:], setup) for s in states])
     e_rest = _energy(setup.q0, np.zeros(N_COORDS), setup)
     drop_energy = e[0] - e_rest
     assert drop_energy > 0.9 * 269.2 * 9.81 * DROP * 0.5   # the drop is a real energy input
-    assert (series[:, reference.SERIES_COLUMNS.index("fz_rear")] > 0).any()  # it lands
+    assert (series[:, outcome.SERIES_COLUMNS.index("fz_rear")] > 0).any()  # it lands
     drift = np.max(np.abs(e - e[0])) / drop_energy
     print(f"energy drift {drift:.2e} of the drop energy {drop_energy:.2f} J")
     assert drift < 0.005, drift
@@ -74,8 +74,8 @@ def test_fast_path_conserves_energy_too(vehicle):
     code, _, _, _, _, _, states = run_fast(y0, p, kind, rp, False, 1e-3, 1000, 5e-6, 1e-3, 10.0, 1, True)
     assert code == 0
     geo = minimal.design_constants(p)
-    work = dict(out=np.zeros(minimal.N_STATE), aux=np.zeros(minimal.N_AUX), L=np.zeros((6, 6)),
-                b=np.zeros(6), c=np.zeros(6), ws=np.zeros((6, 6)))
+    work = {"out": np.zeros(minimal.N_STATE), "aux": np.zeros(minimal.N_AUX), "L": np.zeros((6, 6)),
+                "b": np.zeros(6), "c": np.zeros(6), "ws": np.zeros((6, 6))}
     qg = gravity_forces(p)
 
     def energy(state):

@@ -13,14 +13,26 @@ import math
 import numpy as np
 import pytest
 
-from engine import Design, Road, SimSettings
-from engine.model import params as P
-from engine.model.constraints import jacobian, phi
-from engine.model.coordinates import (
-    ALPHA, BETA, FS, N_CONSTRAINTS, N_COORDS, PHI, THETA, X1, X2, X6, Y1, Y2, Y6,
+from finaldrive.engine import Design, Road, SimSettings
+from finaldrive.engine.model import params as P
+from finaldrive.engine.model.constraints import jacobian, phi
+from finaldrive.engine.model.coordinates import (
+    ALPHA,
+    BETA,
+    FS,
+    N_CONSTRAINTS,
+    N_COORDS,
+    PHI,
+    THETA,
+    X1,
+    X2,
+    X6,
+    Y1,
+    Y2,
+    Y6,
 )
-from engine.model.kinematics import chain_length, design_pose
-from engine.simulate import pack_parameters
+from finaldrive.engine.model.kinematics import chain_length, design_pose
+from finaldrive.engine.simulation import pack_parameters
 
 HELD = [X1, Y1, THETA, PHI, FS, ALPHA]
 FREE = [k for k in range(N_COORDS) if k not in HELD]

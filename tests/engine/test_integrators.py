@@ -7,7 +7,7 @@ import pytest
 from numba import njit
 from scipy.linalg import expm
 
-from engine.solver.integrators import make_integrator, make_steppers
+from finaldrive.engine.solver.integrators import make_integrator, make_steppers
 
 A = np.array([[0.0, 1.0], [-4.0, -0.4]])  # a damped oscillator
 
@@ -41,7 +41,7 @@ def test_abm_predictor_corrector_is_fourth_order():
             r = ABM_STEP((A,), k * dt, y, hist[0], hist[1], hist[2], hist[3], dt, 0.7, 1e-14, 200, 2,
                          ynew, fnew, status)
             assert r > 0
-            hist = [fnew.copy()] + hist[:3]
+            hist = [fnew.copy(), *hist[:3]]
             y = ynew.copy()
         errors.append(np.linalg.norm(y - _exact(t_end)))
     assert _slope(steps, errors) == pytest.approx(4.0, abs=0.2)

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from engine import Design, SimSettings
-from engine.model import params as P
-from engine.model.coordinates import N_COORDS
-from engine.model.mass import bodies, gravity_forces, mass_matrix
-from engine.simulate import pack_parameters
+from finaldrive.engine import Design, SimSettings
+from finaldrive.engine.model import params as P
+from finaldrive.engine.model.coordinates import N_COORDS
+from finaldrive.engine.model.mass import bodies, gravity_forces, mass_matrix
+from finaldrive.engine.simulation import pack_parameters
 
 ROT = np.array([[0.0, -1.0], [1.0, 0.0]])
 

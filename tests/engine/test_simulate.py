@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from engine import STATUS_FAILED, Design, Road, SimSettings, evaluate, simulate
+from finaldrive.engine import STATUS_FAILED, Design, Road, SimSettings, evaluate, simulate
 
 TABLE11 = Design.from_deg(195.3, 0.037, 0.088)
 

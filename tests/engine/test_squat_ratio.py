@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import pytest
 
-from engine import Design, SimSettings
-from engine.model.kinematics import design_squat_ratio
-from engine.simulate import pack_parameters
+from finaldrive.engine import Design, SimSettings
+from finaldrive.engine.model.kinematics import design_squat_ratio
+from finaldrive.engine.simulation import pack_parameters
 
 
 def _rows(tables: dict) -> list[tuple[float, float, float, float]]:

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine import Design, Road, SimSettings
-from engine.calibrate import static_loads
-from engine.model import params as P
-from engine.model.coordinates import FT, RT
-from engine.simulate import pack_parameters
-from engine.solver.equilibrium import static_equilibrium
-from engine.solver.reference import constraint_residual
+from finaldrive.engine import Design, Road, SimSettings
+from finaldrive.engine.calibrate import static_loads
+from finaldrive.engine.fast.equilibrium import static_equilibrium
+from finaldrive.engine.model import params as P
+from finaldrive.engine.model.coordinates import FT, RT
+from finaldrive.engine.simulation import pack_parameters
+from finaldrive.engine.solver.reference import constraint_residual
 
 
 def test_table3_rear_share_and_cog_height(vehicle):

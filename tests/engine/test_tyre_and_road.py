@@ -7,13 +7,16 @@ import math
 import numpy as np
 import pytest
 
-from engine import Road, RoadError
-from engine.model.road_height import road_height
-from engine.model.tyre import (
-    deformation_rate, magic_formula, relaxation_length, slip_stiffness, transient_slip,
+from finaldrive.engine import Design, Road, RoadError, SimSettings
+from finaldrive.engine.model.road_height import road_height
+from finaldrive.engine.model.tyre import (
+    deformation_rate,
+    magic_formula,
+    relaxation_length,
+    slip_stiffness,
+    transient_slip,
 )
-from engine.simulate import pack_parameters
-from engine import Design, SimSettings
+from finaldrive.engine.simulation import pack_parameters
 
 
 @pytest.fixture()

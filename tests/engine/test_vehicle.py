@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from engine import VehicleError, default_vehicle, load_vehicle, load_vehicle_dict
+from finaldrive.engine import VehicleError, default_vehicle, load_vehicle, load_vehicle_dict
 
 
 def test_every_default_value_has_a_unit_and_a_source():

@@ -12,12 +12,12 @@ from alembic.runtime.migration import MigrationContext
 from fastapi.testclient import TestClient
 from sqlalchemy import text
 
-from service.cli import server_cmds
-from service.config import Settings
-from service.db.engine import make_engine
-from service.db.migrate import SchemaMismatchError, alembic_config, current_revision, head_revision, upgrade
-from service.db.models import Base
-from service.main import create_app
+from finaldrive.service.cli import server_cmds
+from finaldrive.service.config import Settings
+from finaldrive.service.db.engine import make_engine
+from finaldrive.service.db.migrate import SchemaMismatchError, alembic_config, current_revision, head_revision, upgrade
+from finaldrive.service.db.models import Base
+from finaldrive.service.main import create_app
 
 
 @pytest.fixture

@@ -6,9 +6,9 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from service.config import Settings
-from service.main import create_app
-from svc_helpers import FakeStream
+from finaldrive.service.config import Settings
+from finaldrive.service.main import create_app
+from tests.service.svc_helpers import FakeStream
 
 
 @pytest.fixture

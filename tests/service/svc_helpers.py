@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from engine.api import BatchResult, SimSettings
-from engine.model.road import Road
-from engine.vehicle import Vehicle
+from finaldrive.engine.api import BatchResult, SimSettings
+from finaldrive.engine.model.road import Road
+from finaldrive.engine.vehicle import Vehicle
 
 TERMINAL = {"succeeded", "failed", "cancelled"}
 

@@ -17,10 +17,10 @@ import httpx
 import numpy as np
 import pytest
 
-from engine import evaluate
-from service.jobs.plan import build_plan
-from service.schemas import JobSpec
-from svc_helpers import wait_done
+from finaldrive.engine import evaluate
+from finaldrive.service.jobs.plan import build_plan
+from finaldrive.service.schemas import JobSpec
+from tests.service.svc_helpers import wait_done
 
 SIM = {"duration": 0.3}
 SWEEP = {"kind": "sweep", "roads": ["flat"], "grid": "a2_deg=0:270:90,l2=0.05|0.15,rws=0.09", "settings": SIM}
@@ -44,7 +44,7 @@ class Server:
         self.proc: subprocess.Popen[bytes] | None = None
 
     def start(self) -> httpx.Client:
-        cmd = [sys.executable, "-m", "service.cli", "serve", "--port", str(self.port),
+        cmd = [sys.executable, "-m", "finaldrive.service.cli", "serve", "--port", str(self.port),
                "--db", self.db_url, "--executor", "serial"]
         with self.log.open("ab") as out:
             self.proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT)
@@ -81,9 +81,11 @@ def wait(client: httpx.Client, job_id: int) -> dict[str, Any]:
 def reference_de(spec: dict[str, Any]) -> Any:
     """The same DE, uninterrupted, in this process."""
     plan = build_plan(JobSpec.model_validate(spec).normalised())
-    de = plan.new_optimiser(0)
+    study = plan.study
+    assert study.de is not None and study.bounds is not None
+    de = study.de.optimiser(study.bounds, study.seed)
     while not de.done:
-        de.tell(evaluate(de.ask(), plan.roads[0].road, plan.settings).fitness_m)
+        de.tell(evaluate(de.ask(), study.roads[0].road, plan.settings).fitness_m)
     return de
 
 
@@ -94,26 +96,26 @@ def test_sweep_and_de_over_http_match_in_process(server: Server) -> None:
     assert (sweep.status_code, de.status_code) == (201, 201)
 
     plan = build_plan(JobSpec.model_validate(SWEEP).normalised())
-    assert plan.designs is not None
-    expected = evaluate(plan.designs, plan.roads[0].road, plan.settings)
+    assert plan.study.designs is not None
+    expected = evaluate(plan.study.designs, plan.study.roads[0].road, plan.settings)
     reference = reference_de(DE)
 
     sweep_job = wait(client, sweep.json()["id"])
     assert sweep_job["state"] == "succeeded"
-    assert sweep_job["done"] + sweep_job["failed"] == len(plan.designs)
+    assert sweep_job["done"] + sweep_job["failed"] == len(plan.study.designs)
     assert sweep_job["failed"] == int(np.count_nonzero(~expected.ok))
     ok = np.where(expected.ok, expected.fitness_m, -np.inf)
     assert sweep_job["roads"][0]["best"]["fitness_m"] == pytest.approx(ok.max(), rel=1e-12)
 
     items = client.get(f"/v1/jobs/{sweep_job['id']}/evaluations").json()["items"]
     by_candidate = {e["candidate"]: e for e in items}
-    assert sorted(by_candidate) == list(range(len(plan.designs)))
+    assert sorted(by_candidate) == list(range(len(plan.study.designs)))
     for i, e in by_candidate.items():
         assert e["status"] == expected.status[i]
         if e["status"] == "ok":
             assert e["fitness_m"] == pytest.approx(expected.fitness_m[i], rel=1e-12)
     csv = client.get(f"/v1/jobs/{sweep_job['id']}/evaluations", params={"format": "csv"}).text
-    assert len(csv.strip().splitlines()) == len(plan.designs) + 1
+    assert len(csv.strip().splitlines()) == len(plan.study.designs) + 1
 
     de_job = wait(client, de.json()["id"])
     assert de_job["state"] == "succeeded"

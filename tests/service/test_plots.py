@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 from fastapi.testclient import TestClient
-from svc_helpers import DE, SWEEP, wait_done
 
-from engine.study.sweep import parse_grid
-from service import plots
+from finaldrive.engine.study.sweep import parse_grid
+from finaldrive.service import plots
+from tests.service.svc_helpers import DE, SWEEP, wait_done
 
 PNG = b"\x89PNG\r\n\x1a\n"
 

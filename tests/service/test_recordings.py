@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 from rerun.chunk import RrdReader
-from svc_helpers import FakeStream, wait_done
 
-from engine import Design, Road, SimSettings, simulate
-from service.config import Settings
-from service.main import create_app
-from service.recording import PARTS, PLOTS, frame_count, record, scalars_of, series_settings
+from finaldrive.engine import Design, Road, SimSettings, simulate
+from finaldrive.service.config import Settings
+from finaldrive.service.main import create_app
+from finaldrive.service.recording import PARTS, PLOTS, frame_count, record, scalars_of, series_settings
+from tests.service.svc_helpers import FakeStream, wait_done
 
 ROAD = Road.parse("sine:0.04:3")
 DURATION, FPS = 0.4, 50
@@ -122,8 +122,8 @@ def test_api_errors(client: TestClient) -> None:
 
 
 def test_scene_read_back_matches_the_engine(rrd: Path) -> None:
-    from engine.model import coordinates as C
-    from service.recording import scene_at
+    from finaldrive.engine.model import coordinates as C
+    from finaldrive.service.recording import scene_at
 
     strips, arrows = scene_at(rrd, 0.2)
     assert {f"/world/g1/{p}" for p in PARTS} <= set(strips) and len(arrows) == 2

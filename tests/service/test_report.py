@@ -8,12 +8,12 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from service.cli import main
-from service.config import Settings
-from service.main import create_app
-from service.report import write_paper_study
-from service.report.analysis import alignment_deg, offset_mm
-from service.report.data import StudyNotFound, from_database, from_server
+from finaldrive.service.cli import main
+from finaldrive.service.config import Settings
+from finaldrive.service.main import create_app
+from finaldrive.service.report import write_paper_study
+from finaldrive.service.report.analysis import alignment_deg, offset_mm
+from finaldrive.service.report.data import StudyNotFound, from_database, from_server
 
 ROADS = ["flat", "sine-h4cm-l3m"]
 

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from workers.batching import BatchSizer, batch_size
+from finaldrive.workers.batching import BatchSizer, batch_size
 
 
 def overhead_fraction(b: int, per_design_s: float, overhead_s: float) -> float:

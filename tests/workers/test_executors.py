@@ -3,22 +3,22 @@
 from __future__ import annotations
 
 import time
-from functools import partial
 from collections.abc import Iterator
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-import workers
-import workers.evaluate
-from engine.api import BatchResult, SimSettings
-from engine.model.road import Road
+import finaldrive.workers.evaluate as evaluate
+from finaldrive import workers
+from finaldrive.engine.api import BatchResult, SimSettings
+from finaldrive.engine.model.road import Road
+from finaldrive.workers import WorkerLostError, evaluate_all, evaluate_stream, make_executor
+from finaldrive.workers.evaluate import stream_rows
+from finaldrive.workers.process import ProcessExecutor
+from finaldrive.workers.serial import SerialExecutor
 from tests.workers import toyfns
-from workers import WorkerLostError, evaluate_all, evaluate_stream, make_executor
-from workers.evaluate import stream_rows
-from workers.process import ProcessExecutor
-from workers.serial import SerialExecutor
 
 
 @pytest.fixture(scope="module")
@@ -157,8 +157,8 @@ def test_worker_lost_after_max_retries() -> None:
 @pytest.fixture
 def toy_engine(monkeypatch: pytest.MonkeyPatch) -> None:
     """Serial runs in-process, so the engine call can be replaced by a toy."""
-    monkeypatch.setattr(workers.evaluate, "run_engine", lambda d, road, settings, vehicle: toyfns.toy_result(d))
-    monkeypatch.setattr(workers.evaluate, "warm_up_engine", lambda *shared: None)
+    monkeypatch.setattr(evaluate, "run_engine", lambda d, road, settings, vehicle: toyfns.toy_result(d))
+    monkeypatch.setattr(evaluate, "warm_up_engine", lambda *shared: None)
 
 
 def test_evaluate_all_in_input_order_with_progress(toy_engine: None) -> None:

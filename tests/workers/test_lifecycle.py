@@ -12,20 +12,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import workers.evaluate
-from engine.api import SimSettings
-from engine.model.road import Road
+import finaldrive.workers.evaluate as evaluate
+from finaldrive.engine.api import SimSettings
+from finaldrive.engine.model.road import Road
+from finaldrive.workers import evaluate_roads_stream
+from finaldrive.workers.process import ProcessExecutor
+from finaldrive.workers.serial import SerialExecutor
 from tests.workers import toyfns
-from workers import evaluate_roads_stream
-from workers.process import ProcessExecutor
-from workers.serial import SerialExecutor
 
 REPO = Path(__file__).resolve().parents[2]
 
 PARENT = """
 import sys, time
 from tests.workers import toyfns
-from workers.process import ProcessExecutor
+from finaldrive.workers.process import ProcessExecutor
 executor = ProcessExecutor(num_workers=2)
 stream = executor.map_batches(toyfns.sleep_then_add, [[i] for i in range(4)], shared=(60.0,))
 import threading
@@ -76,18 +76,18 @@ def test_one_stream_at_a_time() -> None:
 
 def test_warm_up_simulates_briefly(monkeypatch: pytest.MonkeyPatch) -> None:
     calls: list[float] = []
-    monkeypatch.setattr(workers.evaluate, "run_engine",
+    monkeypatch.setattr(evaluate, "run_engine",
                         lambda d, road, settings, vehicle: calls.append(settings.duration) or toyfns.toy_result(d))
-    workers.evaluate.warm_up_engine((Road(),), SimSettings(), None)
-    assert calls == [workers.evaluate.WARM_UP_DURATION_S]
+    evaluate.warm_up_engine((Road(),), SimSettings(), None)
+    assert calls == [evaluate.WARM_UP_DURATION_S]
 
 
 def test_roads_stream_maps_rows_back_to_each_road(monkeypatch: pytest.MonkeyPatch) -> None:
     """A batch may span roads; every (road, row) comes back once with its own road's scale."""
     scale = {Road(): 1.0, Road.parse("sine:0.04:3"): 2.0, Road.parse("bump:0.04:0.2"): 3.0}
-    monkeypatch.setattr(workers.evaluate, "run_engine",
+    monkeypatch.setattr(evaluate, "run_engine",
                         lambda d, road, settings, vehicle: toyfns.toy_result(d, scale[road]))
-    monkeypatch.setattr(workers.evaluate, "warm_up_engine", lambda *shared: None)
+    monkeypatch.setattr(evaluate, "warm_up_engine", lambda *shared: None)
     plan = [(road, toyfns.designs(n)) for road, n in zip(scale, (5, 0, 7))]
     seen: dict[int, list[int]] = {0: [], 1: [], 2: []}
     for r, rows, result in evaluate_roads_stream(SerialExecutor(), plan, SimSettings(), batch_size=4):

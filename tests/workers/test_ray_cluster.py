@@ -51,7 +51,7 @@ def processes_under(temp_dir: str) -> list[psutil.Process]:
 CLIENT = """
 import json, os, ray
 from tests.workers import toyfns
-from workers import make_executor
+from finaldrive.workers import make_executor
 with make_executor("ray") as executor:
     gcs = ray.get_runtime_context().gcs_address
     results = dict(executor.map_batches(toyfns.pid, [[i] for i in range(6)]))

@@ -11,19 +11,19 @@ import pytest
 
 pytest.importorskip("ray")
 
-import workers
-from engine.api import BatchResult, SimSettings
-from engine.model.road import Road
+from finaldrive import workers
+from finaldrive.engine.api import BatchResult, SimSettings
+from finaldrive.engine.model.road import Road
+from finaldrive.workers import WorkerLostError, evaluate_all, make_executor
+from finaldrive.workers.evaluate import stream_rows
+from finaldrive.workers.serial import SerialExecutor
 from tests.workers import toyfns
 from tests.workers.test_executors import assert_same
-from workers import WorkerLostError, evaluate_all, make_executor
-from workers.evaluate import stream_rows
-from workers.serial import SerialExecutor
 
 pytestmark = pytest.mark.slow
 
 try:
-    from engine import evaluate as engine_evaluate
+    from finaldrive.engine import evaluate as engine_evaluate
 except ImportError:
     engine_evaluate = None
 
@@ -91,7 +91,7 @@ def test_worker_lost_after_max_retries(ray_executor: workers.Executor) -> None:
         list(ray_executor.map_batches(toyfns.always_crash, [[1]]))
 
 
-@pytest.mark.skipif(engine_evaluate is None, reason="engine.evaluate is not importable yet")
+@pytest.mark.skipif(engine_evaluate is None, reason="finaldrive.engine.evaluate is not importable yet")
 def test_real_engine_identical_across_executors(ray_executor: workers.Executor) -> None:
     designs = np.array([[np.pi / 4, 0.10, 0.08], [np.pi, 0.05, 0.10], [1.5 * np.pi, 0.15, 0.12]])
     road, settings = Road.parse("sine:0.04:3"), SimSettings(duration=0.2)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.api import BatchResult, SimResult
+from finaldrive.engine.api import BatchResult, SimResult
 
 
 def toy_result(designs: np.ndarray, scale: float = 1.0) -> BatchResult:

@@ -9,9 +9,9 @@ import anyio
 from fastapi import APIRouter, Depends
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
-from service.api.deps import JobId, ServicesDep
-from service.api.problems import ApiProblem, documented
-from service.db.models import TERMINAL_STATES, Job, JobState
+from finaldrive.service.api.deps import JobId, ServicesDep
+from finaldrive.service.api.problems import ApiProblem, documented
+from finaldrive.service.db.models import TERMINAL_STATES, Job, JobState
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
 

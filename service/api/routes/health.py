@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from service.api.deps import ServicesDep
-from service.db.repository import count_active
-from service.schemas import HealthOut
+from finaldrive.service.api.deps import ServicesDep
+from finaldrive.service.db.repository import count_active
+from finaldrive.service.schemas import HealthOut
 
 router = APIRouter(prefix="/health", tags=["health"])
 

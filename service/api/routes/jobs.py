@@ -7,33 +7,18 @@ from typing import Annotated
 import anyio
 from fastapi import APIRouter, Header, Query, Response
 
-from service.api.deps import MAX_ID, JobId, ServicesDep
-from service.api.problems import ApiProblem, documented, validation_problem
-from service.api.security import MutationAuth
-from service.api.views import job_out, jobs_out
-from service.db.models import Job
-from service.db.repository import cancel_job, list_jobs, roads_of
-from service.jobs.plan import PlanError
-from service.jobs.submit import IdempotencyKeyReused, submit_job
-from service.schemas import JobKind, JobOut, JobPage, JobSpec, JobStateName
+from finaldrive.service.api.deps import JobId, ServicesDep
+from finaldrive.service.api.lookups import load_job, parse_cursor
+from finaldrive.service.api.problems import ApiProblem, documented, validation_problem
+from finaldrive.service.api.security import MutationAuth
+from finaldrive.service.api.views import jobs_out
+from finaldrive.service.db.models import Job
+from finaldrive.service.db.repository import cancel_job, list_jobs
+from finaldrive.service.jobs.plan import PlanError
+from finaldrive.service.jobs.submit import IdempotencyKeyReused, submit_job
+from finaldrive.service.schemas import JobKind, JobOut, JobPage, JobSpec, JobStateName
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
-
-
-def parse_cursor(cursor: str | None) -> int | None:
-    if cursor is None:
-        return None
-    if not cursor.isdigit() or int(cursor) > MAX_ID:
-        raise validation_problem(("query", "cursor"), "not a cursor returned by this API")
-    return int(cursor)
-
-
-def load_job(services: ServicesDep, job_id: int) -> JobOut:
-    with services.db.read() as session:
-        job = session.get(Job, job_id)
-        if job is None:
-            raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
-        return job_out(session, job, roads_of(session, [job_id])[job_id], detail=True)
 
 
 @router.post(

@@ -11,11 +11,11 @@ import numpy as np
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
-from service.api.deps import JobId, ServicesDep
-from service.api.problems import ApiProblem, documented
-from service.api.routes.results import _road_filter
-from service.db.models import Job, JobRoad
-from service.db.repository import last_generations, list_evaluations, roads_of
+from finaldrive.service.api.deps import JobId, ServicesDep
+from finaldrive.service.api.lookups import find_road
+from finaldrive.service.api.problems import ApiProblem, documented
+from finaldrive.service.db.models import Job, JobRoad
+from finaldrive.service.db.repository import last_generations, list_evaluations, roads_of
 
 router = APIRouter(prefix="/jobs", tags=["results"])
 
@@ -38,14 +38,14 @@ def plot(
     road: Annotated[str | None, Query(description="road name, spec or index (default: the first)")] = None,
     value: Annotated[Literal["fitness", "distance"], Query(description="sweep-map colour")] = "fitness",
 ) -> Response:
-    from service import plots
+    from finaldrive.service import plots
 
     with services.db.read() as session:
         job = session.get(Job, job_id)
         if job is None:
             raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
         roads = [r for r, _ in roads_of(session, [job_id])[job_id]]
-        index = _road_filter(road, roads) if road is not None else 0
+        index = find_road(road, roads) if road is not None else 0
         chosen: JobRoad = roads[index]
         if name == "sweep-map":
             rows = list_evaluations(session, job_id, road_index=index, after_id=None, limit=10**7)

@@ -9,14 +9,14 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Path, Response
 from fastapi.responses import FileResponse
 
-from service.api.deps import MAX_ID, ServicesDep
-from service.api.problems import ApiProblem, documented, validation_problem
-from service.api.routes.jobs import load_job
-from service.api.security import MutationAuth
-from service.db.models import Job, Recording
-from service.db.repository import create_recording
-from service.jobs.recordings import data_dir, recording_file
-from service.schemas import JobOut, RecordingDesign, RecordingOut, RecordingRequest
+from finaldrive.service.api.deps import MAX_ID, ServicesDep
+from finaldrive.service.api.lookups import load_job
+from finaldrive.service.api.problems import ApiProblem, documented, validation_problem
+from finaldrive.service.api.security import MutationAuth
+from finaldrive.service.db.models import Job, Recording
+from finaldrive.service.db.repository import create_recording
+from finaldrive.service.jobs.recordings import data_dir, recording_file
+from finaldrive.service.schemas import JobOut, RecordingDesign, RecordingOut, RecordingRequest
 
 router = APIRouter(prefix="/recordings", tags=["recordings"])
 
@@ -42,7 +42,7 @@ def _job_best(job: JobOut, road: str | None) -> tuple[str, RecordingDesign]:
 
 def _spec(request: RecordingRequest, services: Any) -> dict[str, Any]:
     """The concrete spec stored and produced: road, designs with labels, timing, method."""
-    from engine.study.presets import resolve_roads
+    from finaldrive.engine import resolve_roads
 
     designs = list(request.designs)
     method, dt, vehicle, road = "fast", 1.0e-3, None, request.road

@@ -9,27 +9,17 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
-from service.api.deps import JobId, ServicesDep
-from service.api.problems import ApiProblem, documented, validation_problem
-from service.api.routes.jobs import load_job, parse_cursor
-from service.api.views import evaluation_out
-from service.db.models import Job, JobRoad
-from service.db.repository import list_evaluations, roads_of
-from service.schemas import BestOut, EvaluationOut, EvaluationPage
+from finaldrive.service.api.deps import JobId, ServicesDep
+from finaldrive.service.api.lookups import find_road, load_job, parse_cursor
+from finaldrive.service.api.problems import ApiProblem, documented
+from finaldrive.service.api.views import evaluation_out
+from finaldrive.service.db.models import Job
+from finaldrive.service.db.repository import list_evaluations, roads_of
+from finaldrive.service.schemas import BestOut, EvaluationOut, EvaluationPage
 
 router = APIRouter(prefix="/jobs", tags=["results"])
 
 CSV_COLUMNS = tuple(EvaluationOut.model_fields)
-
-
-def _road_filter(road: str | None, roads: list[JobRoad]) -> int | None:
-    if road is None:
-        return None
-    for r in roads:
-        if road in (r.name, r.spec, str(r.road_index)):
-            return r.road_index
-    names = ", ".join(r.name for r in roads)
-    raise validation_problem(("query", "road"), f"the job has no road {road!r} (its roads: {names})")
 
 
 @router.get(
@@ -44,14 +34,14 @@ def evaluations(
     road: Annotated[str | None, Query(description="road name, spec or index")] = None,
     cursor: Annotated[str | None, Query(description="next_cursor of the previous page")] = None,
     limit: Annotated[int, Query(ge=1, le=100_000)] = 1000,
-    format: Literal["json", "csv"] = "json",  # noqa: A002 - the query parameter's public name
+    format: Literal["json", "csv"] = "json",
 ) -> EvaluationPage | Response:
     after = parse_cursor(cursor)
     with services.db.read() as session:
         if session.get(Job, job_id) is None:
             raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
         roads = [road for road, _ in roads_of(session, [job_id])[job_id]]
-        road_index = _road_filter(road, roads)
+        road_index = find_road(road, roads)
         rows = list_evaluations(session, job_id, road_index=road_index, after_id=after, limit=limit + 1)
     names = {r.road_index: r.name for r in roads}
     items = [evaluation_out(e, names[e.road_index]) for e in rows[:limit]]

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from engine.study.presets import PRESETS
-from service.schemas import RoadOut
+from finaldrive.engine import PRESETS
+from finaldrive.service.schemas import RoadOut
 
 router = APIRouter(prefix="/roads", tags=["roads"])
 

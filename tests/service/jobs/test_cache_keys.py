@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.api import SimSettings
-from engine.model.road import Road
-from engine.vehicle import Vehicle, default_vehicle
-from service.jobs.cache import context_prefix, design_keys
+from finaldrive.engine.api import SimSettings
+from finaldrive.engine.model.road import Road
+from finaldrive.engine.vehicle import Vehicle, default_vehicle
+from finaldrive.service.jobs.cache import context_prefix, design_keys
 
 ROW = np.array([[0.0, 0.1, 0.09]])
 
@@ -22,7 +22,7 @@ def key(
 
 def test_inputs_that_change_results_change_the_key() -> None:
     base = key()
-    assert key(design=ROW + [[0, 0, 1e-6]]) != base
+    assert key(design=ROW + np.array([[0, 0, 1e-6]])) != base
     assert key(road=Road.parse("sine:0.01:2")) != base
     assert key(settings=SimSettings(duration=1.0)) != base
     assert key(engine="2") != base

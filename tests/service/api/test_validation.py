@@ -6,12 +6,12 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from pydantic import SecretStr
 from fastapi.testclient import TestClient
+from pydantic import SecretStr
 
-from service.config import Settings
-from service.main import create_app
-from svc_helpers import DE, SWEEP, FakeStream
+from finaldrive.service.config import Settings
+from finaldrive.service.main import create_app
+from tests.service.svc_helpers import DE, SWEEP, FakeStream
 
 BAD_SPECS = [
     ({**SWEEP, "roads": ["moon-road"]}, "roads.0", "unknown road 'moon-road'"),
@@ -23,7 +23,7 @@ BAD_SPECS = [
     ({**SWEEP, "bounds": {}}, "body", "bounds: not allowed for a sweep"),
     ({**SWEEP, "kind": "grid-search"}, "kind", ""),
     ({**SWEEP, "colour": "red"}, "colour", "Extra inputs are not permitted"),
-    ({**DE, "de": {"np": 10, "max_evals": 5}}, "de", "max_evals (5) must be >= np (10)"),
+    ({**DE, "de": {"np": 10, "max_evals": 5}}, "de", "max_evals: must be >= np (10), got 5"),
 ]
 
 

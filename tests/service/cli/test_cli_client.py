@@ -10,8 +10,8 @@ from typing import Any
 import httpx
 import pytest
 
-from service.cli import client_cmds, main
-from service.client import ServiceClient
+from finaldrive.service.cli import main, remote
+from finaldrive.service.client import ServiceClient
 
 
 def job(state: str = "running", done: int = 3, **extra: Any) -> dict[str, Any]:
@@ -26,7 +26,7 @@ def use_transport(monkeypatch: pytest.MonkeyPatch, handler: Callable[[httpx.Requ
         http = httpx.Client(transport=httpx.MockTransport(handler), base_url="http://fd.test")
         return ServiceClient("http://fd.test", http=http)
 
-    monkeypatch.setattr(client_cmds, "_client", make)
+    monkeypatch.setattr(remote, "connect", make)
 
 
 def problem(status: int, detail: str) -> httpx.Response:
@@ -35,10 +35,10 @@ def problem(status: int, detail: str) -> httpx.Response:
 
 
 def test_progress_line() -> None:
-    line = client_cmds.progress_line(job())
+    line = remote.progress_line(job())
     assert line.startswith("job 7 running") and "4/12" in line and "failed 1" in line
     assert "best 20.500 m" in line and "ETA 42s" in line
-    assert "ETA" not in client_cmds.progress_line(job("succeeded", 11))
+    assert "ETA" not in remote.progress_line(job("succeeded", 11))
 
 
 def test_follow_polls_until_terminal_and_sleeps_between() -> None:
@@ -50,7 +50,7 @@ def test_follow_polls_until_terminal_and_sleeps_between() -> None:
             return next(states)
 
     out = io.StringIO()
-    final = client_cmds.follow(Fake(), 7, out=out, interval=0.5, sleep=slept.append)
+    final = remote.follow(Fake(), 7, out=out, interval=0.5, sleep=slept.append)
     assert final["state"] == "succeeded" and slept == [0.5, 0.5]
     assert [line.split("]")[1].split()[0] for line in out.getvalue().splitlines()] == ["1/12", "6/12", "12/12"]
 
@@ -66,7 +66,7 @@ def test_submit_maps_options_to_the_spec(monkeypatch: pytest.MonkeyPatch, capsys
     use_transport(monkeypatch, handler)
     argv = ["submit", "robust-de", "--roads", "flat,sine:0.02:3", "--road", "bump:0.02:0.5", "--np", "8",
             "--iters", "3", "--seed", "4", "--objective", "worst", "--duration", "1.5", "--idempotency-key", "k1",
-            "--bounds", "a2_deg=90:270,l2=0:0.1"]
+            "--bounds", "a2_deg=90:270,l2_m=0:0.1"]
     assert main(argv) == 0
     assert seen == [{"kind": "robust-de", "roads": ["bump:0.02:0.5", "flat", "sine:0.02:3"], "seed": 4,
                      "settings": {"duration": 1.5, "method": "fast"}, "aggregate": "worst",
@@ -80,7 +80,7 @@ def test_submit_maps_options_to_the_spec(monkeypatch: pytest.MonkeyPatch, capsys
 def test_follow_exit_code_when_the_job_is_cancelled(monkeypatch: pytest.MonkeyPatch,
                                                     capsys: pytest.CaptureFixture[str]) -> None:
     use_transport(monkeypatch, lambda r: httpx.Response(200, json=job("cancelled", 4)))
-    assert main(["status", "7", "--follow"]) == client_cmds.EXIT_JOB_NOT_SUCCEEDED
+    assert main(["status", "7", "--follow"]) == remote.EXIT_JOB_NOT_SUCCEEDED
     assert capsys.readouterr().err.strip().endswith("finaldrive: job 7 cancelled")
     assert main(["status", "7"]) == 0
 
@@ -88,10 +88,10 @@ def test_follow_exit_code_when_the_job_is_cancelled(monkeypatch: pytest.MonkeyPa
 def test_http_errors_are_one_line_with_their_own_code(monkeypatch: pytest.MonkeyPatch,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     use_transport(monkeypatch, lambda r: problem(404, "job 99 does not exist"))
-    assert main(["best", "99"]) == client_cmds.EXIT_HTTP
+    assert main(["best", "99"]) == remote.EXIT_HTTP
     assert capsys.readouterr().err == "finaldrive: error: HTTP 404: job 99 does not exist\n"
     use_transport(monkeypatch, lambda r: httpx.Response(502, text="<html>bad\ngateway</html>"))
-    assert main(["jobs"]) == client_cmds.EXIT_HTTP
+    assert main(["jobs"]) == remote.EXIT_HTTP
     assert capsys.readouterr().err.count("\n") == 1
 
 
@@ -100,7 +100,7 @@ def test_unreachable_server(monkeypatch: pytest.MonkeyPatch, capsys: pytest.Capt
         raise httpx.ConnectError("connection refused")
 
     use_transport(monkeypatch, refuse)
-    assert main(["cancel", "3", "--json"]) == client_cmds.EXIT_UNREACHABLE
+    assert main(["cancel", "3", "--json"]) == remote.EXIT_UNREACHABLE
     err = capsys.readouterr().err
     assert err.startswith("finaldrive: error: cannot reach the service at http://fd.test") and err.count("\n") == 1
 
@@ -129,7 +129,7 @@ def test_record_and_plot_need_their_arguments(capsys: pytest.CaptureFixture[str]
 
 
 def test_local_record_simulate_record_and_series_plot(tmp_path: Any, capsys: pytest.CaptureFixture[str]) -> None:
-    from service.recording import frame_count
+    from finaldrive.service.recording import frame_count
 
     two = tmp_path / "two.rrd"
     assert main(["record", "--compare", "0,0,0.093", "270,0.15,0.15", "--road", "sine:0.04:3", "--duration", "0.2",
@@ -148,8 +148,8 @@ def test_local_record_simulate_record_and_series_plot(tmp_path: Any, capsys: pyt
 def test_recordings_default_beside_the_sqlite_file() -> None:
     from pathlib import Path
 
-    from service.config import Settings
-    from service.jobs.recordings import data_dir
+    from finaldrive.service.config import Settings
+    from finaldrive.service.jobs.recordings import data_dir
 
     assert data_dir(Settings(db_url="sqlite:////srv/fd/x.db")) == Path("/srv/fd/finaldrive-data")
     assert data_dir(Settings(db_url="postgresql://h/db")) == Path("finaldrive-data")

@@ -6,7 +6,8 @@ import csv
 import io
 
 from fastapi.testclient import TestClient
-from svc_helpers import DE, SWEEP, FakeStream, wait_done
+
+from tests.service.svc_helpers import DE, SWEEP, FakeStream, wait_done
 
 
 def test_sweep_runs_and_streams_results(client: TestClient) -> None:

@@ -7,10 +7,10 @@ import time
 from typing import Any
 
 from fastapi.testclient import TestClient
-from svc_helpers import DE, SWEEP, FakeStream, wait_done
 
-from service.config import Settings
-from service.main import create_app
+from finaldrive.service.config import Settings
+from finaldrive.service.main import create_app
+from tests.service.svc_helpers import DE, SWEEP, FakeStream, wait_done
 
 
 def run_until(settings: Settings, spec: dict[str, Any], stored: int) -> tuple[int, int]:

@@ -11,30 +11,35 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine.api import STATUS_FAILED, STATUS_OK, BatchResult, Design, DesignError, SimResult, SimSettings
-from engine.fitness import fitness, slack
-from engine.model import params as P
-from engine.fast import minimal
-from engine.fast.rosenbrock import run_fast
-from engine.model.coordinates import BETA, FS, N_COORDS, PHI, THETA, X1, X14, Y1, Y14
-from engine.model.kinematics import (
-    GeometryError, chain_length, design_squat_ratio, pose_from_minimal, squat_ratio_at,
+from finaldrive.engine import outcome
+from finaldrive.engine.api import STATUS_FAILED, STATUS_OK, BatchResult, Design, DesignError, SimResult, SimSettings
+from finaldrive.engine.fast import minimal
+from finaldrive.engine.fast.equilibrium import EquilibriumError, static_equilibrium
+from finaldrive.engine.fast.rosenbrock import run_fast
+from finaldrive.engine.fitness import fitness, slack
+from finaldrive.engine.model import params as P
+from finaldrive.engine.model.coordinates import BETA, FS, N_COORDS, PHI, THETA, X1, X14, Y1, Y14
+from finaldrive.engine.model.kinematics import (
+    GeometryError,
+    chain_length,
+    design_squat_ratio,
+    pose_from_minimal,
+    squat_ratio_at,
 )
-from engine.model.mass import gravity_forces, mass_matrix
-from engine.model.road import Road
-from engine.solver import reference
-from engine.solver.equilibrium import EquilibriumError, static_equilibrium
-from engine.vehicle import Vehicle, default_vehicle
+from finaldrive.engine.model.mass import gravity_forces, mass_matrix
+from finaldrive.engine.model.road import Road
+from finaldrive.engine.solver import reference
+from finaldrive.engine.vehicle import Vehicle, default_vehicle
 
 #: The natural coordinates that are the fast path's minimal coordinates z, in order.
 MINIMAL_COORDS = (X1, Y1, THETA, PHI, FS, BETA)
 
 _REASONS = {
-    reference.NONFINITE: "the state became non-finite (diverged)",
-    reference.RESIDUAL: "constraint residual max|Phi| exceeded the limit (diverged)",
-    reference.CORRECTOR: "ABM corrector did not converge",
-    reference.REAR_AIRBORNE: "rear wheel off the road for longer than the limit",
-    reference.FRONT_AIRBORNE: "front wheel off the road for longer than the limit",
+    outcome.NONFINITE: "the state became non-finite (diverged)",
+    outcome.RESIDUAL: "constraint residual max|Phi| exceeded the limit (diverged)",
+    outcome.CORRECTOR: "ABM corrector did not converge",
+    outcome.REAR_AIRBORNE: "rear wheel off the road for longer than the limit",
+    outcome.FRONT_AIRBORNE: "front wheel off the road for longer than the limit",
 }
 
 
@@ -95,7 +100,7 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
             settings.series)
         x1_end = y_end[minimal.ZX1]
     else:
-        max_air_steps = int(math.ceil(settings.max_airborne_time / dt))
+        max_air_steps = math.ceil(settings.max_airborne_time / dt)
         y0 = np.zeros(reference.N_STATE)
         y0[:N_COORDS] = setup.q0
         code, failed_step, y_end, tmin, tmax, series, states = reference.run_reference(
@@ -105,7 +110,7 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
             settings.max_constraint_residual, max_air_steps, settings.series_stride, settings.series)
         x1_end = y_end[X1]
         failed_at = failed_step * dt
-    if code != reference.OK:
+    if code != outcome.OK:
         return _failed(f"{_REASONS[code]} at t = {failed_at:.4f} s", setup.squat_ratio, chain, start)
     distance = float(x1_end - setup.q0[X1])
     slack_m = slack(tmin, tmax)
@@ -125,7 +130,7 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
 def _series(series: np.ndarray, qs: np.ndarray, setup: Setup, p: np.ndarray,
             method: str) -> dict[str, np.ndarray]:
     """Name the recorded columns (Fig. 13 quantities) and add derived ones."""
-    out = {name: series[:, k].copy() for k, name in enumerate(reference.SERIES_COLUMNS)}
+    out = {name: series[:, k].copy() for k, name in enumerate(outcome.SERIES_COLUMNS)}
     out["distance"] = out.pop("x1") - setup.q0[X1]
     out["pitch"] = out.pop("theta")
     out["squat_ratio"] = np.array([squat_ratio_at(q, p, q[X14], q[Y14]) for q in qs])

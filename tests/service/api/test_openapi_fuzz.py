@@ -17,10 +17,10 @@ from schemathesis.checks import (
     response_schema_conformance,
     status_code_conformance,
 )
-from svc_helpers import FakeStream
 
-from service.config import Settings
-from service.main import create_app
+from finaldrive.service.config import Settings
+from finaldrive.service.main import create_app
+from tests.service.svc_helpers import FakeStream
 
 CHECKS = [not_a_server_error, status_code_conformance, content_type_conformance, response_schema_conformance]
 

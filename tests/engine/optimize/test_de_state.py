@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from engine.optimize import DifferentialEvolution
+from finaldrive.engine.optimize import DifferentialEvolution
 
 TWO_PI = 2.0 * np.pi
 LOWER, UPPER, PERIODIC = [0.0, 0.0, 0.05], [TWO_PI, 0.2, 0.15], [True, False, False]

@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import workers.evaluate
-from engine.api import BatchResult, SimResult
-from service.cli import main
+import finaldrive.workers.evaluate as evaluate
+from finaldrive.engine.api import BatchResult, SimResult
+from finaldrive.service.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
 TOY = ["--np", "6", "--iters", "2", "--duration", "0.2"]
@@ -54,7 +54,7 @@ def test_same_seed_same_best_serial_and_process(capsys: pytest.CaptureFixture[st
 
 def test_robust_optimize_over_roads(capsys: pytest.CaptureFixture[str]) -> None:
     r = run_json(["optimize", "--roads", "flat,sine:0.04:3", "--objective", "worst", *TOY,
-                  "--executor", "serial", "--bounds", "a2_deg=90:270,rws=0.08:0.1"], capsys)
+                  "--executor", "serial", "--bounds", "a2_deg=90:270,rws_m=0.08:0.1"], capsys)
     assert r["objective"] == "worst" and r["evaluations"] == 2 * 18 and r["designs_evaluated"] == 18
     assert 90 <= r["best"]["a2_deg"] <= 270 and 0.08 <= r["best"]["rws"] <= 0.1
     on_roads = [road["best_design"]["fitness_m"] for road in r["per_road"]]
@@ -71,7 +71,7 @@ def test_failed_simulations_are_counted_and_never_best(
                    else SimResult("ok", "", l2, 1.0, 0.0, l2, 1.0, 0.0) for _, l2, _ in designs]
         return BatchResult.from_results(designs, results)
 
-    monkeypatch.setattr(workers.evaluate, "run_engine", fake)
+    monkeypatch.setattr(evaluate, "run_engine", fake)
     r = run_json(["optimize", "--road", "flat", *TOY, "--executor", "serial"], capsys)
     assert r["failed"] == sum(h["n_failed"] for h in r["history"]) > 0
     assert r["best"]["l2"] <= 0.1 and r["best"]["fitness_m"] == pytest.approx(r["best"]["l2"])
@@ -111,7 +111,7 @@ def test_roads_json_lists_the_23_presets(capsys: pytest.CaptureFixture[str]) -> 
 @pytest.mark.parametrize("argv, fragment", [
     (["optimize", "--road", "cobbles"], "cobbles"),
     (["optimize", "--road", "flat", "--np", "3"], "--np"),
-    (["optimize", "--road", "flat", "--bounds", "l2=0.2:0.1"], "l2"),
+    (["optimize", "--road", "flat", "--bounds", "l2_m=0.2:0.1"], "l2_m"),
     (["optimize", "--road", "flat", "--max-evals", "10"], "--max-evals"),
     (["optimize", "--road", "paper"], "--roads"),
     (["sweep", "--road", "flat", "--grid", "l2=0:0.1:-1"], "step"),
@@ -127,7 +127,7 @@ def test_bad_arguments_exit_2_with_one_line(argv: list[str], fragment: str, caps
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc")
 def test_ctrl_c_stops_cleanly_without_orphans() -> None:
     """SIGINT to the process group (a terminal's Ctrl-C): exit 130, one message, no worker left."""
-    cmd = [sys.executable, "-m", "service.cli", "sweep", "--road", "flat", "--duration", "0.5",
+    cmd = [sys.executable, "-m", "finaldrive.service.cli", "sweep", "--road", "flat", "--duration", "0.5",
            "--executor", "process", "--workers", "2", "--progress"]
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)

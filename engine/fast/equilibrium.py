@@ -14,14 +14,24 @@ import math
 
 import numpy as np
 
-from engine.fast.minimal import (
-    N_AUX, N_DOF, N_STATE, ZFS, ZPHI, ZTHETA, ZU, ZX1, ZY1, design_constants, fast_rhs,
+from finaldrive.engine.fast.minimal import (
+    N_AUX,
+    N_DOF,
+    N_STATE,
+    ZFS,
+    ZPHI,
+    ZTHETA,
+    ZU,
+    ZX1,
+    ZY1,
+    design_constants,
+    fast_rhs,
 )
-from engine.model import params as P
-from engine.model.coordinates import FS, FT, GAMMA, PHI, RT, THETA, X1, X14, X15, Y1
-from engine.model.jit import jit
-from engine.model.kinematics import assemble, design_pose
-from engine.model.road import Road
+from finaldrive.engine.model import params as P
+from finaldrive.engine.model.coordinates import FS, FT, GAMMA, PHI, RT, THETA, X1, X14, X15, Y1
+from finaldrive.engine.model.jit import jit
+from finaldrive.engine.model.kinematics import assemble, design_pose
+from finaldrive.engine.model.road import Road
 
 #: The first guess presses both tyres this far into the road [m] so both springs act.
 _GUESS_PRELOAD = 0.005

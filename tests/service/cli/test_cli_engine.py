@@ -8,7 +8,7 @@ import subprocess
 
 import pytest
 
-from service.cli import main
+from finaldrive.service.cli import main
 
 
 def run(argv, capsys):

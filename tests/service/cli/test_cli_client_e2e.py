@@ -14,10 +14,10 @@ from pathlib import Path
 import httpx
 import pytest
 
-from service.cli import main
-from service.cli.client_cmds import EXIT_HTTP, EXIT_JOB_NOT_SUCCEEDED, EXIT_UNREACHABLE
-from service.cli.demo import free_port, stop_server
-from service.recording import frame_count
+from finaldrive.service.cli import main
+from finaldrive.service.cli.demo_cmds import free_port, stop_server
+from finaldrive.service.cli.remote import EXIT_HTTP, EXIT_JOB_NOT_SUCCEEDED, EXIT_UNREACHABLE
+from finaldrive.service.recording import frame_count
 
 TOKEN = "e2e-secret"
 
@@ -26,7 +26,7 @@ TOKEN = "e2e-secret"
 def server(tmp_path: Path) -> Iterator[str]:
     port = free_port()
     env = {**os.environ, "FINALDRIVE_API_TOKEN": TOKEN, "FINALDRIVE_DATA_DIR": str(tmp_path / "data")}
-    cmd = [sys.executable, "-m", "service.cli", "serve", "--port", str(port), "--db",
+    cmd = [sys.executable, "-m", "finaldrive.service.cli", "serve", "--port", str(port), "--db",
            f"sqlite:///{tmp_path / 'e2e.db'}", "--executor", "serial"]
     log = (tmp_path / "server.log").open("wb")
     proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)
@@ -86,7 +86,9 @@ def test_submit_follow_results_record_plot(server: str, tmp_path: Path, monkeypa
     assert main(["cancel", "1", *s]) == EXIT_HTTP
     err = capsys.readouterr().err.splitlines()
     assert err[-2:] == ["finaldrive: error: HTTP 404: job 999 does not exist",
-                        "finaldrive: error: HTTP 401: a valid `Authorization: Bearer <token>` header is required"]
+                        "finaldrive: error: HTTP 401: a valid `Authorization: Bearer <token>` header is required "
+                        "(the token is the server's FINALDRIVE_API_TOKEN); the client sends $FINALDRIVE_API_TOKEN, "
+                        "which here is set, but to another value"]
 
 
 def test_stopped_server(capsys: pytest.CaptureFixture[str]) -> None:

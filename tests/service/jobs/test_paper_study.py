@@ -10,14 +10,14 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 from pydantic import ValidationError
-from svc_helpers import FakeStream, wait_done
 
-from service.cli import main
-from service.config import Settings
-from service.jobs.drivers import SWEEP_STEP
-from service.jobs.plan import build_plan
-from service.main import create_app
-from service.schemas import JobSpec
+from finaldrive.engine import PAPER_SWEEP_STEP as SWEEP_STEP
+from finaldrive.service.cli import main
+from finaldrive.service.config import Settings
+from finaldrive.service.jobs.plan import build_plan
+from finaldrive.service.main import create_app
+from finaldrive.service.schemas import JobSpec
+from tests.service.svc_helpers import FakeStream, wait_done
 
 TINY = {"kind": "paper-study", "roads": ["flat", "sine:0.04:3"], "grid": "a2_deg=0:300:60,l2=0.05|0.15",
         "de": {"np": 4, "iters": 3}, "seed": 1}
@@ -27,8 +27,8 @@ TINY_TOTAL = 2 * 12 + 2 * 4 * 4
 def test_the_paper_study_plans_104190_evaluations() -> None:
     spec = JobSpec(kind="paper-study", roads=["paper"]).normalised()
     plan = build_plan(spec)
-    assert (len(plan.roads), plan.n_runs) == (23, 23)
-    assert (plan.sweep_total(), plan.de_total(), plan.total()) == (45_540, 23 * 2_550, 104_190)
+    assert (len(plan.study.roads), plan.study.n_de_runs) == (23, 23)
+    assert (plan.study.sweep_total(), plan.study.de_total(), plan.total()) == (45_540, 23 * 2_550, 104_190)
     assert spec.grid == "table9" and spec.de is not None and spec.de.np == 50 and spec.de.iters == 50
     assert spec.settings.method == "fast"  # the engine's default, as for every kind
     assert JobSpec(kind="paper-study", roads=["flat"], settings={"method": "reference"}).normalised().settings.method == "reference"

@@ -5,12 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.model.road import Road
-from engine.study import (
-    PRESETS,
+from finaldrive.engine import (
     TABLE9_DEFAULT_RWS_M,
     parse_grid,
-    plan_sweep,
     product_grid,
     table9_grid,
 )
@@ -67,23 +64,3 @@ def test_grid_syntax() -> None:
 def test_bad_specs_name_the_variable(spec: str, variable: str) -> None:
     with pytest.raises(ValueError, match=variable):
         parse_grid(spec)
-
-
-def test_sweep_plan_counts() -> None:
-    plan = plan_sweep("paper")
-    assert len(plan) == 23
-    assert all(isinstance(road, Road) and designs.shape == (1980, 3) for road, designs in plan)
-    assert sum(len(designs) for _, designs in plan) == 45540
-    assert [road for road, _ in plan] == [p.road for p in PRESETS.values()]
-
-
-def test_sweep_plan_inputs() -> None:
-    plan = plan_sweep([PRESETS["flat"], Road.parse("sine:0.02:3")], "a2_deg=0|180,l2=0.1")
-    assert [road.spec for road, _ in plan] == ["flat", "sine:0.02:3"]
-    assert all(designs.shape == (2, 3) for _, designs in plan)
-    plan[0][1][0, 0] = 99.0                     # each road gets its own array
-    assert plan[1][1][0, 0] == 0.0
-    array_plan = plan_sweep("flat", np.array([[0.0, 0.0, 0.09]]))
-    assert array_plan[0][1].tolist() == [[0.0, 0.0, 0.09]]
-    with pytest.raises(ValueError):
-        plan_sweep("flat", np.zeros((3, 2)))

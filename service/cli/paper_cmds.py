@@ -17,53 +17,49 @@ import time
 from pathlib import Path
 from typing import Any
 
-from service.cli import UsageError
-
-TERMINAL = ("succeeded", "failed", "cancelled")
-
-
-def _group(subparsers: argparse._SubParsersAction, name: str, help_: str) -> argparse._SubParsersAction:  # type: ignore[type-arg]
-    """The sub-command action of the ``name`` command, creating the command if no other module did."""
-    parser = subparsers.choices.get(name)
-    if parser is None:
-        parser = subparsers.add_parser(name, help=help_)
-        return parser.add_subparsers(dest=f"{name}_command", required=True)
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            return action
-    raise RuntimeError(f"the {name!r} command takes no sub-commands")
+from finaldrive.service.cli.common import UsageError, parser_options
+from finaldrive.service.cli.remote import TERMINAL, client_command
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    paper = _group(subparsers, "study", "run a study").add_parser(
-        "paper", help="the paper's study: Table 9 sweep + Table 10 DE on the 23 roads (one paper-study job)")
+    from finaldrive.engine import DESettings
+
+    table10 = DESettings()
+    study = subparsers.add_parser("study", help="run a study", **parser_options())
+    paper = study.add_subparsers(dest="study_command", required=True, metavar="STUDY").add_parser(
+        "paper", help="the paper's study: Table 9 sweep + Table 10 DE on the 23 roads (one paper-study job)",
+        **parser_options())
     where = paper.add_mutually_exclusive_group()
     where.add_argument("--server", metavar="URL", help="submit to a running service (e.g. http://127.0.0.1:8000)")
     where.add_argument("--local", action="store_true", help="run in this process (the default)")
-    paper.add_argument("--db", metavar="URL", help="--local: SQLAlchemy URL (default: FINALDRIVE_DB_URL or ./finaldrive.db)")
-    paper.add_argument("--executor", choices=("serial", "process", "ray"), default="process", help="--local: where simulations run")
+    paper.add_argument("--db", metavar="URL", help="--local: SQLAlchemy URL (default: FINALDRIVE_DB_URL or "
+                                                   "sqlite:///./finaldrive.db)")
+    paper.add_argument("--executor", choices=("serial", "process", "ray"), default="process",
+                       help="--local: where simulations run")
     paper.add_argument("--workers", type=int, help="--local: worker processes / CPUs (default: all cores)")
-    paper.add_argument("--roads", default="paper", help="road list (default: the paper's 23)")
-    paper.add_argument("--grid", default="table9", help='sweep grid (default "table9")')
-    paper.add_argument("--np", type=int, default=50, help="DE population (default 50)")
-    paper.add_argument("--iters", type=int, default=50, help="DE iterations (default 50)")
-    paper.add_argument("--duration", type=float, default=3.5, help="simulated time [s] (default 3.5)")
-    paper.add_argument("--method", choices=("fast", "reference"), default="fast", help="simulation method (default fast)")
+    paper.add_argument("--roads", default="paper", help="road list")
+    paper.add_argument("--grid", default="table9", help="sweep grid")
+    paper.add_argument("--np", type=int, default=table10.np, help="DE population size NP")
+    paper.add_argument("--iters", type=int, default=table10.iters, help="DE generations after the initial population")
+    paper.add_argument("--duration", type=float, default=3.5, help="simulated time [s]")
+    paper.add_argument("--method", choices=("fast", "reference"), default="fast", help="simulation method")
     paper.add_argument("--seed", type=int, default=0, help="DE seed (road i uses seed + i)")
-    paper.add_argument("--token", help="--server: bearer token (FINALDRIVE_API_TOKEN of the server)")
     paper.add_argument("--no-wait", action="store_true", help="--server: submit and exit")
-    paper.add_argument("--interval", type=float, default=5.0, help="seconds between progress lines (default 5)")
+    paper.add_argument("--interval", type=float, default=5.0, help="seconds between progress lines")
     paper.set_defaults(run=run_study_paper)
 
-    report = _group(subparsers, "report", "write a report from stored results").add_parser(
-        "paper-study", help="docs/paper-study.md (+ .json, figures) from a finished paper-study job")
-    report.add_argument("job_id", type=int, metavar="JOB_ID")
-    report.add_argument("--out", type=Path, default=Path("docs/paper-study.md"), help="markdown file (default docs/paper-study.md)")
-    source = report.add_mutually_exclusive_group()
-    source.add_argument("--db", metavar="URL", help="read the store directly (default: FINALDRIVE_DB_URL or ./finaldrive.db)")
+    report = subparsers.add_parser("report", help="write a report from stored results", **parser_options())
+    paper_report = report.add_subparsers(dest="report_command", required=True, metavar="REPORT").add_parser(
+        "paper-study", help="docs/paper-study.md (+ .json, figures) from a finished paper-study job",
+        **parser_options())
+    paper_report.add_argument("job_id", type=int, metavar="JOB_ID", help="the paper-study job")
+    paper_report.add_argument("--out", type=Path, default=Path("docs/paper-study.md"), help="markdown file to write")
+    source = paper_report.add_mutually_exclusive_group()
+    source.add_argument("--db", metavar="URL", help="read the store directly (default: FINALDRIVE_DB_URL or "
+                                                    "sqlite:///./finaldrive.db)")
     source.add_argument("--server", metavar="URL", help="read through a running service")
-    report.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
-    report.set_defaults(run=run_report_paper_study)
+    paper_report.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    paper_report.set_defaults(run=run_report_paper_study)
 
 
 def study_spec(args: argparse.Namespace) -> dict[str, Any]:
@@ -95,43 +91,36 @@ def run_study_paper(args: argparse.Namespace) -> int:
     return _run_local(args, spec)
 
 
+@client_command
 def _run_server(args: argparse.Namespace, spec: dict[str, Any]) -> int:
-    import httpx
+    from finaldrive.service.client import ClientError, ServiceClient
 
-    headers = {"Idempotency-Key": idempotency_key(spec)}
-    if args.token:
-        headers["Authorization"] = f"Bearer {args.token}"
-    with httpx.Client(base_url=args.server.rstrip("/"), timeout=30.0) as client:
-        try:
-            response = client.post("/v1/jobs", json=spec, headers=headers)
-        except httpx.HTTPError as exc:
-            raise UsageError(f"cannot reach {args.server}: {exc}") from None
-        if response.status_code >= 400:
-            print(f"finaldrive: error: {response.status_code} {response.text}", file=sys.stderr)
-            return 1
-        job = response.json()
-        print(f"job {job['id']} ({'submitted' if response.status_code == 201 else 'existing'}): "
-              f"{job['total']:,} evaluations; {args.server.rstrip('/')}/v1/jobs/{job['id']}", flush=True)
+    with ServiceClient(args.server) as client:
+        before = client.jobs(kind="paper-study", limit=500)
+        job = client.submit(spec, idempotency_key=idempotency_key(spec))
+        existing = any(j["id"] == job["id"] for j in before)
+        print(f"job {job['id']} ({'existing' if existing else 'submitted'}): {job['total']:,} evaluations; "
+              f"{client.server}/v1/jobs/{job['id']}", flush=True)
         if args.no_wait:
             return 0
         started = time.monotonic()
         while job["state"] not in TERMINAL:
             time.sleep(args.interval)
             try:  # the service may restart meanwhile: the job resumes, keep following it
-                job = client.get(f"/v1/jobs/{job['id']}").raise_for_status().json()
-            except httpx.HTTPError as exc:
-                print(f"job {job['id']}: {args.server} not answering ({exc}); retrying", flush=True)
+                job = client.job(job["id"])
+            except ClientError as exc:
+                print(f"job {job['id']}: {client.server} not answering ({exc}); retrying", flush=True)
                 continue
             print(_line(job, started), flush=True)
     return _finish(job, f"--server {args.server}")
 
 
 def _run_local(args: argparse.Namespace, spec_dict: dict[str, Any]) -> int:
-    from service.config import Settings
-    from service.jobs.plan import PlanError
-    from service.jobs.submit import submit_job
-    from service.schemas import JobSpec
-    from service.services import start_services
+    from finaldrive.service.config import Settings
+    from finaldrive.service.jobs.plan import PlanError
+    from finaldrive.service.jobs.submit import submit_job
+    from finaldrive.service.schemas import JobSpec
+    from finaldrive.service.services import start_services
 
     overrides = {"db_url": args.db, "executor": args.executor, "num_workers": args.workers}
     settings = Settings(**{k: v for k, v in overrides.items() if v is not None})
@@ -158,9 +147,9 @@ def _run_local(args: argparse.Namespace, spec_dict: dict[str, Any]) -> int:
 
 
 def _local_job(services: Any, job_id: int) -> dict[str, Any]:
-    from service.api.views import job_out
-    from service.db.models import Job
-    from service.db.repository import roads_of
+    from finaldrive.service.api.views import job_out
+    from finaldrive.service.db.models import Job
+    from finaldrive.service.db.repository import roads_of
 
     with services.db.read() as session:
         job = session.get(Job, job_id)
@@ -176,16 +165,16 @@ def _finish(job: dict[str, Any], source: str) -> int:
 
 
 def run_report_paper_study(args: argparse.Namespace) -> int:
-    from service.report import write_paper_study
-    from service.report.data import StudyNotFound, from_database, from_server
-
     import httpx
+
+    from finaldrive.service.report import write_paper_study
+    from finaldrive.service.report.data import StudyNotFound, from_database, from_server
 
     try:
         if args.server:
             data = from_server(args.server, args.job_id)
         else:
-            from service.config import Settings
+            from finaldrive.service.config import Settings
 
             data = from_database(args.db or Settings().db_url, args.job_id)
     except StudyNotFound as exc:

@@ -2,29 +2,24 @@
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import pytest
 
-from engine.model.road import Road
-from engine.study import PRESETS, RoadPreset, preset_group, resolve_roads, road_label
-from engine.study.presets import PAPER_KEYS, paper_tables
-
-REPO = Path(__file__).parents[2]
-SHARED_TABLES = REPO / ".." / "shared" / "paper" / "tables.json"
+from finaldrive.engine.model.road import Road
+from finaldrive.engine.study.presets import PAPER_KEYS, PRESETS, NamedRoad, paper_tables, preset_group, resolve_roads
 
 
-def shared_tables() -> dict:
-    if not SHARED_TABLES.exists():
-        pytest.skip(f"{SHARED_TABLES} not available")
-    return json.loads(SHARED_TABLES.read_text())
-
-
-def test_shipped_tables_equal_the_shared_paper_tables() -> None:
-    shipped = json.loads((REPO / "engine" / "data" / "paper_tables.json").read_text())
-    assert shipped == shared_tables()
-    assert paper_tables() == shipped
+def test_shipped_tables_hold_the_papers_printed_values() -> None:
+    """Spot checks typed from the paper's text, so a damaged data file is caught."""
+    t = paper_tables()
+    assert (len(t["table11_flat"]), len(t["table12_sine"]), len(t["table13_gaussian"])) == (1, 16, 6)
+    assert {k: t["table11_flat"][0][k] for k in ("a2_deg", "L2_m", "R_WS_m", "fitness_m")} == {
+        "a2_deg": 195.3, "L2_m": 0.037, "R_WS_m": 0.088, "fitness_m": 20.708}
+    g1, g2 = t["table14_geometries"]["geometry1"], t["table14_geometries"]["geometry2"]
+    assert (g1["d_m"], g2["d_m"], g1["SR"], g2["SR"], g2["slack_mm"]) == (19.868, 19.497, 1.092, 0.239, 67.27)
+    assert t["table10_de"] == {"NP": 50, "F": 0.6, "CP": 0.6, "MP": 0.1, "MR_fraction_of_range": 0.2, "IterMax": 50}
+    # Table 12's (0.04 m, 3 m) row, consistent with Table 14's geometry 1 on the same road
+    row = next(r for r in t["table12_sine"] if (r["H_y_m"], r["lambda_m"]) == (0.04, 3.0))
+    assert row["fitness_m"] == 19.861
 
 
 def test_23_roads_split_1_16_6_with_unique_names() -> None:
@@ -55,7 +50,7 @@ def test_specs_parse_back() -> None:
 
 
 def test_reference_rows_match_tables_11_to_13() -> None:
-    tables = shared_tables()
+    tables = paper_tables()
     rows = tables["table11_flat"] + tables["table12_sine"] + tables["table13_gaussian"]
     presets = preset_group("paper")
     for preset, row in zip(presets, rows, strict=True):
@@ -72,8 +67,8 @@ def test_reference_rows_match_tables_11_to_13() -> None:
 
 def test_resolve_roads_mixes_groups_names_and_specs_in_order() -> None:
     roads = resolve_roads("flat, sine-h1cm-l2m ,sine:0.04:3,bump:0.03:0.4:6")
-    assert [road_label(r) for r in roads] == ["flat", "sine-h1cm-l2m", "sine-h4cm-l3m", "bump:0.03:0.4:6"]
-    assert isinstance(roads[2], RoadPreset) and isinstance(roads[3], Road)
+    assert [r.name for r in roads] == ["flat", "sine-h1cm-l2m", "sine-h4cm-l3m", "bump:0.03:0.4:6"]
+    assert roads[2].paper is not None and roads[3].paper is None and isinstance(roads[3], NamedRoad)
     assert len(resolve_roads("paper")) == 23
     assert len(resolve_roads("bump,paper,flat")) == 23          # repeats dropped
     assert [r.name for r in resolve_roads("bump,flat")][-1] == "flat"

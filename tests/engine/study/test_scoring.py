@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.study import aggregate, best_per_road, regret
+from finaldrive.engine import aggregate, best_per_road, regret
 
 NAN = np.nan
 TABLE = np.array([

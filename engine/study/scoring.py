@@ -1,4 +1,7 @@
-"""Scoring designs over a set of roads (beyond the paper).
+"""Scoring designs: the rule for a failed evaluation, and scores over a set of roads.
+
+A simulation that failed, or whose fitness is not finite, scores NaN: the DE ranks it below
+every finite value (engine.optimize.de) and stores it as failed.
 
 The paper optimises each road on its own (Tables 11-13). A rider meets many roads, so
 here a design is scored over several: ``aggregate`` reduces a (roads x designs) fitness
@@ -15,6 +18,8 @@ from typing import Literal, NamedTuple
 import numpy as np
 import numpy.typing as npt
 
+from finaldrive.engine.api import STATUS_OK, BatchResult
+
 Objective = Literal["mean", "worst"]
 OBJECTIVES: tuple[str, ...] = ("mean", "worst")
 
@@ -24,6 +29,21 @@ class Regret(NamedTuple):
 
     absolute_m: np.ndarray
     percent: np.ndarray
+
+
+def fitness_values(batch: BatchResult) -> np.ndarray:
+    """Fitness [m] of each row of a batch; NaN where the simulation failed or gave a non-finite value."""
+    f = np.array(batch.fitness_m, dtype=float)
+    ok = np.array([s == STATUS_OK for s in batch.status], dtype=bool)
+    f[~(ok & np.isfinite(f))] = np.nan
+    return f
+
+
+def score(table: npt.ArrayLike, objective: Objective = "mean") -> np.ndarray:
+    """One score a design from a (roads x designs) fitness table: the fitness itself on one road,
+    else :func:`aggregate` over the roads."""
+    t = _table(table)
+    return t[0] if t.shape[0] == 1 else aggregate(t, objective)
 
 
 def aggregate(fitness: npt.ArrayLike, objective: Objective = "mean") -> np.ndarray:

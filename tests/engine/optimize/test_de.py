@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.optimize import DifferentialEvolution
+from finaldrive.engine.optimize import DifferentialEvolution
 
 TWO_PI = 2.0 * np.pi
 #: Optimum angle of the periodic first variable: close to 2 pi, so its basin wraps past 0.
@@ -260,8 +260,7 @@ def test_optimiser_imports_numpy_and_stdlib_only() -> None:
     import ast
     from pathlib import Path
 
-    import engine.optimize.de as module
-
+    import finaldrive.engine.optimize.de as module
     tree = ast.parse(Path(module.__file__).read_text())
     roots = {alias.name.split(".")[0] for node in ast.walk(tree) if isinstance(node, ast.Import)
              for alias in node.names}

@@ -16,8 +16,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from service.cli.client_cmds import EXIT_FAILED, EXIT_OK, client_command, follow
-from service.cli.engine_cmds import print_json
+from finaldrive.service.cli.common import parser_options, print_json
+from finaldrive.service.cli.remote import EXIT_FAILED, EXIT_OK, client_command, follow
 
 LOG = Path("finaldrive-demo.log")
 START_TIMEOUT_S = 120.0
@@ -30,14 +30,14 @@ def free_port() -> int:
 
 
 def start_server(port: int, db: str, executor: str, log: Path) -> subprocess.Popen[bytes]:
-    cmd = [sys.executable, "-m", "service.cli", "serve", "--host", "127.0.0.1", "--port", str(port),
+    cmd = [sys.executable, "-m", "finaldrive.service.cli", "serve", "--host", "127.0.0.1", "--port", str(port),
            "--db", db, "--executor", executor]
     with log.open("ab") as out:
         return subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT)
 
 
 def wait_healthy(client: Any, proc: subprocess.Popen[bytes], timeout: float = START_TIMEOUT_S) -> dict[str, Any]:
-    from service.client import ClientError
+    from finaldrive.service.client import ClientError
 
     deadline = time.monotonic() + timeout
     while True:
@@ -67,7 +67,7 @@ def demo_spec(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    from service.client import ServiceClient
+    from finaldrive.service.client import ServiceClient
 
     port = args.port or free_port()
     url = f"http://127.0.0.1:{port}"
@@ -109,3 +109,16 @@ def _run_job(args: argparse.Namespace, client: Any) -> int:
         print(f"  a2 = {best['a2_deg']:.1f} deg   L2 = {best['l2']:.4f} m   R_WS = {best['rws']:.4f} m")
         print(f"  fitness = {best['fitness_m']:.3f} m   distance = {best['distance_m']:.3f} m")
     return EXIT_OK
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("demo", help="start a local service, run a small DE through it, print the best design, stop",
+                       **parser_options())
+    p.add_argument("--port", type=int, help="port of the service (default: a free one)")
+    p.add_argument("--db", default="sqlite:///./finaldrive.db", help="database URL")
+    p.add_argument("--executor", choices=("serial", "process", "ray"), default="ray", help="where simulations run")
+    p.add_argument("--np", type=int, default=12, help="DE population size")
+    p.add_argument("--iters", type=int, default=6, help="DE generations after the initial population")
+    p.add_argument("--road", default="sine:0.04:3", help="the road (a preset name or a spec)")
+    p.add_argument("--json", action="store_true", help="print the best design as JSON")
+    p.set_defaults(run=run_demo)

@@ -1,0 +1,156 @@
+"""A study resolved from user input: its roads, its design grid or search box, and its runs.
+
+One definition for the command line and the job service. Kinds:
+
+- ``sweep``: a design grid (Table 9 by default) on every road;
+- ``de``: the paper's DE (Table 10) on each road separately (run i on road i, seed + i);
+- ``robust-de``: one DE whose designs are scored over all the roads (``objective``);
+- ``paper-study``: the sweep and the per-road DE on the same roads (paper section 5).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from finaldrive.engine.optimize import DifferentialEvolution
+from finaldrive.engine.study.presets import NamedRoad, ProfileResolver, resolve_roads
+from finaldrive.engine.study.runs import DERun, SweepRun
+from finaldrive.engine.study.scoring import OBJECTIVES, Objective
+from finaldrive.engine.study.space import Bounds, DESettings, SpaceError
+from finaldrive.engine.study.sweep import parse_grid, table9_grid
+
+StudyKind = Literal["sweep", "de", "robust-de", "paper-study"]
+STUDY_KINDS: tuple[str, ...] = ("sweep", "de", "robust-de", "paper-study")
+#: Run index of a study's sweep (DE runs are 0, 1, ...).
+SWEEP_RUN = -1
+#: Step of a paper-study's sweep evaluations, apart from the DE generations 0, 1, ...
+PAPER_SWEEP_STEP = -1
+
+Run = SweepRun | DERun
+
+
+class PlanError(ValueError):
+    """Input that names something the study cannot use; ``loc`` is the field's path."""
+
+    def __init__(self, loc: tuple[str | int, ...], msg: str) -> None:
+        super().__init__(f"{'.'.join(map(str, loc))}: {msg}" if loc else msg)
+        self.loc = loc
+        self.msg = msg
+
+
+@dataclass(frozen=True)
+class StudyPlan:
+    """What a study evaluates; :meth:`runs` builds (or resumes) its runs."""
+
+    kind: StudyKind
+    roads: tuple[NamedRoad, ...]
+    designs: np.ndarray | None = None      # sweep / paper-study: the grid, (n, 3)
+    bounds: Bounds | None = None           # de / robust-de / paper-study
+    de: DESettings | None = None
+    objective: Objective = "mean"          # robust-de
+    seed: int = 0
+
+    @property
+    def n_de_runs(self) -> int:
+        """Independent DE runs: one a road (de, paper-study), one for robust-de, none for a sweep."""
+        if self.de is None:
+            return 0
+        return 1 if self.kind == "robust-de" else len(self.roads)
+
+    @property
+    def sweep_step(self) -> int:
+        return PAPER_SWEEP_STEP if self.kind == "paper-study" else 0
+
+    def sweep_total(self) -> int:
+        return 0 if self.designs is None else len(self.designs) * len(self.roads)
+
+    def de_total(self) -> int:
+        """Evaluations the DE runs plan (robust: each design on every road)."""
+        if self.de is None:
+            return 0
+        per_design = len(self.roads) if self.kind == "robust-de" else 1
+        return self.n_de_runs * self.de.evals_per_run() * per_design
+
+    def total(self) -> int:
+        """Evaluations the study plans (a DE with patience may stop earlier)."""
+        return self.sweep_total() + self.de_total()
+
+    def de_roads(self, run: int) -> list[int]:
+        return list(range(len(self.roads))) if self.kind == "robust-de" else [run]
+
+    def runs(self, *, sweep_done: set[tuple[int, int]] | None = None,
+             de_states: Mapping[int, tuple[dict[str, Any], int]] | None = None) -> list[Run]:
+        """The study's runs, fresh, or resumed from what is stored.
+
+        ``sweep_done``: (road, candidate) pairs of the sweep already evaluated;
+        ``de_states``: DE run index -> (optimiser state, generations told).
+        """
+        out: list[Run] = []
+        if self.designs is not None:
+            out.append(SweepRun(SWEEP_RUN, range(len(self.roads)), self.designs, step=self.sweep_step,
+                                done=sweep_done))
+        assert self.de is not None or self.n_de_runs == 0
+        for i in range(self.n_de_runs):
+            stored = (de_states or {}).get(i)
+            if stored is not None:
+                de, generation = DifferentialEvolution.from_state(stored[0]), stored[1]
+            else:
+                assert self.de is not None and self.bounds is not None
+                de, generation = self.de.optimiser(self.bounds, self.seed + i), 0
+            out.append(DERun(i, de, self.de_roads(i), objective=self.objective, generation=generation))
+        return out
+
+
+def plan_study(
+    kind: str, roads: Sequence[str], *, grid: str | np.ndarray | None = None, bounds: Bounds | None = None,
+    de: DESettings | None = None, objective: str | None = None, seed: int = 0,
+    profiles: ProfileResolver | None = None,
+) -> StudyPlan:
+    """Resolve a study; raises :class:`PlanError` naming the field (``roads``, ``grid``, ...).
+
+    Missing parts take the paper's values: Table 9 grid, Table 8 box, Table 10 DE, mean objective.
+    """
+    if kind not in STUDY_KINDS:
+        raise PlanError(("kind",), f"unknown study {kind!r}: expected one of {', '.join(STUDY_KINDS)}")
+    named: list[NamedRoad] = []
+    for i, text in enumerate(roads):
+        try:
+            found = resolve_roads(text, profiles)
+        except ValueError as exc:
+            raise PlanError(("roads", i), str(exc)) from None
+        named += [r for r in found if r.road not in {n.road for n in named}]
+    if not named:
+        raise PlanError(("roads",), "give at least one road")
+    sweeping = kind in ("sweep", "paper-study")
+    if not sweeping and grid is not None:
+        raise PlanError(("grid",), f"not used by a {kind} study")
+    if kind == "sweep" and (bounds is not None or de is not None):
+        raise PlanError(("bounds" if bounds is not None else "de",), "not used by a sweep")
+    if objective is not None and kind != "robust-de":
+        raise PlanError(("objective",), "only for robust-de")
+    if objective is not None and objective not in OBJECTIVES:
+        raise PlanError(("objective",), f"expected one of {', '.join(OBJECTIVES)}")
+    designs = None
+    if sweeping:
+        try:
+            if grid is None or (isinstance(grid, str) and grid.strip().lower() == "table9"):
+                designs = table9_grid()
+            elif isinstance(grid, str):
+                designs = parse_grid(grid)
+            else:
+                designs = np.asarray(grid, dtype=float)
+                if designs.ndim != 2 or designs.shape[1] != 3 or len(designs) == 0:
+                    raise ValueError(f"designs must have shape (n >= 1, 3), got {designs.shape}")
+        except ValueError as exc:
+            raise PlanError(("grid",), str(exc)) from None
+    if kind == "sweep":
+        return StudyPlan("sweep", tuple(named), designs=designs, seed=seed)
+    try:
+        return StudyPlan(kind, tuple(named), designs=designs, bounds=bounds or Bounds(), de=de or DESettings(),  # type: ignore[arg-type]
+                         objective=objective or "mean", seed=seed)  # type: ignore[arg-type]
+    except SpaceError as exc:
+        raise PlanError((exc.field,), exc.msg) from None

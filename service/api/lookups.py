@@ -1,0 +1,37 @@
+"""Lookups the routes share: a job by id, a page cursor, a road of a job."""
+
+from __future__ import annotations
+
+from finaldrive.service.api.deps import MAX_ID, ServicesDep
+from finaldrive.service.api.problems import ApiProblem, validation_problem
+from finaldrive.service.api.views import job_out
+from finaldrive.service.db.models import Job, JobRoad
+from finaldrive.service.db.repository import roads_of
+from finaldrive.service.schemas import JobOut
+
+
+def parse_cursor(cursor: str | None) -> int | None:
+    if cursor is None:
+        return None
+    if not (cursor.isascii() and cursor.isdigit()) or int(cursor) > MAX_ID:
+        raise validation_problem(("query", "cursor"), "not a cursor returned by this API")
+    return int(cursor)
+
+
+def load_job(services: ServicesDep, job_id: int) -> JobOut:
+    with services.db.read() as session:
+        job = session.get(Job, job_id)
+        if job is None:
+            raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
+        return job_out(session, job, roads_of(session, [job_id])[job_id], detail=True)
+
+
+
+def find_road(road: str | None, roads: list[JobRoad]) -> int | None:
+    if road is None:
+        return None
+    for r in roads:
+        if road in (r.name, r.spec, str(r.road_index)):
+            return r.road_index
+    names = ", ".join(r.name for r in roads)
+    raise validation_problem(("query", "road"), f"the job has no road {road!r} (its roads: {names})")

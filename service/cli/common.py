@@ -1,0 +1,233 @@
+"""What the command groups share: argument helpers, engine inputs from arguments, output.
+
+Engine imports happen inside the functions (the facade is lazy), so ``finaldrive --help``
+and the client commands never load the simulation machinery.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from finaldrive.engine import Design, Road, SimSettings, Vehicle
+
+ROAD_HELP = ("a preset name (finaldrive roads), a spec (flat, sine:H:LAMBDA, bump:H:SIGMA[:MU], metres) "
+             "or profile:FILE.csv (x, y in metres)")
+
+
+class UsageError(Exception):
+    """A bad argument or input file: reported on one line, exit code 2."""
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Appends each option's default to its help, unless the default is None or False."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if "%(default)" in text or default is None or default is False or default is argparse.SUPPRESS \
+                or not action.option_strings:
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+def parser_options() -> dict[str, Any]:
+    """Keyword arguments for every (sub)parser: the formatter above."""
+    return {"formatter_class": HelpFormatter}
+
+
+# --- arguments -------------------------------------------------------------------------------
+
+def add_design_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--a2-deg", type=float, required=True,
+                   help="angle a2 of the engine sprocket axis from the swingarm pivot, in the chassis frame [deg]")
+    p.add_argument("--l2", type=float, required=True, help="distance L2 from the pivot to the engine sprocket axis [m]")
+    p.add_argument("--rws", type=float, required=True, help="wheel sprocket pitch radius R_WS [m]")
+
+
+def add_vehicle_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--vehicle", metavar="FILE",
+                   help="vehicle parameter file (JSON shaped like engine/data/vehicle.json); default: the paper's bike")
+
+
+def add_settings_args(p: argparse.ArgumentParser) -> None:
+    from finaldrive.engine import SimSettings
+
+    defaults = SimSettings()
+    p.add_argument("--duration", type=float, default=defaults.duration, help="simulated time [s]")
+    p.add_argument("--method", choices=("fast", "reference"), default=defaults.method,
+                   help="fast (validated against the paper's method) or reference (the paper's solver)")
+    p.add_argument("--dt", type=float, default=None,
+                   help=f"reference: time step [s]; fast: output interval (default {defaults.dt:g})")
+
+
+def add_de_args(p: argparse.ArgumentParser) -> None:
+    """The DE options; defaults and limits are the study layer's (Table 10)."""
+    from finaldrive.engine import DE_LIMITS, DESettings
+
+    de = DESettings()
+    p.add_argument("--np", type=int, default=de.np, help=f"population size NP (>= {DE_LIMITS['np'][0]:g})")
+    p.add_argument("--iters", type=int, default=de.iters, help="generations after the initial population")
+    p.add_argument("--seed", type=int, default=0, help="random seed (DE run i uses seed + i)")
+    p.add_argument("--f", type=float, default=de.f, help="differential weight F")
+    p.add_argument("--cp", type=float, default=de.cp, help="crossover probability CP")
+    p.add_argument("--mp", type=float, default=de.mp, help="mutation probability MP")
+    p.add_argument("--mr", type=float, default=de.mr_fraction, help="mutation range MR, a fraction of each range")
+    p.add_argument("--patience", type=int, default=None, help="stop after N generations without improvement")
+    p.add_argument("--max-evals", type=int, default=None, help="evaluation budget of each DE run (>= --np)")
+    p.add_argument("--bounds", metavar="SPEC", default=None,
+                   help="search box a2_deg=LO:HI,l2_m=LO:HI,rws_m=LO:HI (any subset; default Table 8: "
+                        "a2_deg=0:360,l2_m=0:0.2,rws_m=0.05:0.15); a2 is periodic only over a full 360 deg")
+
+
+def add_json_arg(p: argparse.ArgumentParser, what: str = "print one JSON object (for scripts)") -> None:
+    p.add_argument("--json", action="store_true", help=what)
+
+
+# --- engine inputs from arguments ----------------------------------------------------------
+
+def load_vehicle_arg(path: str | None) -> Vehicle:
+    from finaldrive.engine import VehicleError, default_vehicle, load_vehicle
+
+    if path is None:
+        return default_vehicle()
+    try:
+        return load_vehicle(path)
+    except VehicleError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def design_from_args(args: argparse.Namespace) -> Design:
+    from finaldrive.engine import Design, DesignError
+
+    try:
+        return Design.from_deg(args.a2_deg, args.l2, args.rws)
+    except DesignError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def settings_from_args(args: argparse.Namespace, **extra: Any) -> SimSettings:
+    from finaldrive.engine import SimSettings
+
+    changes: dict[str, Any] = {"duration": args.duration, "method": args.method, **extra}
+    if args.dt is not None:
+        changes["dt"] = args.dt
+    try:
+        return SimSettings(**changes)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def de_from_args(args: argparse.Namespace) -> tuple[Any, Any]:
+    """(Bounds, DESettings) from the DE options; UsageError names the option."""
+    from finaldrive.engine import Bounds, DESettings, SpaceError
+
+    options = {"np": "--np", "iters": "--iters", "f": "--f", "cp": "--cp", "mp": "--mp", "mr_fraction": "--mr",
+               "patience": "--patience", "max_evals": "--max-evals"}
+    try:
+        bounds = Bounds.parse(args.bounds)
+    except SpaceError as exc:
+        raise UsageError(f"--bounds: {exc}") from None
+    try:
+        de = DESettings(np=args.np, f=args.f, cp=args.cp, mp=args.mp, mr_fraction=args.mr, iters=args.iters,
+                        patience=args.patience, max_evals=args.max_evals)
+    except SpaceError as exc:
+        raise UsageError(f"{options[exc.field]}: {exc.msg}") from None
+    return bounds, de
+
+
+def read_profile(path: Path) -> Road:
+    """A measured road from a CSV of x, y [m] (an optional header line; # comments)."""
+    from finaldrive.engine import Road, RoadError
+
+    try:
+        rows = [r for r in csv.reader(path.read_text().splitlines()) if r and not r[0].startswith("#")]
+    except OSError as exc:
+        raise UsageError(f"road profile {str(path)!r}: {exc.strerror or exc}") from None
+    if rows and not _is_number(rows[0][0]):
+        rows = rows[1:]  # header
+    try:
+        return Road.from_points([float(r[0]) for r in rows], [float(r[1]) for r in rows], name=path.name)
+    except (IndexError, ValueError, RoadError) as exc:
+        raise UsageError(f"road profile {str(path)!r}: {exc}") from None
+
+
+def road_list(text: str) -> list[Any]:
+    """Named roads from a road list (presets, groups, specs, profile:FILE.csv)."""
+    from finaldrive.engine import resolve_roads
+
+    try:
+        return resolve_roads(text, lambda name: read_profile(Path(name)))
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def road_from_arg(text: str) -> Road:
+    """Exactly one road (see :func:`road_list`)."""
+    roads = road_list(text)
+    if len(roads) != 1:
+        raise UsageError(f"--road takes one road, {text!r} names {len(roads)}")
+    road: Road = roads[0].road
+    return road
+
+
+def read_designs_csv(path: str) -> np.ndarray:
+    """Rows (a2 [rad], L2 [m], R_WS [m]) from a CSV with header a2_deg,l2,rws."""
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise UsageError(f"designs file {path!r}: {exc.strerror or exc}") from None
+    reader = csv.DictReader(io.StringIO(text))
+    missing = {"a2_deg", "l2", "rws"} - set(reader.fieldnames or ())
+    if missing:
+        raise UsageError(f"designs file {path!r}: missing column(s) {', '.join(sorted(missing))}")
+    rows = []
+    for n, row in enumerate(reader, start=2):
+        try:
+            rows.append([math.radians(float(row["a2_deg"])), float(row["l2"]), float(row["rws"])])
+        except (TypeError, ValueError):
+            raise UsageError(f"designs file {path!r}, line {n}: a2_deg, l2 and rws must be numbers") from None
+    return np.array(rows, dtype=float).reshape(-1, 3)
+
+
+def writable(path: str, option: str) -> Path:
+    """``path`` if a file can be written there (its folder exists), else UsageError naming ``option``."""
+    out = Path(path)
+    if not out.parent.is_dir():
+        raise UsageError(f"{option} {path!r}: the folder {str(out.parent)!r} does not exist")
+    if out.is_dir():
+        raise UsageError(f"{option} {path!r}: is a folder")
+    return out
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
+# --- output ------------------------------------------------------------------------------------
+
+def print_json(obj: Any) -> None:
+    print(json.dumps(obj, indent=2, default=_json_default, allow_nan=False))
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, np.generic):
+        return o.item()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def clean(value: float) -> float | None:
+    """JSON has no NaN: failed values are null."""
+    return None if not math.isfinite(value) else float(value)

@@ -1,0 +1,137 @@
+"""Study plans and runs: what each kind evaluates, resumption, and order independence."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from finaldrive.engine import (
+    PAPER_SWEEP_STEP,
+    PRESETS,
+    SWEEP_RUN,
+    Bounds,
+    DERun,
+    DESettings,
+    PlanError,
+    SpaceError,
+    SweepRun,
+    plan_study,
+)
+
+
+def sphere(designs: np.ndarray, road: int) -> np.ndarray:
+    """A toy fitness (maximised) that differs by road; NaN for one design to exercise failures."""
+    f = -np.sum((designs - [3.0, 0.1, 0.1]) ** 2, axis=1) - 0.01 * road
+    f[designs[:, 1] > 0.19] = np.nan
+    return f
+
+
+def drive(runs: list, *, shuffle: np.random.Generator | None = None, split: int = 0) -> None:
+    """Evaluate every run to the end, optionally telling results in random order and in pieces."""
+    while requests := [q for run in runs if not run.done for q in run.take()]:
+        parts = []
+        for q in requests:
+            rows = np.arange(len(q))
+            pieces = np.array_split(rows, max(1, len(q) // split)) if split else [rows]
+            parts += [q.part(p) for p in pieces]
+        if shuffle is not None:
+            parts = [parts[i] for i in shuffle.permutation(len(parts))]
+        by_index = {r.index: r for r in runs}
+        for part in parts:
+            by_index[part.run].tell(part.road, part.step, part.candidates, sphere(part.designs, part.road))
+
+
+def test_paper_study_plans_the_papers_104190_simulations() -> None:
+    plan = plan_study("paper-study", ["paper"])
+    assert (len(plan.roads), plan.n_de_runs, plan.sweep_total(), plan.de_total()) == (23, 23, 45540, 58650)
+    assert plan.total() == 104190
+    runs = plan.runs()
+    assert isinstance(runs[0], SweepRun) and runs[0].index == SWEEP_RUN and runs[0].step == PAPER_SWEEP_STEP
+    assert [r.index for r in runs[1:]] == list(range(23)) and all(isinstance(r, DERun) for r in runs[1:])
+
+
+def test_defaults_are_the_papers_tables() -> None:
+    plan = plan_study("de", ["flat"])
+    assert plan.bounds == Bounds() and plan.de == DESettings()
+    assert Bounds().a2_deg == (0.0, 360.0) and Bounds().l2_m == (0.0, 0.2) and Bounds().rws_m == (0.05, 0.15)
+    assert DESettings().evals_per_run() == 2550
+    assert plan_study("robust-de", ["flat,sine:0.04:3"]).de_total() == 2 * 2550
+
+
+@pytest.mark.parametrize(("kind", "roads", "parts", "field"), [
+    ("nope", ["flat"], {}, "kind"),
+    ("de", ["flat", "mars"], {}, "roads.1"),
+    ("de", ["flat"], {"grid": "table9"}, "grid"),
+    ("sweep", ["flat"], {"de": DESettings()}, "de"),
+    ("sweep", ["flat"], {"grid": "l2=0:oops"}, "grid"),
+    ("de", ["flat"], {"objective": "mean"}, "objective"),
+])
+def test_plan_errors_name_the_field(kind: str, roads: list[str], parts: dict, field: str) -> None:
+    with pytest.raises(PlanError) as info:
+        plan_study(kind, roads, **parts)
+    assert ".".join(map(str, info.value.loc)) == field
+
+
+@pytest.mark.parametrize(("make", "field"), [
+    (lambda: Bounds(l2_m=(0.2, 0.1)), "l2_m"),
+    (lambda: Bounds(a2_deg=(0.0, 400.0)), "a2_deg"),
+    (lambda: Bounds(rws_m=(0.0, 0.1)), "rws_m"),
+    (lambda: Bounds(l2_m=(0.0, float("inf"))), "l2_m"),
+    (lambda: Bounds.parse("l2_m=1"), "l2_m"),
+    (lambda: Bounds.parse("theta=0:1"), "theta"),
+    (lambda: DESettings(np=3), "np"),
+    (lambda: DESettings(np=10, max_evals=5), "max_evals"),
+    (lambda: DESettings(cp=1.5), "cp"),
+    (lambda: DESettings(iters=10**400), "iters"),
+])
+def test_space_errors_name_the_field(make, field: str) -> None:
+    with pytest.raises(SpaceError) as info:
+        make()
+    assert info.value.field == field
+
+
+def test_a_de_is_bit_identical_whatever_the_order_and_splitting_of_its_work() -> None:
+    def final(**how) -> np.ndarray:
+        plan = plan_study("de", ["flat,sine:0.04:3"], de=DESettings(np=12, iters=8), seed=5)
+        runs = plan.runs()
+        drive(runs, **how)
+        return np.stack([r.de.population for r in runs])
+
+    reference = final()
+    np.testing.assert_array_equal(final(shuffle=np.random.default_rng(1), split=5), reference)
+    np.testing.assert_array_equal(final(shuffle=np.random.default_rng(2), split=1), reference)
+
+
+def test_a_resumed_de_continues_exactly() -> None:
+    plan = plan_study("robust-de", ["flat,sine:0.04:3"], de=DESettings(np=8, iters=6), objective="worst", seed=3)
+    whole = plan.runs()
+    drive(whole)
+    first = plan.runs()
+    run = first[0]
+    for _ in range(3):  # three generations, then "stop" and keep the state
+        requests = run.take()
+        for q in requests:
+            run.tell(q.road, q.step, q.candidates, sphere(q.designs, q.road))
+    resumed = plan.runs(de_states={0: (run.de.state(), run.generation)})
+    assert resumed[0].generation == 3
+    drive(resumed)
+    np.testing.assert_array_equal(resumed[0].de.population, whole[0].de.population)
+    assert resumed[0].de.best_f == whole[0].de.best_f
+
+
+def test_a_resumed_sweep_hands_out_only_what_is_missing() -> None:
+    plan = plan_study("sweep", ["flat,sine:0.04:3"], grid="a2_deg=0:90:30,l2=0|0.1,rws=0.093")
+    assert plan.sweep_total() == 2 * 8
+    run = plan.runs(sweep_done={(0, 0), (0, 1), (1, 7)})[0]
+    requests = run.take()
+    assert [(q.road, q.candidates.tolist()) for q in requests] == [(0, [2, 3, 4, 5, 6, 7]), (1, list(range(7)))]
+    assert run.take() == [] and not run.done
+    for q in requests:
+        run.tell(q.road, q.step, q.candidates, np.zeros(len(q)))
+    assert run.done
+
+
+def test_spec_roads_equal_to_a_preset_carry_the_paper_row() -> None:
+    plan = plan_study("sweep", ["sine:0.04:3", "flat,sine:0.04:3"])
+    assert [r.name for r in plan.roads] == ["sine-h4cm-l3m", "flat"]
+    assert plan.roads[0].paper == PRESETS["sine-h4cm-l3m"].paper
