@@ -124,7 +124,9 @@ def cli_evaluate_cost(n_extra: int = 100, repeat: int = 3) -> tuple[float, float
     """(median wall s of `finaldrive evaluate` on 1 design, on 1 + n_extra designs)."""
     rng = np.random.default_rng(7)
     rows = ["a2_deg,l2,rws", "195.3,0.037,0.088"]
-    rows += [f"{rng.uniform(0, 360):.3f},{rng.uniform(0, 0.2):.4f},{rng.uniform(0.05, 0.15):.4f}" for _ in range(n_extra)]
+    rows += [
+        f"{rng.uniform(0, 360):.3f},{rng.uniform(0, 0.2):.4f},{rng.uniform(0.05, 0.15):.4f}" for _ in range(n_extra)
+    ]
     exe = shutil.which("finaldrive") or "finaldrive"
     with tempfile.TemporaryDirectory() as tmp:
         one, many = Path(tmp) / "one.csv", Path(tmp) / "many.csv"
@@ -157,7 +159,10 @@ def main() -> None:
         for road in ROADS:
             ratio, wall = realtime_ratio(method, road, args.repeat)
             m[f"ratio {road}"] = ratio
-            print(f"real-time ratio, Table 11 design, {road:>14}: {ratio:8.1f}  ({wall * 1000:.1f} ms / 3.5 s run, median of {args.repeat})")
+            print(
+                f"real-time ratio, Table 11 design, {road:>14}: {ratio:8.1f}  "
+                f"({wall * 1000:.1f} ms / 3.5 s run, median of {args.repeat})"
+            )
         rate = batch_throughput(method, n_batch, max(1, args.repeat // 2))
         m["batch sims/s"] = rate
         print(f"batch throughput, {n_batch} random designs on sine:0.04:3, 1 core: {rate:.1f} sims/s")

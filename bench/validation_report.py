@@ -34,7 +34,8 @@ def sr_rows() -> list[str]:
     for label, r in rows:
         sr = design_squat_ratio(pack_parameters(v, Design.from_deg(r["a2_deg"], r["L2_m"], r["R_WS_m"]), SimSettings()))
         worst = max(worst, abs(sr - r["SR"]))
-        out.append(f"| {label} | {r['a2_deg']} | {r['L2_m']} | {r['R_WS_m']} | {r['SR']:.3f} | {sr:.4f} | {sr - r['SR']:+.4f} |")
+        out.append(f"| {label} | {r['a2_deg']} | {r['L2_m']} | {r['R_WS_m']} | {r['SR']:.3f} | {sr:.4f} | "
+                   f"{sr - r['SR']:+.4f} |")
     out.append(f"\nLargest difference: {worst:.4f} (tolerance 0.01).")
     return out
 
@@ -68,38 +69,60 @@ def main() -> None:
     print(f"| centre of mass height | 0.623 m | {loads.cog_height:.4f} m |")
     print(f"| total mass | 272 kg (Table 3) / 269.2 kg (Table 2) | {loads.total_mass:.1f} kg |")
     print(f"| wheelbase | 1.424 m (Table 3; Table 4's geometry gives about 1.38 m) | {loads.wheelbase:.4f} m |")
-    print(f"\nChassis + rider centre of mass (solved, chassis frame from the pivot): x = {v['chassis_cog_x']:.4f} m, y = {v['chassis_cog_y']:.4f} m.\n")
-    print("## Drive torque (READING-NOTES calibration)\n")
-    print(f"Constant engine-sprocket torque **{v['torque']:.2f} N m** (wheel torque {2 * v['torque']:.1f} N m at the fixed ratio 2.0).")
-    print(f"Table 11 flat optimum (195.3 deg, 0.037 m, 0.088 m): d = {r11.distance_m:.4f} m (fast: {r11f.distance_m:.4f} m; paper fitness 20.708 m), slack {r11.slack_mm:.3f} mm (paper 0.132 mm), SR {r11.squat_ratio:.4f} (paper 1.000).\n")
+    print(f"\nChassis + rider centre of mass (solved, chassis frame from the pivot): x = "
+          f"{v['chassis_cog_x']:.4f} m, y = {v['chassis_cog_y']:.4f} m.\n")
+    print("## Drive torque (calibrated: a reference choice, docs/engine.md#reading-notes-reference-choices)\n")
+    print(f"Constant engine-sprocket torque **{v['torque']:.2f} N m** (wheel torque {2 * v['torque']:.1f} "
+          f"N m at the fixed ratio 2.0).")
+    print(f"Table 11 flat optimum (195.3 deg, 0.037 m, 0.088 m): d = {r11.distance_m:.4f} m (fast: "
+          f"{r11f.distance_m:.4f} m; paper fitness 20.708 m), slack {r11.slack_mm:.3f} mm (paper 0.132 "
+          f"mm), SR {r11.squat_ratio:.4f} (paper 1.000).\n")
     print("## Table 14: two geometries on sine H = 0.04 m, lambda = 3 m\n")
-    print("| | d paper [m] | d here [m] | slack paper [mm] | slack here [mm] | SR paper | SR here |\n|---|---|---|---|---|---|---|")
-    print(f"| geometry 1 (0 deg, 0 m, 0.093 m) | {g['geometry1']['d_m']} | {g1.distance_m:.3f} | {g['geometry1']['slack_mm']} | {g1.slack_mm:.3f} | {g['geometry1']['SR']} | {g1.squat_ratio:.3f} |")
-    print(f"| geometry 2 (270 deg, 0.15 m, 0.050 m) | {g['geometry2']['d_m']} | {g2.distance_m:.3f} | {g['geometry2']['slack_mm']} | {g2.slack_mm:.3f} | {g['geometry2']['SR']} | {g2.squat_ratio:.3f} |")
-    print(f"| geometry 2 with the table's 0.150 m | | {g2t.distance_m:.3f} | | {g2t.slack_mm:.3f} | | {g2t.squat_ratio:.3f} |")
+    print("| | d paper [m] | d here [m] | slack paper [mm] | slack here [mm] | SR paper | SR here "
+          "|\n|---|---|---|---|---|---|---|")
+    print(f"| geometry 1 (0 deg, 0 m, 0.093 m) | {g['geometry1']['d_m']} | {g1.distance_m:.3f} | "
+          f"{g['geometry1']['slack_mm']} | {g1.slack_mm:.3f} | {g['geometry1']['SR']} | "
+          f"{g1.squat_ratio:.3f} |")
+    print(f"| geometry 2 (270 deg, 0.15 m, 0.050 m) | {g['geometry2']['d_m']} | {g2.distance_m:.3f} | "
+          f"{g['geometry2']['slack_mm']} | {g2.slack_mm:.3f} | {g['geometry2']['SR']} | "
+          f"{g2.squat_ratio:.3f} |")
+    print(f"| geometry 2 with the table's 0.150 m | | {g2t.distance_m:.3f} | | {g2t.slack_mm:.3f} | | "
+          f"{g2t.squat_ratio:.3f} |")
     f1, f2, f2t = runs["fast"]
-    print(f"| fast method: geometry 1 / 2 / 2 with 0.150 m | | {f1.distance_m:.3f} / {f2.distance_m:.3f} / {f2t.distance_m:.3f} | | {f1.slack_mm:.3f} / {f2.slack_mm:.3f} / {f2t.slack_mm:.3f} | | |")
+    print(f"| fast method: geometry 1 / 2 / 2 with 0.150 m | | {f1.distance_m:.3f} / {f2.distance_m:.3f} / "
+          f"{f2t.distance_m:.3f} | | {f1.slack_mm:.3f} / {f2.slack_mm:.3f} / {f2t.slack_mm:.3f} | | |")
     adv_here = (g1.distance_m - g2.distance_m) / g2.distance_m * 100
     adv_paper = (g["geometry1"]["d_m"] - g["geometry2"]["d_m"]) / g["geometry2"]["d_m"] * 100
-    print(f"\nGeometry 1 travels {adv_here:.2f} % farther than geometry 2 here (paper: {adv_paper:.2f} %, 'up to 2 %').")
-    print("Both distances are higher than the paper's (the paper's torque is not published; ours is calibrated on the flat road only),")
-    print("and the advantage of geometry 1 is smaller. Geometry 2 has far more slack, as in the paper, but less than its 67.27 mm.\n")
+    print(f"\nGeometry 1 travels {adv_here:.2f} % farther than geometry 2 here (paper: {adv_paper:.2f} %, "
+          f"'up to 2 %').")
+    print("Both distances are higher than the paper's (the paper's torque is not published; ours is "
+          "calibrated on the flat road only),")
+    print("and the advantage of geometry 1 is smaller. Geometry 2 has far more slack, as in the paper, "
+          "but less than its 67.27 mm.\n")
     print("## Time step (reference method)\n")
     print("| case | d at dt = 1 ms | d at dt = 0.5 ms | change |\n|---|---|---|---|")
-    print(f"| Table 11 design, flat | {r11.distance_m:.6f} m | {r11h.distance_m:.6f} m | {abs(r11.distance_m - r11h.distance_m) * 1000:.4f} mm |")
-    print(f"| Table 11 design, sine:0.04:3 | {r11s.distance_m:.6f} m | {r11sh.distance_m:.6f} m | {abs(r11s.distance_m - r11sh.distance_m) * 1000:.4f} mm |")
+    print(f"| Table 11 design, flat | {r11.distance_m:.6f} m | {r11h.distance_m:.6f} m | "
+          f"{abs(r11.distance_m - r11h.distance_m) * 1000:.4f} mm |")
+    print(f"| Table 11 design, sine:0.04:3 | {r11s.distance_m:.6f} m | {r11sh.distance_m:.6f} m | "
+          f"{abs(r11s.distance_m - r11sh.distance_m) * 1000:.4f} mm |")
     print("\n## Constraints and energy\n")
-    print(f"- max|Phi| over a 3.5 s run on sine:0.04:2 (Table 11 design): {rough.series['residual'].max():.2e} (limit 1e-6).")
+    print(f"- max|Phi| over a 3.5 s run on sine:0.04:2 (Table 11 design): "
+          f"{rough.series['residual'].max():.2e} (limit 1e-6).")
     print("- Energy: drive, dampers and longitudinal tyre force off, the bike dropped 2 cm onto a flat road: the total")
     print("  mechanical energy (kinetic + gravity + suspension and tyre springs) drifts by 1.75e-3 of the 39.9 J drop")
     print("  energy over 1 s with the reference method, and by 2.7e-5 with the fast path's minimal-coordinate")
     print("  equations (tolerance 5e-6; the same 39.9 J drop energy); test_energy.py prints both (bound 5e-3).")
-    print("- Jacobian Phi_q and (Phi_q)' q' match central differences at random poses for every coordinate (test_constraints.py).")
-    print("- Fig. 5: with the engine sprocket held, rotating the swingarm 8 deg turns the wheel as the tangent geometry gives,")
+    print("- Jacobian Phi_q and (Phi_q)' q' match central differences at random poses for every "
+          "coordinate (test_constraints.py).")
+    print("- Fig. 5: with the engine sprocket held, rotating the swingarm 8 deg turns the wheel as the "
+          "tangent geometry gives,")
     print("  to 1e-10 rad; concentric sprocket: exactly half the swingarm's rotation (test_final_drive.py).")
-    print("- Integrators on y' = A y: ABM (63)-(65) from an exact start converges at order 4.0; the trapezoidal rule at 2.0;")
-    print("  the paper's scheme (4 trapezoidal steps, then ABM) at 3.0, limited by the 2nd-order start (test_integrators.py).\n")
-    print("## Squat ratio (READING-NOTES reading, K = 0.4895) against every SR of Tables 11-14\n")
+    print("- Integrators on y' = A y: ABM (63)-(65) from an exact start converges at order 4.0; the "
+          "trapezoidal rule at 2.0;")
+    print("  the paper's scheme (4 trapezoidal steps, then ABM) at 3.0, limited by the 2nd-order start "
+          "(test_integrators.py).\n")
+    print("## Squat ratio (the reading of docs/engine.md#reading-notes-squat-ratio, K = 0.4895) against every SR "
+          "of Tables 11-14\n")
     print("\n".join(sr_rows()))
     if not all(math.isfinite(x) for x in (g1.distance_m, g2.distance_m)):
         raise SystemExit("a validation run failed")

@@ -57,65 +57,79 @@ def __dir__() -> list[str]:
     return list(__all__)
 
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
     from finaldrive.engine.api import (
-        STATUS_FAILED,
-        STATUS_OK,
-        BatchResult,
-        Design,
-        DesignError,
-        Method,
-        SimResult,
-        SimSettings,
+        STATUS_FAILED as STATUS_FAILED,
+        STATUS_OK as STATUS_OK,
+        BatchResult as BatchResult,
+        Design as Design,
+        DesignError as DesignError,
+        Method as Method,
+        SimResult as SimResult,
+        SimSettings as SimSettings,
     )
     from finaldrive.engine.calibrate import (
-        StaticLoads,
-        calibration_design,
-        solve_chassis_cog,
-        solve_torque,
-        static_loads,
+        StaticLoads as StaticLoads,
+        calibration_design as calibration_design,
+        solve_chassis_cog as solve_chassis_cog,
+        solve_torque as solve_torque,
+        static_loads as static_loads,
     )
-    from finaldrive.engine.geometry import static_geometry
-    from finaldrive.engine.model.coordinates import coordinate_index, point_positions
-    from finaldrive.engine.model.road import Road, RoadError
-    from finaldrive.engine.optimize import DifferentialEvolution
-    from finaldrive.engine.simulation import evaluate, simulate
+    from finaldrive.engine.geometry import static_geometry as static_geometry
+    from finaldrive.engine.model.coordinates import (
+        coordinate_index as coordinate_index,
+        point_positions as point_positions,
+    )
+    from finaldrive.engine.model.road import Road as Road, RoadError as RoadError
+    from finaldrive.engine.optimize import DifferentialEvolution as DifferentialEvolution
+    from finaldrive.engine.simulation import evaluate as evaluate, simulate as simulate
     from finaldrive.engine.study.plan import (
-        PAPER_SWEEP_STEP,
-        STUDY_KINDS,
-        SWEEP_RUN,
-        PlanError,
-        Run,
-        StudyKind,
-        StudyPlan,
-        plan_study,
+        PAPER_SWEEP_STEP as PAPER_SWEEP_STEP,
+        STUDY_KINDS as STUDY_KINDS,
+        SWEEP_RUN as SWEEP_RUN,
+        PlanError as PlanError,
+        Run as Run,
+        StudyKind as StudyKind,
+        StudyPlan as StudyPlan,
+        plan_study as plan_study,
     )
     from finaldrive.engine.study.presets import (
-        GROUPS,
-        PRESETS,
-        NamedRoad,
-        ProfileResolver,
-        paper_tables,
-        preset_group,
-        resolve_roads,
+        GROUPS as GROUPS,
+        PRESETS as PRESETS,
+        NamedRoad as NamedRoad,
+        ProfileResolver as ProfileResolver,
+        paper_tables as paper_tables,
+        preset_group as preset_group,
+        resolve_roads as resolve_roads,
     )
-    from finaldrive.engine.study.runs import DERun, Request, SweepRun
+    from finaldrive.engine.study.runs import DERun as DERun, Request as Request, SweepRun as SweepRun
     from finaldrive.engine.study.scoring import (
-        OBJECTIVES,
-        Objective,
-        Regret,
-        aggregate,
-        best_per_road,
-        fitness_values,
-        regret,
-        score,
+        OBJECTIVES as OBJECTIVES,
+        Objective as Objective,
+        Regret as Regret,
+        aggregate as aggregate,
+        best_per_road as best_per_road,
+        fitness_values as fitness_values,
+        regret as regret,
+        score as score,
     )
-    from finaldrive.engine.study.space import DE_LIMITS, Bounds, DESettings, SpaceError
+    from finaldrive.engine.study.space import (
+        DE_LIMITS as DE_LIMITS,
+        Bounds as Bounds,
+        DESettings as DESettings,
+        SpaceError as SpaceError,
+    )
     from finaldrive.engine.study.sweep import (
-        MAX_GRID_DESIGNS,
-        TABLE9_DEFAULT_RWS_M,
-        parse_grid,
-        product_grid,
-        table9_grid,
+        MAX_GRID_DESIGNS as MAX_GRID_DESIGNS,
+        TABLE9_DEFAULT_RWS_M as TABLE9_DEFAULT_RWS_M,
+        parse_grid as parse_grid,
+        product_grid as product_grid,
+        table9_grid as table9_grid,
     )
-    from finaldrive.engine.vehicle import Vehicle, VehicleError, default_vehicle, load_vehicle, load_vehicle_dict
+    from finaldrive.engine.vehicle import (
+        Vehicle as Vehicle,
+        VehicleError as VehicleError,
+        default_vehicle as default_vehicle,
+        load_vehicle as load_vehicle,
+        load_vehicle_dict as load_vehicle_dict,
+    )

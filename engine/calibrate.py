@@ -1,4 +1,4 @@
-"""Calibration of the values the paper leaves open (READING-NOTES reference choices).
+"""Calibration of the values the paper leaves open (docs/engine.md#reading-notes-reference-choices).
 
 - chassis + rider centre of mass: so that at static equilibrium on flat ground the rear tyre
   carries ``target_rear_share`` of the weight and the bike's centre of mass is

@@ -18,38 +18,34 @@ from typing import Any
 
 import numpy as np
 
-from finaldrive.engine.model import params as P
-
-#: Rules for each key: (lower bound, lower inclusive, upper bound). None = unbounded.
+#: A rule: (lower bound, lower inclusive, upper bound); None = unbounded.
+Rule = tuple[float | None, bool, float | None]
 _POSITIVE = (0.0, False, None)
 _NON_NEGATIVE = (0.0, True, None)
 _FRACTION = (0.0, True, 1.0)
 _ANY = (None, True, None)
 
-_RULES: dict[str, tuple[float | None, bool, float | None]] = {
-    **dict.fromkeys(("L4", "L5", "L7", "L_SA", "rt0", "ft0", "L8"), _POSITIVE),
-    **dict.fromkeys(("L3",), _NON_NEGATIVE),
-    **dict.fromkeys(("a3", "a4", "a5", "theta0", "phi0", "chassis_cog_x", "chassis_cog_y"), _ANY),
-    **dict.fromkeys(("k_rs", "s_rs", "k_fs", "s_fs", "k_rt", "k_ft"), _POSITIVE),
-    **dict.fromkeys(("c_rs", "c_fs", "c_rt", "c_ft"), _NON_NEGATIVE),
-    **dict.fromkeys(("m_chassis", "I_chassis", "m_swingarm", "I_swingarm", "m_sprocket", "I_sprocket", "m_rear_wheel", "I_rear_wheel", "m_fork", "I_fork", "m_front_wheel"), _POSITIVE),
-    "swingarm_cog_fraction": _FRACTION,
-    "fork_cog_fraction": _FRACTION,
-    **dict.fromkeys(("pDx2", "pEx1", "pEx2", "pEx3", "pEx4", "pKx2", "pKx3"), _ANY),
-    **dict.fromkeys(("pCx1", "pDx1", "pKx1", "Fz0"), _POSITIVE),
-    "K_vlow0": _NON_NEGATIVE,
-    **dict.fromkeys(("sigma_k0", "sigma_min", "eps_F", "V_low"), _POSITIVE),
-    "torque": _ANY,
-    "sprocket_ratio": _POSITIVE,
-    "gravity": _POSITIVE,
-    "eps1": _NON_NEGATIVE,
-    "eps2": _NON_NEGATIVE,
-    "sr_optimum": _ANY,
-    "floor": _FRACTION,
-    "squat_K": _POSITIVE,
-}
+#: The model's vehicle parameters, in the order the compiled model packs them (engine.model.params is
+#: generated from this list), each with its rule: (lower bound, lower inclusive, upper bound).
+PARAMETERS: tuple[tuple[str, Rule], ...] = (
+    ("L3", _NON_NEGATIVE), ("a3", _ANY), ("L4", _POSITIVE), ("a4", _ANY), ("L5", _POSITIVE), ("a5", _ANY),
+    ("L7", _POSITIVE), ("L_SA", _POSITIVE), ("theta0", _ANY), ("phi0", _ANY), ("rt0", _POSITIVE),
+    ("ft0", _POSITIVE), ("L8", _POSITIVE), ("k_rs", _POSITIVE), ("c_rs", _NON_NEGATIVE), ("s_rs", _POSITIVE),
+    ("k_fs", _POSITIVE), ("c_fs", _NON_NEGATIVE), ("s_fs", _POSITIVE), ("k_rt", _POSITIVE),
+    ("c_rt", _NON_NEGATIVE), ("k_ft", _POSITIVE), ("c_ft", _NON_NEGATIVE), ("m_chassis", _POSITIVE),
+    ("I_chassis", _POSITIVE), ("m_swingarm", _POSITIVE), ("I_swingarm", _POSITIVE), ("m_sprocket", _POSITIVE),
+    ("I_sprocket", _POSITIVE), ("m_rear_wheel", _POSITIVE), ("I_rear_wheel", _POSITIVE), ("m_fork", _POSITIVE),
+    ("I_fork", _POSITIVE), ("m_front_wheel", _POSITIVE), ("swingarm_cog_fraction", _FRACTION),
+    ("fork_cog_fraction", _FRACTION), ("chassis_cog_x", _ANY), ("chassis_cog_y", _ANY), ("pCx1", _POSITIVE),
+    ("pDx1", _POSITIVE), ("pDx2", _ANY), ("pEx1", _ANY), ("pEx2", _ANY), ("pEx3", _ANY), ("pEx4", _ANY),
+    ("pKx1", _POSITIVE), ("pKx2", _ANY), ("pKx3", _ANY), ("Fz0", _POSITIVE), ("K_vlow0", _NON_NEGATIVE),
+    ("sigma_k0", _POSITIVE), ("sigma_min", _POSITIVE), ("eps_F", _POSITIVE), ("V_low", _POSITIVE),
+    ("torque", _ANY), ("sprocket_ratio", _POSITIVE), ("gravity", _POSITIVE), ("eps1", _NON_NEGATIVE),
+    ("eps2", _NON_NEGATIVE), ("sr_optimum", _ANY), ("floor", _FRACTION), ("squat_K", _POSITIVE),
+)
+_RULES: dict[str, Rule] = dict(PARAMETERS)
 #: Calibration targets: validated and carried, not packed for the model.
-_TARGET_RULES: dict[str, tuple[float | None, bool, float | None]] = {
+_TARGET_RULES: dict[str, Rule] = {
     "target_rear_share": (0.0, False, 1.0),
     "target_cog_height": _POSITIVE,
     "target_distance": _POSITIVE,
@@ -79,7 +75,7 @@ class Vehicle:
     def packed(self) -> np.ndarray:
         """The vehicle part of the model's parameter vector P (see engine.model.params)."""
         v = dict(self.values)
-        return np.array([v[k] for k in P.VEHICLE_KEYS], dtype=float)
+        return np.array([v[k] for k, _ in PARAMETERS], dtype=float)
 
     def replace(self, **changes: float) -> Vehicle:
         """A copy with some values changed (validated)."""

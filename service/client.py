@@ -68,26 +68,33 @@ class ServiceClient:
     def json(self, method: str, path: str, **kwargs: Any) -> Any:
         return self.request(method, path, **kwargs).json()
 
+    def object(self, method: str, path: str, **kwargs: Any) -> dict[str, Any]:
+        """A JSON object answer (anything else is an error of the server)."""
+        body = self.json(method, path, **kwargs)
+        if not isinstance(body, dict):
+            raise ApiError(502, f"expected a JSON object from {path}, got {type(body).__name__}")
+        return body
+
     # ------------------------------------------------------------------ endpoints
     def health(self) -> dict[str, Any]:
-        return self.json("GET", "/v1/health")
+        return self.object("GET", "/v1/health")
 
     def submit(self, spec: dict[str, Any], idempotency_key: str | None = None) -> dict[str, Any]:
         headers = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
-        return self.json("POST", "/v1/jobs", json=spec, headers=headers)
+        return self.object("POST", "/v1/jobs", json=spec, headers=headers)
 
     def jobs(self, *, state: str | None = None, kind: str | None = None, limit: int = 50) -> list[dict[str, Any]]:
         params = {k: v for k, v in {"state": state, "kind": kind, "limit": limit}.items() if v is not None}
         return list(self.json("GET", "/v1/jobs", params=params)["items"])
 
     def job(self, job_id: int) -> dict[str, Any]:
-        return self.json("GET", f"/v1/jobs/{job_id}")
+        return self.object("GET", f"/v1/jobs/{job_id}")
 
     def cancel(self, job_id: int) -> dict[str, Any]:
-        return self.json("POST", f"/v1/jobs/{job_id}/cancel")
+        return self.object("POST", f"/v1/jobs/{job_id}/cancel")
 
     def best(self, job_id: int) -> dict[str, Any]:
-        return self.json("GET", f"/v1/jobs/{job_id}/best")
+        return self.object("GET", f"/v1/jobs/{job_id}/best")
 
     def evaluations_csv(self, job_id: int, road: str | None = None, page: int = 10_000) -> Iterator[str]:
         """The job's evaluations as CSV text, page by page (the header only in the first)."""
@@ -112,10 +119,10 @@ class ServiceClient:
         return self.request("GET", f"/v1/jobs/{job_id}/plots/{name}.png", params=params).content
 
     def create_recording(self, body: dict[str, Any]) -> dict[str, Any]:
-        return self.json("POST", "/v1/recordings", json=body)
+        return self.object("POST", "/v1/recordings", json=body)
 
     def recording(self, recording_id: int) -> dict[str, Any]:
-        return self.json("GET", f"/v1/recordings/{recording_id}")
+        return self.object("GET", f"/v1/recordings/{recording_id}")
 
     def download_recording(self, recording_id: int, dest: Path) -> int:
         """Stream the .rrd to ``dest``; returns the bytes written."""

@@ -23,7 +23,9 @@ class Settings(BaseSettings):
     db_url: str = Field("sqlite:///./finaldrive.db", description="SQLAlchemy database URL")
     host: str = Field("127.0.0.1", description="interface `finaldrive serve` binds")
     port: int = Field(8000, ge=0, le=65535, description="port `finaldrive serve` binds")
-    executor: ExecutorKind = Field("ray", description="where simulations run (a local Ray by default; RAY_ADDRESS or ray_address joins a cluster)")
+    executor: ExecutorKind = Field(
+        "ray", description="where simulations run (a local Ray by default; RAY_ADDRESS or ray_address joins a cluster)"
+    )
     num_workers: int | None = Field(None, ge=1, description="worker processes (process/ray)")
     ray_address: str | None = Field(None, description="Ray cluster address (ray executor)")
     batch_size: int | None = Field(None, ge=1, description="designs per worker task")

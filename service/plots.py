@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import matplotlib
 
@@ -21,6 +21,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.projections.polar import PolarAxes
 
 from finaldrive.engine import default_vehicle
 from finaldrive.service.scene import ROW_OFFSET_M
@@ -42,9 +43,9 @@ def _save(fig: Figure, path: str | Path) -> None:
     fig.savefig(str(path), dpi=_DPI)
 
 
-def _polar_axes(fig: Figure, rect: Any = 111) -> Axes:
+def _polar_axes(fig: Figure, rect: Any = 111) -> PolarAxes:
     """Polar axes, a2 = 0 (forward) pointing right, counter-clockwise."""
-    ax = fig.add_subplot(rect, projection="polar")
+    ax = cast(PolarAxes, fig.add_subplot(rect, projection="polar"))
     ax.set_theta_zero_location("E")
     ax.set_theta_direction(1)
     return ax
@@ -80,7 +81,7 @@ def sweep_map_png(path: str | Path, designs: np.ndarray, values: np.ndarray, *, 
     a2s, a2_idx = np.unique(np.round(designs[:, 0] % (2 * math.pi), 9), return_inverse=True)
     l2s, l2_idx = np.unique(np.round(designs[:, 1], 9), return_inverse=True)
     grid = np.full((len(l2s), len(a2s)), np.nan)
-    for i, j, v in zip(l2_idx, a2_idx, values):
+    for i, j, v in zip(l2_idx, a2_idx, values, strict=True):
         if np.isfinite(v) and not v <= grid[i, j]:
             grid[i, j] = v
     mappable: Any
@@ -89,7 +90,9 @@ def sweep_map_png(path: str | Path, designs: np.ndarray, values: np.ndarray, *, 
                                  cmap="viridis", shading="flat")
     else:  # scattered designs (e.g. a DE population or a coarse grid)
         ok = np.isfinite(values)
-        mappable = ax.scatter(designs[ok, 0], designs[ok, 1], c=values[ok], cmap="viridis", s=40, edgecolors="k", lw=0.3)
+        mappable = ax.scatter(
+            designs[ok, 0], designs[ok, 1], c=values[ok], cmap="viridis", s=40, edgecolors="k", lw=0.3
+        )
         if not ok.all():
             ax.scatter(designs[~ok, 0], designs[~ok, 1], marker="x", color="red", s=25, label="failed")
     r_max = max(float(designs[:, 1].max()), 1e-3) * 1.05
@@ -111,9 +114,9 @@ def _edges(centres: np.ndarray, periodic: bool = False) -> np.ndarray:
         return np.array([centres[0] - 0.5, centres[0] + 0.5])
     if periodic:
         ext = np.concatenate([[centres[-1] - 2 * math.pi], centres, [centres[0] + 2 * math.pi]])
-        return 0.5 * (ext[:-1] + ext[1:])
+        return np.asarray(0.5 * (ext[:-1] + ext[1:]), dtype=float)
     mid = 0.5 * (centres[:-1] + centres[1:])
-    return np.concatenate([[max(0.0, 2 * centres[0] - mid[0])], mid, [2 * centres[-1] - mid[-1]]])
+    return np.concatenate([[max(0.0, 2 * centres[0] - mid[0])], mid, [2 * centres[-1] - mid[-1]]]).astype(float)
 
 
 def de_history_png(path: str | Path, history: list[dict[str, Any]], population: np.ndarray, *, title: str) -> None:
@@ -165,7 +168,7 @@ def series_png(path: str | Path, runs: list[tuple[str, Mapping[str, np.ndarray]]
     """Fig. 13: distance, chain tension, SR, Fz, slip and Fx against time, one line per run."""
     fig = Figure(figsize=(11, 8.5))
     axes = fig.subplots(3, 2, sharex=True)
-    for ax, (key, label) in zip(axes.ravel(), SERIES_PANELS):
+    for ax, (key, label) in zip(axes.ravel(), SERIES_PANELS, strict=True):
         for name, series in runs:
             ax.plot(series["t"], series[key], lw=1.2, label=name)
         ax.set_ylabel(label)
@@ -192,7 +195,7 @@ def scene_png(path: str | Path, strips: Mapping[str, Sequence[np.ndarray]],
         for line in lines:
             ax.plot(line[:, 0], line[:, 1], color=colour, lw=width)
     for origins, vectors in arrows:
-        for o, v in zip(origins, vectors):
+        for o, v in zip(origins, vectors, strict=True):
             ax.annotate("", xy=o + v, xytext=o, arrowprops={"arrowstyle": "->", "color": "tab:orange", "lw": 1.8})
     ax.set_xlim(*xlim)
     ax.set_aspect("equal")

@@ -174,9 +174,10 @@ def frame_count(path: str | Path, entity: str) -> int:
 
 def scalars_of(path: str | Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
     """(t [s], value) of one series entity, in time order."""
-    t, v = [], []
+    t: list[int] = []
+    v: list[float] = []
     for batch in read_rows(path).get(entity, []):
         t.extend(batch.column(TIMELINE).cast("int64").to_pylist())  # type: ignore[attr-defined]
         v.extend(x[0] for x in batch.column("Scalars:scalars").to_pylist())  # type: ignore[attr-defined]
     order = np.argsort(t, kind="stable")
-    return np.asarray(t, float)[order] * 1e-9, np.asarray(v, float)[order]
+    return np.asarray(t, dtype=float)[order] * 1e-9, np.asarray(v, dtype=float)[order]

@@ -34,7 +34,7 @@ _RT, _FT, _BETA, _ALPHA = (coordinate_index(n) for n in ("rt", "ft", "beta", "al
 
 
 def _pt(q: np.ndarray, k: int, dy: float) -> np.ndarray:
-    return point_positions(q)[k - 1] + np.array([0.0, dy])
+    return np.asarray(point_positions(q)[k - 1] + np.array([0.0, dy]), dtype=float)
 
 
 def circle(centre: np.ndarray, radius: float) -> np.ndarray:

@@ -10,8 +10,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_validator
 
-from finaldrive.engine import DE_LIMITS, DESettings, SimSettings, SpaceError, StudyKind
-from finaldrive.engine import Bounds as StudyBounds
+from finaldrive.engine import DE_LIMITS, Bounds as StudyBounds, DESettings, SimSettings, SpaceError, StudyKind
 
 JobKind = StudyKind
 JobStateName = Literal["queued", "running", "succeeded", "failed", "cancelled", "interrupted"]

@@ -84,7 +84,9 @@ def executor_stream(executor: Executor, batch_size: int | None) -> EvalStream:
     """``workers.evaluate_stream`` bound to an executor and a batch size."""
     from finaldrive.workers import evaluate_stream
 
-    def stream(designs: np.ndarray, road: Road, sim: SimSettings, vehicle: Vehicle | None) -> Iterator[tuple[np.ndarray, BatchResult]]:
+    def stream(
+        designs: np.ndarray, road: Road, sim: SimSettings, vehicle: Vehicle | None
+    ) -> Iterator[tuple[np.ndarray, BatchResult]]:
         return evaluate_stream(executor, designs, road, sim, vehicle, batch_size=batch_size)
 
     return stream

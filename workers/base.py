@@ -18,7 +18,7 @@ Failures, named precisely (docs/workers.md, "Retries"):
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable
 from types import TracebackType
 from typing import Any, Protocol, Self, runtime_checkable
 
@@ -46,7 +46,7 @@ class Executor(Protocol):
 
     def map_batches(
         self, fn: Callable[..., Any], batches: Iterable[Any], shared: tuple[Any, ...] = ()
-    ) -> Iterator[tuple[int, Any]]:
+    ) -> Generator[tuple[int, Any], None, None]:
         """Run ``fn(batch, *shared)`` for each batch; yield ``(batch_index, result)`` as each completes.
 
         ``shared`` is sent once (process initializer or ``ray.put``). Closing the iterator

@@ -21,7 +21,7 @@ import signal
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
@@ -77,7 +77,7 @@ class ProcessExecutor(ClosingMixin):
 
     def map_batches(
         self, fn: Callable[..., Any], batches: Iterable[Any], shared: tuple[Any, ...] = ()
-    ) -> Iterator[tuple[int, Any]]:
+    ) -> Generator[tuple[int, Any], None, None]:
         if not self._busy.acquire(blocking=False):
             raise RuntimeError(
                 "ProcessExecutor runs one map_batches stream at a time; give each concurrent job its own executor"

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable
 from typing import Any
 
 from finaldrive.workers.base import ClosingMixin
@@ -15,7 +15,7 @@ class SerialExecutor(ClosingMixin):
 
     def map_batches(
         self, fn: Callable[..., Any], batches: Iterable[Any], shared: tuple[Any, ...] = ()
-    ) -> Iterator[tuple[int, Any]]:
+    ) -> Generator[tuple[int, Any], None, None]:
         for index, batch in enumerate(batches):
             yield index, fn(batch, *shared)
 

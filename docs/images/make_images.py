@@ -35,9 +35,14 @@ def recording_frame(t: float = 2.0) -> None:
         strips, arrows = scene_at(rrd, t)
     k = round(t * 50)
     xs = [r.series["q"][k][[C.X6, C.X13]] for r in runs]
-    plots.scene_png(HERE / "recording-frame.png", strips, arrows, xlim=(float(np.min(xs)) - 0.7, float(np.max(xs)) + 0.7),
-                    title=f"One frame (t = {t:.2f} s) read back from the .rrd, sine:0.04:3; orange: tyre forces (1 m = 5 kN)\n"
-                          f"blue: {TABLE14[0][0]}    red: {TABLE14[1][0]}")
+    plots.scene_png(
+        HERE / "recording-frame.png",
+        strips,
+        arrows,
+        xlim=(float(np.min(xs)) - 0.7, float(np.max(xs)) + 0.7),
+        title=f"One frame (t = {t:.2f} s) read back from the .rrd, sine:0.04:3; orange: tyre forces (1 m = 5 kN)\n"
+        f"blue: {TABLE14[0][0]}    red: {TABLE14[1][0]}",
+    )
     plots.series_png(HERE / "series.png", [(r.label, r.series) for r in runs],
                      title="Fig. 13 quantities of the Table 14 geometries on sine:0.04:3")
 

@@ -3,9 +3,10 @@
 The paper relaxes the dynamics with a trapezoidal solver; the equilibrium itself is a property
 of the model, so it is solved here directly: at rest, with no drive torque and no longitudinal
 tyre force, the generalized forces on the free coordinates vanish. The free coordinates are
-y1, theta, phi and fs; the rear contact point stays at x = 0 (READING-NOTES: x = 0 at the rear
-tyre's initial contact point), which ties x1 to phi: x1 = -L_SA cos(phi). The forces come
-from the compiled minimal-coordinate model (engine.fast.minimal), by Newton's method.
+y1, theta, phi and fs; the rear contact point stays at x = 0 (x = 0 at the rear tyre's initial
+contact point: docs/engine.md#reading-notes-reference-choices), which ties x1 to phi:
+x1 = -L_SA cos(phi). The forces come from the compiled minimal-coordinate model
+(engine.fast.minimal), by Newton's method.
 """
 
 from __future__ import annotations

@@ -50,7 +50,18 @@ BETA = 36   # wheel sprocket angle
 GAMMA = 37  # upper chain angle (angle of the radius to the tangent points)
 PHI = 38    # swingarm angle (absolute, from the horizontal)
 
-NAMES: tuple[str, ...] = (*tuple(f"{axis}{k}" for k in range(1, N_POINTS + 1) for axis in ("x", "y")), "rs", "fs", "rt", "ft", "theta", "alpha", "beta", "gamma", "phi")
+NAMES: tuple[str, ...] = (
+    *tuple(f"{axis}{k}" for k in range(1, N_POINTS + 1) for axis in ("x", "y")),
+    "rs",
+    "fs",
+    "rt",
+    "ft",
+    "theta",
+    "alpha",
+    "beta",
+    "gamma",
+    "phi",
+)
 
 
 def coordinate_index(name: str) -> int:

@@ -128,8 +128,8 @@ def taut_length(q: np.ndarray) -> float:
 
 def chain_length(q: np.ndarray, p: np.ndarray) -> float:
     """L of eq. (69) at pose q."""
-    return ((q[GAMMA] - q[ALPHA]) * p[P.R_ES] + taut_length(q)
-            + (q[BETA] - q[GAMMA]) * p[P.R_WS])
+    return float((q[GAMMA] - q[ALPHA]) * p[P.R_ES] + taut_length(q)
+                 + (q[BETA] - q[GAMMA]) * p[P.R_WS])
 
 
 def design_pose(p: np.ndarray) -> np.ndarray:
@@ -151,7 +151,7 @@ def design_pose(p: np.ndarray) -> np.ndarray:
 
 
 def squat_ratio_at(q: np.ndarray, p: np.ndarray, contact_x: float, contact_y: float) -> float:
-    """SR = K / tan(tau) (READING-NOTES reading of Cossalter's squat ratio).
+    """SR = K / tan(tau) (the reading of Cossalter's squat ratio in docs/engine.md#reading-notes-squat-ratio).
 
     X is the intersection of the chain's upper run (10-11) with the swingarm line (1-6);
     tan(tau) is the slope of the line from the rear contact point to X.
@@ -169,7 +169,7 @@ def squat_ratio_at(q: np.ndarray, p: np.ndarray, contact_x: float, contact_y: fl
         rise, run = xy - contact_y, xx - contact_x
     if rise == 0.0:
         return math.inf
-    return p[P.SQUAT_K] * run / rise
+    return float(p[P.SQUAT_K] * run / rise)
 
 
 def design_squat_ratio(p: np.ndarray) -> float:

@@ -1,7 +1,7 @@
 """Road profiles, eqs. (32)-(33): flat, sinusoidal, Gaussian bump, and a user profile.
 
 The road is the height y(x) under both tyre contact points (points 14 and 15).
-x = 0 is the rear tyre's initial contact point (READING-NOTES reference choice).
+x = 0 is the rear tyre's initial contact point (reference choice, docs/engine.md#reading-notes-reference-choices).
 
 A road is described by a frozen, picklable :class:`Road`; the compiled model reads it
 as a kind code plus a flat parameter array (see :meth:`Road.packed`).
@@ -17,7 +17,7 @@ import numpy as np
 FLAT, SINE, BUMP, PROFILE = 0, 1, 2, 3
 _KIND_CODES = {"flat": FLAT, "sine": SINE, "bump": BUMP, "profile": PROFILE}
 
-#: Gaussian bump centre when the spec gives none (READING-NOTES reference choice).
+#: Gaussian bump centre when the spec gives none (reference choice, docs/engine.md#reading-notes-reference-choices).
 DEFAULT_BUMP_CENTRE_M = 5.0
 
 
@@ -102,7 +102,7 @@ class Road:
             return self.height * np.sin(2.0 * np.pi * x / self.wavelength)
         if self.kind == "bump":
             return self.height * np.exp(-((x - self.mu) ** 2) / (2.0 * self.sigma**2))
-        return np.interp(x, self.xs, self.ys)
+        return np.asarray(np.interp(x, self.xs, self.ys), dtype=float)
 
     @classmethod
     def parse(cls, spec: str) -> Road:

@@ -1,9 +1,10 @@
 """Rear tyre longitudinal force: Pacejka's fully nonlinear transient model, eqs. (38)-(52).
 
 Sign convention: kappa' > 0 and F_x > 0 when driving (the wheel spins faster than it rolls).
-Two corrections to the printed text (READING-NOTES): eq. (43) uses K_vlow * V_sx / K_xk, and
-pKx1 is 25.939. The algebraic loop of eq. (41) (sigma* needs F_x and kappa', which need sigma*)
-is closed with the values of the last accepted step: sigma* is held through each step.
+Two corrections to the printed text (docs/engine.md#reading-notes-extraction-faults): eq. (43)
+uses K_vlow * V_sx / K_xk, and pKx1 is 25.939. The algebraic loop of eq. (41) (sigma* needs F_x
+and kappa', which need sigma*) is closed with the values of the last accepted step: sigma* is
+held through each step.
 """
 
 from __future__ import annotations

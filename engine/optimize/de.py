@@ -230,7 +230,7 @@ class DifferentialEvolution:
         """Best individual (NaN row before the first tell)."""
         if self._population.shape[0] == 0:
             return np.full(self.dim, np.nan)
-        return self._population[0].copy()
+        return np.array(self._population[0], dtype=float)
 
     @property
     def best_f(self) -> float:
@@ -330,7 +330,7 @@ class DifferentialEvolution:
         outside = (x < lo) | (x > hi)
         periodic_out = self._periodic & ((x < lo) | (x >= hi))
         x = np.where(periodic_out, wrapped, np.where(outside & ~self._periodic, folded, x))
-        return np.clip(x, lo, hi)
+        return np.asarray(np.clip(x, lo, hi), dtype=float)
 
     def _record(self, n_failed: int) -> dict[str, Any]:
         finite = self._fitness[np.isfinite(self._fitness)]
@@ -355,7 +355,7 @@ class DifferentialEvolution:
 # ---------------------------------------------------------------------- helpers
 def _key(values: npt.ArrayLike) -> np.ndarray:
     """Ranking key: failed (NaN) ranks below every finite value."""
-    return np.nan_to_num(np.asarray(values, dtype=float), nan=-np.inf)
+    return np.asarray(np.nan_to_num(np.asarray(values, dtype=float), nan=-np.inf), dtype=float)
 
 
 def _check_int(name: str, value: Any, minimum: int) -> int:

@@ -6,8 +6,9 @@ Roads (paper section 5.1; Tables 11-13), built with :class:`engine.model.road.Ro
 - 16 sinusoids ``sine-h{H}cm-l{lambda}m``: H_y = 1, 2, 3, 4 cm x lambda = 2, 3, 4, 5 m,
   H_y outer (Table 12 row order), e.g. ``sine-h4cm-l3m`` = ``sine:0.04:3``;
 - 6 Gaussian bumps ``bump-h{H}cm-s{sigma}cm``: H_y = 2, 4 cm x sigma = 20, 50, 100 cm,
-  H_y outer (Table 13 row order, restored in READING-NOTES), centre mu = 5.0 m (the
-  READING-NOTES reference choice; the paper gives none), e.g. ``bump-h4cm-s20cm``.
+  H_y outer (Table 13 row order, inferred: docs/engine.md#reading-notes-extraction-faults),
+  centre mu = 5.0 m (a reference choice: docs/engine.md#reading-notes-reference-choices; the
+  paper gives none), e.g. ``bump-h4cm-s20cm``.
 
 Groups: ``paper`` (all 23 in the order Table 11, Table 12 rows, Table 13 rows),
 ``sine`` and ``bump``.
@@ -57,7 +58,8 @@ class NamedRoad:
 def paper_tables() -> dict[str, Any]:
     """The paper's tables as shipped in ``engine/data/paper_tables.json`` (do not mutate)."""
     path = importlib.resources.files("finaldrive.engine") / "data" / "paper_tables.json"
-    return json.loads(path.read_text(encoding="utf-8"))
+    tables: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+    return tables
 
 
 def _cm(metres: float) -> int:

@@ -59,6 +59,7 @@ def aggregate(fitness: npt.ArrayLike, objective: Objective = "mean") -> np.ndarr
         score = table.min(axis=0)
     else:
         raise ValueError(f"unknown objective {objective!r}: expected one of {', '.join(OBJECTIVES)}")
+    score = np.asarray(score, dtype=float)
     score[np.any(np.isnan(table), axis=0)] = np.nan
     return score
 

@@ -30,9 +30,9 @@ Example: ``"a2_deg=0:358:2,l2=0:0.2:0.02,rws=0.093"`` == Table 9.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 #: R_WS of the Table 9 sweep [m]: not stated in the paper; the mean of its 23 DE optima (section 5.3).
 TABLE9_DEFAULT_RWS_M = 0.093
@@ -55,7 +55,7 @@ def table9_grid(rws: float = TABLE9_DEFAULT_RWS_M) -> np.ndarray:
     )
 
 
-def product_grid(a2_rad: Sequence[float], l2_m: Sequence[float], rws_m: Sequence[float]) -> np.ndarray:
+def product_grid(a2_rad: npt.ArrayLike, l2_m: npt.ArrayLike, rws_m: npt.ArrayLike) -> np.ndarray:
     """Cartesian product (n, 3) of value lists, a2 slowest, rws fastest."""
     axes = np.meshgrid(np.asarray(a2_rad, float), np.asarray(l2_m, float),
                        np.asarray(rws_m, float), indexing="ij")

@@ -27,9 +27,8 @@ def load_job(services: ServicesDep, job_id: int) -> JobOut:
 
 
 
-def find_road(road: str | None, roads: list[JobRoad]) -> int | None:
-    if road is None:
-        return None
+def find_road(road: str, roads: list[JobRoad]) -> int:
+    """The index of a job's road given by name, spec or index; 422 naming the roads otherwise."""
     for r in roads:
         if road in (r.name, r.spec, str(r.road_index)):
             return r.road_index

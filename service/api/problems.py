@@ -45,7 +45,9 @@ def problem_response(
 
 def validation_problem(loc: tuple[str | int, ...], msg: str) -> ApiProblem:
     """A 422 naming one field (``loc`` as in pydantic errors, e.g. ("body", "roads", 0))."""
-    return ApiProblem(422, f"{_where(loc)}: {msg}", slug="validation-error", errors=[ProblemItem(loc=list(loc), msg=msg)])
+    return ApiProblem(
+        422, f"{_where(loc)}: {msg}", slug="validation-error", errors=[ProblemItem(loc=list(loc), msg=msg)]
+    )
 
 
 def _where(loc: tuple[str | int, ...] | list[Any]) -> str:
@@ -85,7 +87,7 @@ def install(app: FastAPI) -> None:
 def documented(*statuses: int) -> dict[int | str, dict[str, Any]]:
     """``responses=`` entries for problem statuses (media type fixed in the OpenAPI hook)."""
     text = {
-        400: "the body could not be read (not UTF-8 JSON)",
+        400: "the body could not be read (its bytes are not UTF-8)",
         401: "missing or wrong bearer token (only when FINALDRIVE_API_TOKEN is set)",
         404: "no such job",
         409: "the resource is not ready for this (e.g. a recording still being produced)",

@@ -22,7 +22,7 @@ def evaluation_out(e: Evaluation, road_name: str) -> EvaluationOut:
         id=e.id, road_index=e.road_index, road=road_name, step=e.step, candidate=e.candidate,
         a2=e.a2, a2_deg=math.degrees(e.a2), l2=e.l2, rws=e.rws, distance_m=e.distance_m,
         squat_ratio=e.squat_ratio, slack_m=e.slack_m, fitness_m=e.fitness_m,
-        chain_length_m=e.chain_length_m, status=e.status,  # type: ignore[arg-type]
+        chain_length_m=e.chain_length_m, status=e.status,
         reason=e.reason, wall_s=e.wall_s, cached=e.cached,
     )
 
@@ -63,11 +63,11 @@ def job_out(
     if job.started_at is not None:
         elapsed = ((job.finished_at or now) - job.started_at).total_seconds()
     return JobOut(
-        id=job.id, kind=job.kind,  # type: ignore[arg-type]
-        state=job.state,  # type: ignore[arg-type]
+        id=job.id, kind=job.kind,
+        state=job.state,
         spec=JobSpec.model_validate(job.spec), total=job.total, done=job.n_done, failed=job.n_failed,
         cached=job.n_cached, progress=min(1.0, completed / job.total) if job.total else 1.0,
-        created_at=_aware(job.created_at),  # type: ignore[arg-type]
+        created_at=_aware(job.created_at),
         started_at=_aware(job.started_at), finished_at=_aware(job.finished_at),
         elapsed_s=elapsed, eta_s=_eta(job, completed, now), error=job.error,
         roads=road_progress(roads), robust_best=robust_best(session, job) if detail else None,

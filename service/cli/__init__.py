@@ -13,6 +13,7 @@ import os
 import sys
 from collections.abc import Sequence
 from importlib.metadata import PackageNotFoundError, version
+from typing import NoReturn
 
 from finaldrive.service.cli.common import UsageError, parser_options
 
@@ -24,7 +25,7 @@ __all__ = ["UsageError", "build_parser", "main"]
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # argparse's hook: one line, exit code 2 (main)
+    def error(self, message: str) -> NoReturn:  # argparse's hook: one line, exit code 2 (main)
         raise UsageError(message)
 
 

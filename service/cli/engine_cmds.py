@@ -86,7 +86,16 @@ def run_simulate(args: argparse.Namespace) -> int:
     if args.json:
         print_json(summary)
     else:
-        for key in ("status", "reason", "distance_m", "squat_ratio", "slack_mm", "fitness_m", "chain_length_m", "wall_s"):
+        for key in (
+            "status",
+            "reason",
+            "distance_m",
+            "squat_ratio",
+            "slack_mm",
+            "fitness_m",
+            "chain_length_m",
+            "wall_s",
+        ):
             print(f"{key:>15}: {summary[key]}")
         if "record" in summary:
             print(f"{'record':>15}: {summary['record']}")
@@ -97,7 +106,7 @@ def _write_series(path: Path, series: dict[str, np.ndarray]) -> None:
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(SERIES_CSV_COLUMNS)
-    for row in zip(*(series[c] for c in SERIES_CSV_COLUMNS)):
+    for row in zip(*(series[c] for c in SERIES_CSV_COLUMNS), strict=True):
         w.writerow([f"{v:.9g}" for v in row])
     path.write_text(buf.getvalue())
 

@@ -87,8 +87,8 @@ class Tally:
             if math.isfinite(fitness[i]) and (best is None or fitness[i] > best[0]):
                 self.road_best[part.road] = (float(fitness[i]), row)
         ok = np.isfinite(fitness)
-        best = max((b for b, _ in self.road_best.values()), default=None) if self.n_roads == 1 else None
-        self.progress.update(done=len(part), failed=int((~ok).sum()), best=best)
+        best_f = max((f for f, _ in self.road_best.values()), default=None) if self.n_roads == 1 else None
+        self.progress.update(done=len(part), failed=int((~ok).sum()), best=best_f)
 
     def on_roads(self, x: np.ndarray) -> list[dict[str, Any] | None]:
         """The results of design ``x`` on each road (None where it was not evaluated)."""

@@ -58,7 +58,10 @@ def run_record(args: argparse.Namespace) -> int:
     if args.json:
         print_json(summary)
     else:
-        print(f"wrote {args.out}: {len(runs)} geometries, {summary['frames']} frames on {road.spec} (open: rerun {args.out})")
+        print(
+            f"wrote {args.out}: {len(runs)} geometries, {summary['frames']} frames on {road.spec} "
+            f"(open: rerun {args.out})"
+        )
     return EXIT_OK
 
 
@@ -89,7 +92,9 @@ def _record_remote(args: argparse.Namespace) -> int:
         print_json({**rec, "out": args.out, "bytes": size})
     else:
         labels = ", ".join(d["label"] for d in rec["designs"])
-        print(f"wrote {args.out} (recording {rec['id']}, {size} bytes, {rec['frames']} frames): {labels} on {rec['road']}")
+        print(
+            f"wrote {args.out} (recording {rec['id']}, {size} bytes, {rec['frames']} frames): {labels} on {rec['road']}"
+        )
     return EXIT_OK
 
 
@@ -105,7 +110,9 @@ def run_plot(args: argparse.Namespace) -> int:
     road = road_from_arg(args.road)
     writable(args.out, "--out")
     try:
-        runs = simulate_runs(_designs(args.series), road, SimSettings(duration=args.duration, series=True, series_stride=5))
+        runs = simulate_runs(
+            _designs(args.series), road, SimSettings(duration=args.duration, series=True, series_stride=5)
+        )
     except RecordingError as exc:
         print(f"finaldrive: error: {exc}", file=sys.stderr)
         return EXIT_FAILED

@@ -79,9 +79,11 @@ def idempotency_key(spec: dict[str, Any]) -> str:
 def _line(job: dict[str, Any], started: float) -> str:
     done, failed, total = job["done"], job["failed"], job["total"]
     eta = job.get("eta_s")
-    return (f"job {job['id']} {job['state']}: {done + failed:,}/{total:,} ({100 * (done + failed) / max(total, 1):.1f} %), "
-            f"failed {failed:,}, cached {job['cached']:,}, {time.monotonic() - started:.0f} s"
-            + ("" if eta is None else f", eta {eta:.0f} s"))
+    return (
+        f"job {job['id']} {job['state']}: {done + failed:,}/{total:,} ({100 * (done + failed) / max(total, 1):.1f} %), "
+        f"failed {failed:,}, cached {job['cached']:,}, {time.monotonic() - started:.0f} s"
+        + ("" if eta is None else f", eta {eta:.0f} s")
+    )
 
 
 def run_study_paper(args: argparse.Namespace) -> int:

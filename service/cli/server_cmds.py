@@ -31,7 +31,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     db = subparsers.add_parser("db", help="manage the results database", **parser_options())
     db_sub = db.add_subparsers(dest="db_command", required=True, metavar="COMMAND")
     upgrade = db_sub.add_parser("upgrade", help="migrate the database schema to this version", **parser_options())
-    upgrade.add_argument("--db", metavar="URL", help=f"SQLAlchemy URL (default {defaults['db_url']}; FINALDRIVE_DB_URL)")
+    upgrade.add_argument(
+        "--db", metavar="URL", help=f"SQLAlchemy URL (default {defaults['db_url']}; FINALDRIVE_DB_URL)"
+    )
     upgrade.set_defaults(run=run_db_upgrade)
 
 

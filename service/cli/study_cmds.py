@@ -242,17 +242,16 @@ def _design_text(d: dict[str, Any] | None) -> str:
 def run_roads(args: argparse.Namespace) -> int:
     from finaldrive.engine import PRESETS
 
-    rows = [{"name": p.name, "spec": p.road.spec, "description": p.description, "paper": p.paper}
-            for p in PRESETS.values()]
     if args.json:
-        print_json(rows)
+        print_json([{"name": p.name, "spec": p.road.spec, "description": p.description, "paper": p.paper}
+                    for p in PRESETS.values()])
         return 0
     print(f"{'name':<20} {'spec':<20} {'a2 deg':>7} {'L2 m':>6} {'R_WS m':>7} {'fit m':>7}  description")
-    for row in rows:
-        ref = row["paper"] or {}
-        print(f"{row['name']:<20} {row['spec']:<20} {ref.get('a2_deg', math.nan):7.1f} "
+    for p in PRESETS.values():
+        ref = p.paper or {}
+        print(f"{p.name:<20} {p.road.spec:<20} {ref.get('a2_deg', math.nan):7.1f} "
               f"{ref.get('L2_m', math.nan):6.3f} {ref.get('R_WS_m', math.nan):7.3f} "
-              f"{ref.get('fitness_m', math.nan):7.3f}  {row['description']}")
+              f"{ref.get('fitness_m', math.nan):7.3f}  {p.description}")
     return 0
 
 

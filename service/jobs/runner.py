@@ -104,7 +104,7 @@ class JobRunner:
             except _Stopping:
                 return
             except Exception as exc:  # a bug or an infrastructure failure: fail the job, keep serving
-                if self._stopping:  # the executor or database closed under us: resume next start
+                if self._is_stopping():  # the executor or database closed under us: resume next start
                     return
                 log.exception("job %s failed", job_id)
                 self._drop(job_id)
@@ -160,6 +160,10 @@ class JobRunner:
             close = getattr(batches, "close", None)
             if close is not None:
                 close()
+
+    def _is_stopping(self) -> bool:
+        with self._wake:
+            return self._stopping
 
     def _is_cancelled(self, job_id: int) -> bool:
         with self._wake:

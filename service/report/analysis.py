@@ -194,7 +194,9 @@ def _spearman(x: list[float], y: list[float]) -> float | None:
     return _r(float(spearmanr(x, y).statistic), 3)
 
 
-def conclusions(roads: list[dict[str, Any]], table14: dict[str, Any] | None, l2_range: tuple[float, float]) -> dict[str, Any]:
+def conclusions(
+    roads: list[dict[str, Any]], table14: dict[str, Any] | None, l2_range: tuple[float, float]
+) -> dict[str, Any]:
     """The three checks of the paper's conclusions, with their numbers and verdicts."""
     sp = [r for r in roads if r["sweep_distance"]]
     heights = [r["height_m"] for r in sp]
@@ -234,12 +236,19 @@ def conclusions(roads: list[dict[str, Any]], table14: dict[str, Any] | None, l2_
     paper = position([r["paper"] for r in roads if r["paper"]])
     span = l2_range[1] - l2_range[0]
     c2 = {
-        "ours": ours, "paper": paper, "L2_range_m": [l2_range[0], l2_range[1]], "phi0_deg": _r(PHI0_DEG, 3),
+        "ours": ours,
+        "paper": paper,
+        "L2_range_m": [l2_range[0], l2_range[1]],
+        "phi0_deg": _r(PHI0_DEG, 3),
         "close_holds": None if ours is None else bool(ours["median_L2_m"] <= l2_range[0] + CLOSE_L2_FRACTION * span),
         "aligned_holds": None if ours is None else bool(ours["median_angle_to_swingarm_deg"] <= ALIGNED_DEG),
     }
     c3: dict[str, Any] = {"holds": None}
-    if table14 is not None and table14["ours"]["geometry1"]["distance_m"] and table14["ours"]["geometry2"]["distance_m"]:
+    if (
+        table14 is not None
+        and table14["ours"]["geometry1"]["distance_m"]
+        and table14["ours"]["geometry2"]["distance_m"]
+    ):
         gain = table14["ours"]["gain_pct"]
         c3 = {"gain_pct": gain, "paper_gain_pct": table14["paper"]["gain_pct"],
               "holds": bool(gain is not None and GAIN_BAND_PCT[0] <= gain <= GAIN_BAND_PCT[1])}
@@ -263,12 +272,20 @@ def run_stats(data: StudyData) -> dict[str, Any]:
     wall = data.wall_s
     sim_s = float(e["wall_s"][~e["cached"]].sum())
     return {
-        "state": data.state, "total_planned": data.total, "stored": int(e["ok"].size),
-        "ok": int(e["ok"].sum()), "failed": int((~e["ok"]).sum()), "cached": int(e["cached"].sum()),
-        "simulated": simulated, "created_at": _time(data.created_at), "started_at": _time(data.started_at),
-        "finished_at": _time(data.finished_at), "wall_s": _r(wall, 1),
+        "state": data.state,
+        "total_planned": data.total,
+        "stored": int(e["ok"].size),
+        "ok": int(e["ok"].sum()),
+        "failed": int((~e["ok"]).sum()),
+        "cached": int(e["cached"].sum()),
+        "simulated": simulated,
+        "created_at": _time(data.created_at),
+        "started_at": _time(data.started_at),
+        "finished_at": _time(data.finished_at),
+        "wall_s": _r(wall, 1),
         "simulations_per_s": _r(simulated / wall, 1) if wall else None,
-        "simulation_cpu_s": _r(sim_s, 1), "mean_ms_per_simulation": _r(1000 * sim_s / simulated, 2) if simulated else None,
+        "simulation_cpu_s": _r(sim_s, 1),
+        "mean_ms_per_simulation": _r(1000 * sim_s / simulated, 2) if simulated else None,
     }
 
 

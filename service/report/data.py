@@ -129,7 +129,7 @@ def from_server(base_url: str, job_id: int, *, client: httpx.Client | None = Non
             client.close()
     return StudyData(
         job_id=job["id"], state=job["state"], spec=job["spec"], total=job["total"],
-        created_at=_naive(job["created_at"]), started_at=_naive(job["started_at"]),
+        created_at=_naive(job["created_at"]) or datetime.min, started_at=_naive(job["started_at"]),
         finished_at=_naive(job["finished_at"]),
         roads=[(r["name"], r["spec"]) for r in sorted(job["roads"], key=lambda r: r["index"])],
         evals=_arrays(rows),

@@ -105,11 +105,15 @@ def _conclusions(rep: dict[str, Any]) -> list[str]:
             f"median {ours['median_offset_from_swingarm_line_mm']:.1f} mm off the swingarm line. Aligned if the "
             f"median angle is <= {A.ALIGNED_DEG:g} deg: {_yes(c2['aligned_holds'])}.", ""]
     if paper:
-        out += [f"The same measures on the paper's own {paper['n']} rows (Tables 11-13): median L2 = {paper['median_L2_m']:.3f} m, "
-                f"median angle to the swingarm line {paper['median_angle_to_swingarm_deg']:.1f} deg "
-                f"({100 * paper['share_within_20_deg']:.0f} % within {A.ALIGNED_DEG:g} deg), median offset "
-                f"{paper['median_offset_from_swingarm_line_mm']:.1f} mm. With L2 this small the angle matters little: "
-                "the offset from the line is the better measure of \"aligned and close\".", ""]
+        out += [
+            f"The same measures on the paper's own {paper['n']} rows (Tables 11-13): "
+            f"median L2 = {paper['median_L2_m']:.3f} m, "
+            f"median angle to the swingarm line {paper['median_angle_to_swingarm_deg']:.1f} deg "
+            f"({100 * paper['share_within_20_deg']:.0f} % within {A.ALIGNED_DEG:g} deg), median offset "
+            f"{paper['median_offset_from_swingarm_line_mm']:.1f} mm. With L2 this small the angle matters little: "
+            'the offset from the line is the better measure of "aligned and close".',
+            "",
+        ]
     if c3["holds"] is not None:
         out += ["**(3) Geometry 1 beats geometry 2 by about 2 %.** On sine:0.04:3, geometry 1 travels "
                 f"{c3['gain_pct']:.2f} % further than geometry 2 (paper: {c3['paper_gain_pct']:.2f} %). Holds if "
@@ -122,20 +126,25 @@ def _disagreements(rep: dict[str, Any]) -> list[str]:
     fp, t14 = rep["fitness_vs_paper"], rep["table14"]
     out = ["### Where this model disagrees with the paper", ""]
     if fp:
-        out.append(f"- DE optimum fitness minus the paper's, over {fp['n']} roads: mean {_signed(fp['mean_m'])} m "
-                   f"(from {_signed(fp['min_m'])} to {_signed(fp['max_m'])} m; mean absolute {fp['mean_abs_m']:.3f} m). The "
-                   "drive torque is calibrated once, on the flat road's Table 11 optimum (READING-NOTES), so the "
-                   "flat road matches by construction and the rough roads show how the model's response to "
-                   "the road differs: the centres of mass, the start from static equilibrium, x = 0 of the "
-                   "road and the bump centre (mu = 5 m) are reference choices the paper does not give.")
+        out.append(
+            f"- DE optimum fitness minus the paper's, over {fp['n']} roads: mean {_signed(fp['mean_m'])} m "
+            f"(from {_signed(fp['min_m'])} to {_signed(fp['max_m'])} m; mean absolute {fp['mean_abs_m']:.3f} m). The "
+            "drive torque is calibrated once, on the flat road's Table 11 optimum "
+            "(docs/engine.md#reading-notes-reference-choices), so the "
+            "flat road matches by construction and the rough roads show how the model's response to "
+            "the road differs: the centres of mass, the start from static equilibrium, x = 0 of the "
+            "road and the bump centre (mu = 5 m) are reference choices the paper does not give."
+        )
     pos = rep["conclusions"]["position"]
     if pos["ours"] and pos["paper"]:
         o, p = pos["ours"], pos["paper"]
-        out.append(f"- Optimum position: median L2 {o['median_L2_m']:.3f} m here against {p['median_L2_m']:.3f} m in the "
-                   f"paper's rows; median offset from the swingarm line {o['median_offset_from_swingarm_line_mm']:.1f} "
-                   f"against {p['median_offset_from_swingarm_line_mm']:.1f} mm. Where L2 is a few millimetres the "
-                   "angle a2 hardly moves the sprocket, so the DE's a2 is close to arbitrary there and the angle "
-                   "check is weak evidence either way.")
+        out.append(
+            f"- Optimum position: median L2 {o['median_L2_m']:.3f} m here against {p['median_L2_m']:.3f} m in the "
+            f"paper's rows; median offset from the swingarm line {o['median_offset_from_swingarm_line_mm']:.1f} "
+            f"against {p['median_offset_from_swingarm_line_mm']:.1f} mm. Where L2 is a few millimetres the "
+            "angle a2 hardly moves the sprocket, so the DE's a2 is close to arbitrary there and the angle "
+            "check is weak evidence either way."
+        )
     g1, g2 = t14["ours"]["geometry1"], t14["ours"]["geometry2"]
     p1, p2 = t14["paper"]["geometry1"], t14["paper"]["geometry2"]
     if g1["distance_m"] is not None and g2["distance_m"] is not None:
@@ -164,7 +173,8 @@ def _gap_cause(t14: dict[str, Any]) -> str:
     more = "less" if ours < paper else "more"
     return (f" The gap between the geometries is {ours:.2f} % here against {paper:.2f} %: this model's distance "
             f"depends {more} on the chain's line of action than the paper's. Likely causes: the tyre's transient "
-            "slip model (eqs. 41-43, whose printed forms READING-NOTES corrects, with the algebraic loop of "
+            "slip model (eqs. 41-43, whose printed forms docs/engine.md#reading-notes-extraction-faults corrects, "
+            "with the algebraic loop of "
             "eq. 41 closed by choice), and the drive torque calibrated on the flat road only.")
 
 
@@ -216,10 +226,26 @@ def _table14(t: dict[str, Any], figs: dict[str, str]) -> list[str]:
         rows.append([g, f"{o['a2_deg']:g}", f"{o['L2_m']:g}", f"{o['R_WS_m']:g} (paper table: {p['R_WS_m']:g})",
                      _f(o["SR"]), f"{p['SR']:.3f}", _f(o["slack_mm"], ".2f"), f"{p['slack_mm']:.2f}",
                      _f(o["distance_m"]), f"{p['d_m']:.3f}", o["status"]])
-    header = ["", "a2 [deg]", "L2 [m]", "R_WS [m]", "SR", "paper SR", "slack [mm]", "paper slack", "d [m]",
-              "paper d", "status"]
-    out = [f"## Table 14: two geometries on `{t['road']}`", "", *_table(header, rows),
-           f"Geometry 1 ahead by {_f(t['ours']['gain_pct'], '.2f')} % (paper {_f(t['paper']['gain_pct'], '.2f')} %).", ""]
+    header = [
+        "",
+        "a2 [deg]",
+        "L2 [m]",
+        "R_WS [m]",
+        "SR",
+        "paper SR",
+        "slack [mm]",
+        "paper slack",
+        "d [m]",
+        "paper d",
+        "status",
+    ]
+    out = [
+        f"## Table 14: two geometries on `{t['road']}`",
+        "",
+        *_table(header, rows),
+        f"Geometry 1 ahead by {_f(t['ours']['gain_pct'], '.2f')} % (paper {_f(t['paper']['gain_pct'], '.2f')} %).",
+        "",
+    ]
     if "table14" in figs:
         out += [f"![Fig. 13 style series]({figs['table14']})", ""]
     return out
@@ -228,14 +254,20 @@ def _table14(t: dict[str, Any], figs: dict[str, str]) -> list[str]:
 def _robust(rb: dict[str, Any] | None) -> list[str]:
     if rb is None:
         return ["## Robust design", "", "No sweep design succeeded on every road.", ""]
-    rows = [[f"`{r['name']}`", _f(r["fitness_m"]), _f(r["optimum_m"]), _f(r["regret_m"]), _f(r["regret_pct"], ".2f")]
-            for r in rb["per_road"]]
-    return ["## Robust design over all roads", "",
-            f"Method: {rb['method']}: a2 = {rb['a2_deg']:.1f} deg, L2 = {rb['L2_m']:.3f} m, R_WS = {rb['R_WS_m']:.3f} m, "
-            f"mean fitness {rb['mean_fitness_m']:.3f} m ({rb['n_valid_designs']} grid designs succeeded on every road). "
-            f"What it costs on each road against that road's own optimum (the best of its DE and sweep): mean "
-            f"{rb['mean_regret_pct']:.2f} %, at most {rb['max_regret_pct']:.2f} %.", "",
-            *_table(["road", "fitness [m]", "road optimum [m]", "regret [m]", "regret [%]"], rows)]
+    rows = [
+        [f"`{r['name']}`", _f(r["fitness_m"]), _f(r["optimum_m"]), _f(r["regret_m"]), _f(r["regret_pct"], ".2f")]
+        for r in rb["per_road"]
+    ]
+    return [
+        "## Robust design over all roads",
+        "",
+        f"Method: {rb['method']}: a2 = {rb['a2_deg']:.1f} deg, L2 = {rb['L2_m']:.3f} m, R_WS = {rb['R_WS_m']:.3f} m, "
+        f"mean fitness {rb['mean_fitness_m']:.3f} m ({rb['n_valid_designs']} grid designs succeeded on every road). "
+        f"What it costs on each road against that road's own optimum (the best of its DE and sweep): mean "
+        f"{rb['mean_regret_pct']:.2f} %, at most {rb['max_regret_pct']:.2f} %.",
+        "",
+        *_table(["road", "fitness [m]", "road optimum [m]", "regret [m]", "regret [%]"], rows),
+    ]
 
 
 def _de_figures(roads: list[dict[str, Any]], figs: dict[str, str]) -> list[str]:

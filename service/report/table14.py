@@ -1,8 +1,9 @@
 """Table 14: the paper's two geometries on ``sine:0.04:3``, simulated with the study's settings.
 
 Geometry 2 uses R_WS = 0.050 m, the text's value (the table's 0.150 m contradicts its own
-squat ratio; READING-NOTES). Simulations are deterministic, so re-running the report gives
-the same numbers; the time series (Fig. 13 quantities) are not stored by the study.
+squat ratio; docs/engine.md#reading-notes-extraction-faults). Simulations are deterministic, so
+re-running the report gives the same numbers; the time series (Fig. 13 quantities) are not
+stored by the study.
 """
 
 from __future__ import annotations

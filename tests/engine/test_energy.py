@@ -5,6 +5,7 @@ formulations: the 39 natural coordinates (reference) and the 6 minimal ones (fas
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from finaldrive.engine import Design, Road, SimSettings, outcome
 from finaldrive.engine.fast import minimal
@@ -33,6 +34,7 @@ def _conservative(vehicle):
     return vehicle.replace(torque=0.0, c_rs=0.0, c_fs=0.0, c_rt=0.0, c_ft=0.0)
 
 
+@pytest.mark.slow
 def test_energy_is_conserved_within_half_a_percent_of_the_drop(vehicle):
     conservative = _conservative(vehicle)
     settings = SimSettings(method="reference", duration=1.0, tyre_longitudinal=False)

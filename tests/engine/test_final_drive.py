@@ -56,7 +56,9 @@ def _closed_form(q, p):
     return gamma, math.sqrt(d * d - (p[P.R_WS] - p[P.R_ES]) ** 2)
 
 
-@pytest.mark.parametrize("a2_deg, l2, rws", [(0, 0.0, 0.093), (270, 0.15, 0.05), (195.3, 0.037, 0.088), (45, 0.2, 0.15)])
+@pytest.mark.parametrize(
+    "a2_deg, l2, rws", [(0, 0.0, 0.093), (270, 0.15, 0.05), (195.3, 0.037, 0.088), (45, 0.2, 0.15)]
+)
 def test_wheel_turns_by_the_tangent_geometry(vehicle, a2_deg, l2, rws):
     p = pack_parameters(vehicle, Design.from_deg(a2_deg, l2, rws), SimSettings())
     q = design_pose(p)

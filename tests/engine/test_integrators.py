@@ -58,6 +58,7 @@ def _scheme_order(n_trap: int | None) -> float:
     return _slope(steps, errors)
 
 
+@pytest.mark.slow
 def test_trapezoidal_is_second_order():
     assert _scheme_order(None) == pytest.approx(2.0, abs=0.1)
 

@@ -17,7 +17,7 @@ def _rows(tables: dict) -> list[tuple[float, float, float, float]]:
     rows += [(r["a2_deg"], r["L2_m"], r["R_WS_m"], r["SR"]) for r in tables["table13_gaussian"]]
     g1, g2 = tables["table14_geometries"]["geometry1"], tables["table14_geometries"]["geometry2"]
     rows.append((g1["a2_deg"], g1["L2_m"], g1["R_WS_m"], g1["SR"]))
-    # READING-NOTES: geometry 2's wheel sprocket is 50 mm (text), not 0.150 m (table)
+    # docs/engine.md#reading-notes-extraction-faults: geometry 2's wheel sprocket is 50 mm (text), not 0.150 m (table)
     rows.append((g2["a2_deg"], g2["L2_m"], 0.050, g2["SR"]))
     return rows
 

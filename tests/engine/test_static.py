@@ -30,7 +30,9 @@ def test_tyre_loads_carry_the_weight_and_balance_moments(vehicle):
 
 
 def test_wheelbase_is_the_model_geometry(vehicle):
-    """READING-NOTES: Table 4 gives about 1.38 m at static equilibrium (not Table 3's 1.424)."""
+    """Table 4 gives about 1.38 m at static equilibrium, not Table 3's 1.424 m.
+
+    See docs/engine.md#reading-notes-reference-choices."""
     assert static_loads(vehicle).wheelbase == pytest.approx(1.38, abs=0.01)
 
 

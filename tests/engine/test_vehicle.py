@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import json
+from importlib import resources
 
 import pytest
 
 from finaldrive.engine import VehicleError, default_vehicle, load_vehicle, load_vehicle_dict
+from finaldrive.engine.vehicle import PARAMETERS
 
 
 def test_every_default_value_has_a_unit_and_a_source():
@@ -44,10 +46,35 @@ def test_file_round_trip_and_malformed_json(tmp_path):
     path.write_text("{ not json")
     with pytest.raises(VehicleError, match="not valid JSON"):
         load_vehicle(path)
-    with pytest.raises(VehicleError, match="missing.json"):
+    with pytest.raises(VehicleError, match=r"missing\.json"):
         load_vehicle(tmp_path / "missing.json")
 
 
 def test_replace_changes_the_fingerprint():
     v = default_vehicle()
     assert v.replace(torque=100.0).fingerprint() != v.fingerprint()
+
+
+def test_the_parameter_layout_is_generated_from_the_one_list() -> None:
+    from finaldrive.engine.model import params as P
+    from finaldrive.engine.model.params_layout import path, render
+
+    assert path().read_text() == render(), "run: python -m finaldrive.engine.model.params_layout"
+    assert tuple(key for key, _ in PARAMETERS) == P.VEHICLE_KEYS
+
+
+def test_every_key_of_the_vehicle_file_maps_to_exactly_one_slot() -> None:
+    import json
+
+    from finaldrive.engine.model import params as P
+
+    data = json.loads(resources.files("finaldrive.engine").joinpath("data/vehicle.json").read_text())
+    keys = [key for group in data["parameters"].values() for key in group]
+    assert len(keys) == len(set(keys))
+    model_keys = [k for k in keys if not k.startswith(("target_", "calibration_"))]
+    slots = [getattr(P, key.upper()) for key in model_keys]
+    assert sorted(slots) == list(range(P.N_VEHICLE))
+    vehicle = default_vehicle()
+    packed = vehicle.packed()
+    for key, slot in zip(model_keys, slots, strict=True):
+        assert packed[slot] == vehicle[key]

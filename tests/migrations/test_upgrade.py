@@ -57,7 +57,10 @@ def _set_revision(url: str, revision: str) -> None:
 def test_service_refuses_a_database_at_another_revision(url: str) -> None:
     upgrade(url)
     _set_revision(url, "v0.0.1.a")
-    with pytest.raises(SchemaMismatchError, match="newer finaldrive"), TestClient(create_app(Settings(db_url=url, executor="serial"))):
+    with (
+        pytest.raises(SchemaMismatchError, match="newer finaldrive"),
+        TestClient(create_app(Settings(db_url=url, executor="serial"))),
+    ):
         pass
 
 

@@ -13,8 +13,13 @@ from tests.service.svc_helpers import FakeStream
 
 @pytest.fixture
 def settings(tmp_path: Path) -> Settings:
-    return Settings(db_url=f"sqlite:///{tmp_path / 'fd.db'}", executor="serial", events_poll_seconds=0.02, sweep_chunk=16,
-                    status_cache_seconds=0)
+    return Settings(
+        db_url=f"sqlite:///{tmp_path / 'fd.db'}",
+        executor="serial",
+        events_poll_seconds=0.02,
+        sweep_chunk=16,
+        status_cache_seconds=0,
+    )
 
 
 @pytest.fixture

@@ -22,6 +22,8 @@ from finaldrive.service.jobs.plan import build_plan
 from finaldrive.service.schemas import JobSpec
 from tests.service.svc_helpers import wait_done
 
+pytestmark = pytest.mark.slow  # starts servers or subprocesses
+
 SIM = {"duration": 0.3}
 SWEEP = {"kind": "sweep", "roads": ["flat"], "grid": "a2_deg=0:270:90,l2=0.05|0.15,rws=0.09", "settings": SIM}
 DE = {"kind": "de", "roads": ["sine:0.02:3"], "de": {"np": 6, "iters": 3}, "seed": 7, "settings": SIM}

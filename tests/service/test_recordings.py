@@ -71,7 +71,12 @@ def test_fps_must_divide_the_step_rate() -> None:
 
 @pytest.fixture
 def client(tmp_path: Path) -> TestClient:
-    settings = Settings(db_url=f"sqlite:///{tmp_path / 'r.db'}", executor="serial", data_dir=str(tmp_path / "data"), status_cache_seconds=0)
+    settings = Settings(
+        db_url=f"sqlite:///{tmp_path / 'r.db'}",
+        executor="serial",
+        data_dir=str(tmp_path / "data"),
+        status_cache_seconds=0,
+    )
     with TestClient(create_app(settings, stream=FakeStream())) as c:
         yield c
 

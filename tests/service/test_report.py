@@ -32,6 +32,7 @@ def _files(root: Path) -> dict[str, bytes]:
     return {p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
 
 
+@pytest.mark.slow
 def test_report_is_complete_and_byte_identical_when_rerun(study: str, tmp_path: Path) -> None:
     out_a, out_b = tmp_path / "a", tmp_path / "b"
     for out in (out_a, out_b):

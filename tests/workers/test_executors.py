@@ -164,7 +164,9 @@ def toy_engine(monkeypatch: pytest.MonkeyPatch) -> None:
 def test_evaluate_all_in_input_order_with_progress(toy_engine: None) -> None:
     designs = toyfns.designs(50)
     progress: list[tuple[int, int]] = []
-    result = evaluate_all(SerialExecutor(), designs, Road(), SimSettings(), on_progress=lambda d, t: progress.append((d, t)))
+    result = evaluate_all(
+        SerialExecutor(), designs, Road(), SimSettings(), on_progress=lambda d, t: progress.append((d, t))
+    )
     assert_same(result, toyfns.toy_result(designs))
     assert len(progress) > 1 and progress[-1] == (50, 50)
     assert [d for d, _ in progress] == sorted({d for d, _ in progress})

@@ -88,7 +88,7 @@ def test_roads_stream_maps_rows_back_to_each_road(monkeypatch: pytest.MonkeyPatc
     monkeypatch.setattr(evaluate, "run_engine",
                         lambda d, road, settings, vehicle: toyfns.toy_result(d, scale[road]))
     monkeypatch.setattr(evaluate, "warm_up_engine", lambda *shared: None)
-    plan = [(road, toyfns.designs(n)) for road, n in zip(scale, (5, 0, 7))]
+    plan = [(road, toyfns.designs(n)) for road, n in zip(scale, (5, 0, 7), strict=True)]
     seen: dict[int, list[int]] = {0: [], 1: [], 2: []}
     for r, rows, result in evaluate_roads_stream(SerialExecutor(), plan, SimSettings(), batch_size=4):
         road, designs = plan[r]

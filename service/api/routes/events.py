@@ -47,4 +47,5 @@ async def events(
             yield ServerSentEvent(event="end", data=current)
             return
         await anyio.sleep(services.settings.events_poll_seconds)
-        current = await anyio.to_thread.run_sync(_progress, services, job_id) or current
+        latest: dict[str, object] | None = await anyio.to_thread.run_sync(_progress, services, job_id)
+        current = latest or current

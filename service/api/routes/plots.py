@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import tempfile
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from fastapi import APIRouter, Query
@@ -20,8 +20,8 @@ from finaldrive.service.db.repository import last_generations, list_evaluations,
 router = APIRouter(prefix="/jobs", tags=["results"])
 
 PlotName = Literal["sweep-map", "de-history"]
-_PNG = {200: {"content": {"image/png": {"schema": {"type": "string", "format": "binary"}}},
-              "description": "the plot"}}
+_PNG: dict[int | str, dict[str, Any]] = {
+    200: {"content": {"image/png": {"schema": {"type": "string", "format": "binary"}}}, "description": "the plot"}}
 
 
 def _png(draw: object, *args: object, **kwargs: object) -> bytes:

@@ -17,6 +17,7 @@ from finaldrive.service.db.models import Job, Recording
 from finaldrive.service.db.repository import create_recording
 from finaldrive.service.jobs.recordings import data_dir, recording_file
 from finaldrive.service.schemas import JobOut, RecordingDesign, RecordingOut, RecordingRequest
+from finaldrive.service.services import Services
 
 router = APIRouter(prefix="/recordings", tags=["recordings"])
 
@@ -69,7 +70,7 @@ def _spec(request: RecordingRequest, services: Any) -> dict[str, Any]:
 def _out(r: Recording) -> RecordingOut:
     s = r.spec
     return RecordingOut(
-        id=r.id, status=r.status, job_id=r.job_id, road=s["road"],  # type: ignore[arg-type]
+        id=r.id, status=r.status, job_id=r.job_id, road=s["road"],
         designs=[RecordingDesign(**d) for d in s["designs"]], duration=s["duration"], fps=s["fps"],
         frames=math.ceil(s["duration"] * s["fps"] - 1e-9) + 1, error=s.get("error"),
         file=f"/v1/recordings/{r.id}/file" if r.status == "succeeded" else None,
@@ -77,7 +78,7 @@ def _out(r: Recording) -> RecordingOut:
     )
 
 
-def _load(services: Any, recording_id: int) -> Recording:
+def _load(services: Services, recording_id: int) -> Recording:
     with services.db.read() as session:
         row = session.get(Recording, recording_id)
     if row is None:
@@ -91,7 +92,9 @@ def _load(services: Any, recording_id: int) -> Recording:
 def create(request: RecordingRequest, services: ServicesDep, response: Response) -> RecordingOut:
     spec = _spec(request, services)
     with services.db.write() as session:
-        job_id = request.job_id if request.job_id is not None and session.get(Job, request.job_id) else None
+        job_id = None
+        if request.job_id is not None and session.get(Job, request.job_id) is not None:
+            job_id = request.job_id
         row = create_recording(session, job_id, spec)
     assert services.recorder is not None
     services.recorder.submit(row.id)
@@ -114,4 +117,6 @@ def file(recording_id: RecordingId, services: ServicesDep) -> FileResponse:
     path = recording_file(data_dir(services.settings), recording_id)
     if not path.is_file():
         raise ApiProblem(404, f"the file of recording {recording_id} is gone from the server", slug="not-found")
-    return FileResponse(path, media_type="application/octet-stream", filename=f"finaldrive-recording-{recording_id}.rrd")
+    return FileResponse(
+        path, media_type="application/octet-stream", filename=f"finaldrive-recording-{recording_id}.rrd"
+    )

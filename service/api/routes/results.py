@@ -41,7 +41,7 @@ def evaluations(
         if session.get(Job, job_id) is None:
             raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
         roads = [road for road, _ in roads_of(session, [job_id])[job_id]]
-        road_index = find_road(road, roads)
+        road_index = None if road is None else find_road(road, roads)
         rows = list_evaluations(session, job_id, road_index=road_index, after_id=after, limit=limit + 1)
     names = {r.road_index: r.name for r in roads}
     items = [evaluation_out(e, names[e.road_index]) for e in rows[:limit]]

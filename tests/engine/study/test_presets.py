@@ -60,7 +60,8 @@ def test_reference_rows_match_tables_11_to_13() -> None:
         if preset.road.kind == "bump":
             assert (preset.road.height, preset.road.sigma) == (row["H_y_m"], row["sigma_m"])
     assert PRESETS["flat"].paper["fitness_m"] == 20.708
-    assert PRESETS["sine-h4cm-l3m"].paper["fitness_m"] == 19.861   # READING-NOTES check row
+    # the check row of docs/engine.md#reading-notes-extraction-faults
+    assert PRESETS["sine-h4cm-l3m"].paper["fitness_m"] == 19.861
     assert PRESETS["sine-h4cm-l2m"].paper["a2_deg"] == 371.0       # printed; wraps to 11 deg
     assert PRESETS["bump-h4cm-s20cm"].paper["fitness_m"] == 20.584
 

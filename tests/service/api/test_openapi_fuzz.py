@@ -22,6 +22,8 @@ from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
 from tests.service.svc_helpers import FakeStream
 
+pytestmark = pytest.mark.slow  # starts servers or subprocesses
+
 CHECKS = [not_a_server_error, status_code_conformance, content_type_conformance, response_schema_conformance]
 
 

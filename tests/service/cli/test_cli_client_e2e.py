@@ -19,6 +19,8 @@ from finaldrive.service.cli.demo_cmds import free_port, stop_server
 from finaldrive.service.cli.remote import EXIT_HTTP, EXIT_JOB_NOT_SUCCEEDED, EXIT_UNREACHABLE
 from finaldrive.service.recording import frame_count
 
+pytestmark = pytest.mark.slow  # starts servers or subprocesses
+
 TOKEN = "e2e-secret"
 
 

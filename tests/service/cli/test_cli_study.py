@@ -125,6 +125,7 @@ def test_bad_arguments_exit_2_with_one_line(argv: list[str], fragment: str, caps
 
 
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc")
+@pytest.mark.slow
 def test_ctrl_c_stops_cleanly_without_orphans() -> None:
     """SIGINT to the process group (a terminal's Ctrl-C): exit 130, one message, no worker left."""
     cmd = [sys.executable, "-m", "finaldrive.service.cli", "sweep", "--road", "flat", "--duration", "0.5",

@@ -31,7 +31,10 @@ def test_the_paper_study_plans_104190_evaluations() -> None:
     assert (plan.study.sweep_total(), plan.study.de_total(), plan.total()) == (45_540, 23 * 2_550, 104_190)
     assert spec.grid == "table9" and spec.de is not None and spec.de.np == 50 and spec.de.iters == 50
     assert spec.settings.method == "fast"  # the engine's default, as for every kind
-    assert JobSpec(kind="paper-study", roads=["flat"], settings={"method": "reference"}).normalised().settings.method == "reference"
+    assert (
+        JobSpec(kind="paper-study", roads=["flat"], settings={"method": "reference"}).normalised().settings.method
+        == "reference"
+    )
     # a stored spec normalises to itself (the Idempotency-Key hash is stable)
     assert JobSpec.model_validate(spec.model_dump(mode="json")).normalised() == spec
 
