@@ -48,7 +48,7 @@ def make_executor(
             from finaldrive.workers.ray_executor import RayExecutor
         except ImportError as error:
             raise ImportError(
-                "make_executor('ray') needs Ray: pip install 'ray[default]' "
+                "make_executor('ray') needs Ray: pip install ray "
                 f"(import failed: {error})"
             ) from error
         return RayExecutor(num_workers=num_workers, max_retries=max_retries, address=address)

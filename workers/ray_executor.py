@@ -4,15 +4,35 @@ Local by default (``ray.init(address="local")`` with ``num_workers`` CPUs); join
 cluster when ``address`` or ``RAY_ADDRESS`` is set. If Ray is already initialised in this
 process, the executor uses that session and leaves it running on ``close()``.
 
-Ray 2.60's ``ray.init`` sets ``RAY_AUTH_MODE=token`` in this process's environment when
-token authentication applies (a local start, or a token in ``~/.ray/auth_token``); ``close()``
-restores the previous value so the setting does not outlive the executor.
+What ``ray.init`` changes in this process, and what the executor does about it (Ray 2.60):
+
+- **Token authentication.** A local start turns token authentication on (it sets
+  ``RAY_AUTH_MODE=token`` in ``os.environ``) and, unless a token is found in
+  ``RAY_AUTH_TOKEN``, ``RAY_AUTH_TOKEN_PATH`` or ``~/.ray/auth_token``, writes a new one to
+  ``~/.ray/auth_token``. A local Ray listens on every interface, so authentication stays on,
+  but the executor gives the local Ray a random token of its own in ``RAY_AUTH_TOKEN`` (this
+  process and the Ray processes it starts inherit it), so nothing is written to the user's
+  home. A token the user set (``RAY_AUTH_TOKEN`` or ``RAY_AUTH_TOKEN_PATH``), or
+  ``RAY_AUTH_MODE=disabled``, is respected. Joining a cluster is left to Ray. ``close()``
+  restores ``RAY_AUTH_MODE`` and ``RAY_AUTH_TOKEN`` so the settings do not outlive the executor.
+- **Signals.** The driver's C++ core worker installs Abseil's failure-signal handler, which
+  counts SIGTERM as a failure: every SIGTERM (how services are normally stopped) printed a
+  ``*** SIGTERM received ...`` stack dump before the process's own handler ran. The executor
+  gives SIGTERM back to the handler it had before (in the main thread: the Python handler that
+  ``ray.init`` registers, which raises ``SystemExit``), and keeps Ray's handler for real
+  crashes (SIGSEGV, SIGABRT, ...). ``ray.shutdown()`` resets those signals to ``SIG_DFL``;
+  ``close()`` puts back what they were before ``ray.init`` (e.g. ``faulthandler``).
 """
 
 from __future__ import annotations
 
+import ctypes
 import os
-from collections.abc import Callable, Iterable, Iterator
+import secrets
+import signal
+import sys
+import threading
+from collections.abc import Callable, Generator, Iterable
 from typing import Any
 
 import ray
@@ -20,10 +40,114 @@ from ray.exceptions import LocalRayletDiedError, NodeDiedError, OutOfMemoryError
 
 from finaldrive.workers.base import IN_FLIGHT_PER_WORKER, ClosingMixin, WorkerLostError
 
-_AUTH_MODE = "RAY_AUTH_MODE"
+#: Environment variables ``ray.init`` reads or sets for token authentication; restored on close.
+_AUTH_ENV = ("RAY_AUTH_MODE", "RAY_AUTH_TOKEN")
 
 #: Ray errors that mean the batch's worker (or node) was lost after all retries.
 _WORKER_LOSS = (WorkerCrashedError, NodeDiedError, OutOfMemoryError, LocalRayletDiedError)
+
+#: Signals whose handlers Ray's failure-signal handler (Abseil) takes over in ``ray.init``.
+_FAILURE_SIGNALS = tuple(
+    getattr(signal, name) for name in ("SIGTERM", "SIGSEGV", "SIGILL", "SIGFPE", "SIGABRT", "SIGBUS", "SIGTRAP")
+    if hasattr(signal, name)
+)
+_SIGACTION_BYTES = 512   # more than any libc's struct sigaction; copied as opaque bytes
+
+
+def _libc() -> Any:
+    if sys.platform == "win32":
+        return None
+    try:
+        return ctypes.CDLL(None, use_errno=True)
+    except OSError:
+        return None
+
+
+class _Signals:
+    """The process's signal handlers around Ray: no stack dump on SIGTERM, and undo ``ray.shutdown()``'s reset.
+
+    Handlers are read and written with libc's ``sigaction`` (the struct copied as opaque bytes),
+    because ``signal.signal`` works only in the main thread and the service starts Ray in
+    another one. On Windows (no ``sigaction``) only the main-thread path applies.
+    """
+
+    def __init__(self) -> None:
+        self._libc = _libc()
+        self._main_thread = threading.current_thread() is threading.main_thread()
+        self._before = self._read()                          # before ray.init
+        self._python_sigterm = signal.getsignal(signal.SIGTERM)
+        self._ray_python_sigterm: Any = None                 # the handler ray.init registered, if any
+        self._ray_handlers: dict[int, int] = {}              # the C handlers ray.init installed
+        self._init_done = False
+
+    def _read(self) -> dict[int, Any]:
+        actions = {}
+        for signum in _FAILURE_SIGNALS if self._libc is not None else ():
+            action = ctypes.create_string_buffer(_SIGACTION_BYTES)
+            if self._libc.sigaction(int(signum), None, action) == 0:
+                actions[int(signum)] = action
+        return actions
+
+    def _write(self, signum: int, action: Any) -> None:
+        if action is not None:
+            self._libc.sigaction(signum, action, None)
+
+    @staticmethod
+    def _handler(action: Any) -> int:
+        return int(ctypes.c_void_p.from_buffer(action).value or 0)
+
+    def after_init(self) -> None:
+        """Give SIGTERM back to Python's handler; Ray keeps the crash signals (SIGSEGV, ...)."""
+        sigterm = int(signal.SIGTERM)
+        handler = signal.getsignal(signal.SIGTERM)
+        if self._main_thread and handler is not None and handler is not self._python_sigterm:
+            signal.signal(signal.SIGTERM, handler)           # ray.init's handler (SystemExit), not Abseil's
+            self._ray_python_sigterm = handler
+        else:
+            self._write(sigterm, self._before.get(sigterm))  # ray.init left the Python handler alone
+        self._ray_handlers = {
+            signum: self._handler(action) for signum, action in self._read().items()
+            if signum != sigterm and signum in self._before
+            and self._handler(action) != self._handler(self._before[signum])
+        }
+        self._init_done = True
+
+    def before_shutdown(self) -> dict[int, Any]:
+        return self._read()
+
+    def after_shutdown(self, before_shutdown: dict[int, Any]) -> None:
+        """Put back what ``ray.shutdown()`` reset to ``SIG_DFL``: Ray's handlers by the earlier ones.
+
+        After a failed ``ray.init`` (``after_init`` never ran), every handler goes back.
+        """
+        for signum, action in before_shutdown.items():
+            by_ray = not self._init_done or self._ray_handlers.get(signum) == self._handler(action)
+            self._write(signum, self._before.get(signum) if by_ray else action)
+        if self._python_sigterm is None or threading.current_thread() is not threading.main_thread():
+            return
+        current = signal.getsignal(signal.SIGTERM)
+        if self._init_done:
+            by_ray = self._ray_python_sigterm is not None and current is self._ray_python_sigterm
+        else:
+            by_ray = current is not self._python_sigterm
+        if by_ray:
+            signal.signal(signal.SIGTERM, self._python_sigterm)
+
+
+def _reload_auth(config: bool = True) -> None:
+    """Make Ray in this process read ``RAY_AUTH_MODE`` (``config``) and the token from the environment again.
+
+    Ray caches both: the mode in its C++ config, the token once it has loaded one. ``ray.init``
+    refreshes the config itself when it turns token authentication on (``Config.initialize``),
+    but not when the mode goes back, so without this a later ``ray.init`` in this process
+    would still ask for a token.
+    """
+    raylet: Any = ray._raylet                # compiled; its stubs omit these names
+    if not hasattr(raylet, "AuthenticationTokenLoader"):   # a Ray without token authentication
+        return
+    if config:
+        raylet.Config.initialize("")
+    raylet.AuthenticationTokenLoader.instance().reset_cache()
 
 
 @ray.remote
@@ -41,25 +165,34 @@ class RayExecutor(ClosingMixin):
             raise ValueError("max_retries must be >= 0")
         self.max_retries = max_retries
         self._started = not ray.is_initialized()
-        self._auth_mode_before = os.environ.get(_AUTH_MODE)
+        self._env_before = {name: os.environ.get(name) for name in _AUTH_ENV}
+        self._signals: _Signals | None = None
         if self._started:
             address = address or os.environ.get("RAY_ADDRESS") or None
             options: dict[str, Any] = {
                 "include_dashboard": False, "ignore_reinit_error": True, "log_to_driver": False,
             }
-            if address:
-                ray.init(address=address, **options)
-            else:
-                ray.init(address="local", num_cpus=num_workers or os.cpu_count() or 1, **options)
-        self.num_workers = num_workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
+            self._signals = _Signals()
+            try:
+                if address:
+                    ray.init(address=address, **options)
+                else:
+                    self._use_own_token()
+                    ray.init(address="local", num_cpus=num_workers or os.cpu_count() or 1, **options)
+            except BaseException:
+                self._undo_init()
+                self._started = False
+                raise
+            self._signals.after_init()
+        self.num_workers = num_workers or max(1, int(ray.cluster_resources().get("CPU", 1)))  # type: ignore[no-untyped-call]
         self._task = _run_batch.options(max_retries=max_retries, retry_exceptions=False)
 
     def map_batches(
         self, fn: Callable[..., Any], batches: Iterable[Any], shared: tuple[Any, ...] = ()
-    ) -> Iterator[tuple[int, Any]]:
+    ) -> Generator[tuple[int, Any], None, None]:
         shared_refs = [ray.put(value) for value in shared]
         source = enumerate(batches)
-        pending: dict[ray.ObjectRef, int] = {}
+        pending: dict[ray.ObjectRef[Any], int] = {}
         limit = IN_FLIGHT_PER_WORKER * self.num_workers
 
         def fill() -> None:
@@ -80,7 +213,7 @@ class RayExecutor(ClosingMixin):
                     raise WorkerLostError(
                         f"a batch's worker died more than max_retries={self.max_retries} times: {error}"
                     ) from error
-                finished = [(pending.pop(ref), value) for ref, value in zip(ready, values)]
+                finished = [(pending.pop(ref), value) for ref, value in zip(ready, values, strict=True)]
                 fill()
                 yield from finished
         finally:
@@ -88,12 +221,32 @@ class RayExecutor(ClosingMixin):
                 for ref in pending:
                     ray.cancel(ref)
 
+    def _use_own_token(self) -> None:
+        """A local Ray gets a random token in ``RAY_AUTH_TOKEN``, so Ray writes none to ``~/.ray``."""
+        if os.environ.get("RAY_AUTH_MODE", "").lower() == "disabled":
+            return
+        if os.environ.get("RAY_AUTH_TOKEN") or os.environ.get("RAY_AUTH_TOKEN_PATH"):
+            return                                   # the user's token
+        os.environ["RAY_AUTH_TOKEN"] = secrets.token_hex(32)
+        _reload_auth(config=False)                   # a token cached by an earlier session in this process
+
+    def _undo_init(self) -> None:
+        """Restore the environment and the signal handlers that ``ray.init`` changed."""
+        before_shutdown = self._signals.before_shutdown() if self._signals is not None else {}
+        if ray.is_initialized():
+            ray.shutdown()
+        if self._signals is not None:
+            self._signals.after_shutdown(before_shutdown)
+        if any(os.environ.get(name) != value for name, value in self._env_before.items()):
+            for name, value in self._env_before.items():
+                if value is None:
+                    os.environ.pop(name, None)
+                else:
+                    os.environ[name] = value
+            _reload_auth()
+
     def close(self) -> None:
         """Shut Ray down if this executor started it; idempotent."""
-        if self._started and ray.is_initialized():
-            ray.shutdown()
-            if self._auth_mode_before is None:
-                os.environ.pop(_AUTH_MODE, None)
-            else:
-                os.environ[_AUTH_MODE] = self._auth_mode_before
+        if self._started:
+            self._undo_init()
         self._started = False

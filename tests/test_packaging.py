@@ -1,0 +1,47 @@
+"""One import package: finaldrive.{engine,workers,service,migrations}; nothing under the folders' own names."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tomllib
+import zipfile
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+FOLDERS = ("engine", "workers", "service", "migrations")
+
+
+@pytest.mark.parametrize("name", FOLDERS)
+def test_the_folders_are_not_importable_under_their_own_names(name: str, tmp_path: Path) -> None:
+    for cwd in (REPO, tmp_path):  # from the clone (its folders are on sys.path) and from anywhere else
+        done = subprocess.run([sys.executable, "-c", f"import {name}"], cwd=cwd, capture_output=True, text=True)
+        assert done.returncode != 0
+        assert "ModuleNotFoundError" in done.stderr or f"this is finaldrive.{name}" in done.stderr
+    done = subprocess.run([sys.executable, "-c", f"import finaldrive.{name}"], cwd=tmp_path, capture_output=True)
+    assert done.returncode == 0, done.stderr
+
+
+def test_every_package_folder_is_listed_in_pyproject() -> None:
+    config = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]
+    mapping = {folder: package for package, folder in config["package-dir"].items()}
+    found = {
+        ".".join([mapping[path.relative_to(REPO).parts[0]], *path.relative_to(REPO).parts[1:]])
+        for folder in FOLDERS for path in [REPO / folder, *(REPO / folder).rglob("*")]
+        if path.is_dir() and "__pycache__" not in path.parts and any(path.glob("*.py"))
+    }
+    assert found == set(config["packages"])
+
+
+@pytest.mark.slow
+def test_the_wheel_carries_the_data_and_the_migrations(tmp_path: Path) -> None:
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path), str(REPO)],
+                   check=True, capture_output=True)
+    (wheel,) = tmp_path.glob("finaldrive-*.whl")
+    names = set(zipfile.ZipFile(wheel).namelist())
+    assert {"finaldrive/engine/data/vehicle.json", "finaldrive/engine/data/paper_tables.json",
+            "finaldrive/migrations/alembic.ini", "finaldrive/migrations/env.py"} <= names
+    assert any(n.startswith("finaldrive/migrations/versions/") for n in names)
+    assert not any(n.split("/")[0] in FOLDERS for n in names)

@@ -1,0 +1,71 @@
+"""A local RayExecutor in a fresh process: no stack dump on SIGTERM, nothing written to $HOME, the
+process's signal handlers and environment restored on close."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("ray")
+pytestmark = pytest.mark.slow
+
+DRIVER = r"""
+import ctypes, faulthandler, json, operator, os, signal, sys, time
+from finaldrive.workers import make_executor
+
+libc = ctypes.CDLL(None)
+def handlers():
+    out = {}
+    for name in ("SIGTERM", "SIGSEGV", "SIGABRT", "SIGBUS"):
+        buf = ctypes.create_string_buffer(512)
+        libc.sigaction(getattr(signal, name), None, buf)
+        out[name] = ctypes.c_void_p.from_buffer(buf).value or 0
+    return out
+
+faulthandler.enable()
+def on_term(signum, frame):
+    raise SystemExit(7)
+signal.signal(signal.SIGTERM, on_term)
+env = lambda: {k: os.environ.get(k) for k in ("RAY_AUTH_MODE", "RAY_AUTH_TOKEN")}
+before = (handlers(), env())
+with make_executor("ray", num_workers=1) as executor:
+    assert dict(executor.map_batches(operator.neg, [1, 2])) == {0: -1, 1: -2}
+    print("ready", flush=True)
+    if sys.argv[1] == "wait":
+        time.sleep(60)
+after = (handlers(), env())
+print(json.dumps({"restored": before == after, "handler": signal.getsignal(signal.SIGTERM) is on_term}))
+"""
+
+
+def run_driver(tmp_path: Path, mode: str) -> subprocess.Popen[str]:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
+    env["HOME"] = str(tmp_path)                          # a home of its own: nothing may appear in it
+    return subprocess.Popen([sys.executable, "-c", DRIVER, mode], env=env, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+
+
+def test_local_start_writes_nothing_to_home_and_restores_the_process(tmp_path: Path) -> None:
+    proc = run_driver(tmp_path, "close")
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0, err[-3000:]
+    assert json.loads(out.splitlines()[-1]) == {"restored": True, "handler": True}
+    assert not (tmp_path / ".ray").exists()
+    assert "SIGTERM received" not in err
+
+
+def test_sigterm_prints_no_stack_dump(tmp_path: Path) -> None:
+    proc = run_driver(tmp_path, "wait")
+    assert proc.stdout is not None
+    assert proc.stdout.readline().strip() == "ready"
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert "SIGTERM received" not in err and "Traceback" not in err, err[-3000:]
+    assert proc.returncode == 15     # while Ray runs, ray.init's handler in the main thread: sys.exit(15)
+    assert not (tmp_path / ".ray").exists()
