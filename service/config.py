@@ -7,12 +7,11 @@ first use, and tests pass their own :class:`Settings` to ``create_app``.
 from __future__ import annotations
 
 from functools import lru_cache
-from typing import Literal
 
 from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-ExecutorKind = Literal["serial", "process", "ray"]
+from finaldrive.workers import ExecutorKind
 
 
 class Settings(BaseSettings):
