@@ -26,6 +26,7 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("Vehicle", "VehicleError", "default_vehicle", "load_vehicle", "load_vehicle_dict"),
                     "finaldrive.engine.vehicle"),
     "static_geometry": "finaldrive.engine.geometry",
+    **dict.fromkeys(("Cost", "estimate_cost"), "finaldrive.engine.cost"),
     **dict.fromkeys(("StaticLoads", "calibration_design", "solve_chassis_cog", "solve_torque", "static_loads"),
                     "finaldrive.engine.calibrate"),
     "DifferentialEvolution": "finaldrive.engine.optimize",
@@ -75,6 +76,7 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         solve_torque as solve_torque,
         static_loads as static_loads,
     )
+    from finaldrive.engine.cost import Cost as Cost, estimate_cost as estimate_cost
     from finaldrive.engine.geometry import static_geometry as static_geometry
     from finaldrive.engine.model.coordinates import (
         coordinate_index as coordinate_index,

@@ -15,7 +15,7 @@ from finaldrive.workers import ExecutorKind
 
 
 class Settings(BaseSettings):
-    """Every knob of the REST job service (env var = ``FINALDRIVE_`` + upper-case name)."""
+    """Every knob of the REST job service and its schedulers (env var = ``FINALDRIVE_`` + upper-case name)."""
 
     model_config = SettingsConfigDict(env_prefix="FINALDRIVE_", extra="ignore")
 
@@ -31,12 +31,20 @@ class Settings(BaseSettings):
     api_token: SecretStr | None = Field(None, description="bearer token for mutating endpoints")
     max_body_bytes: int = Field(1_048_576, ge=1024, description="request body size limit")
     max_job_evaluations: int = Field(250_000, ge=1, description="largest job accepted")
-    sweep_chunk: int = Field(64, ge=1, description="designs dispatched per sweep step")
+    max_job_cpu_hours: float = Field(100.0, gt=0, description="largest estimated cost of a job accepted, in "
+                                     "CPU-hours of simulation (the estimate is in the job's cost_cpu_s)")
+    max_simulation_seconds: float = Field(60.0, gt=0, description="wall-time limit of one simulation; beyond it "
+                                          "the evaluation fails with reason 'time limit'")
+    lease_seconds: float = Field(15.0, ge=1, description="how long a scheduler's claim on a job lasts without a "
+                                 "heartbeat; after it another scheduler may resume the job")
+    heartbeat_seconds: float = Field(1.0, gt=0, le=5, description="how often a scheduler renews its leases and "
+                                     "looks for cancelled jobs")
+    max_jobs: int = Field(32, ge=1, description="jobs one scheduler runs at once")
+    niceness: int = Field(10, ge=0, le=19, description="OS priority offset of the simulation worker processes "
+                          "(the API keeps its core)")
     events_poll_seconds: float = Field(0.5, gt=0, description="SSE progress poll interval")
     status_cache_seconds: float = Field(0.25, ge=0, description="max age of a cached GET /v1/jobs/{id} (0: off)")
     auto_create_db: bool = Field(True, description="create the schema in an empty database")
-    data_dir: str | None = Field(None, description="where the service writes recordings "
-                                 "(default: finaldrive-data beside the SQLite file, else ./finaldrive-data)")
 
 
 @lru_cache

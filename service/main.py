@@ -14,7 +14,6 @@ from finaldrive.service.api import problems
 from finaldrive.service.api.limits import BodySizeLimit
 from finaldrive.service.api.main import api_router
 from finaldrive.service.config import Settings, get_settings
-from finaldrive.service.jobs.runner import EvalStream
 from finaldrive.service.services import start_services
 
 DESCRIPTION = """Simulate motorcycle final-drive designs on roads: parameter sweeps and differential
@@ -22,14 +21,15 @@ evolution jobs, stored in a results database. Errors are `application/problem+js
 When the server has `FINALDRIVE_API_TOKEN` set, POST endpoints need `Authorization: Bearer <token>`."""
 
 
-def create_app(settings: Settings | None = None, *, stream: EvalStream | None = None) -> FastAPI:
-    """The app. ``settings`` default to the environment (read at start-up, not here);
-    ``stream`` replaces the workers executor's evaluation stream (for tests)."""
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """The app. ``settings`` default to the environment (read at start-up, not here).
+
+    Jobs are run by schedulers (``finaldrive scheduler``; ``finaldrive serve`` starts one)."""
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         resolved = settings or get_settings()
-        services = await anyio.to_thread.run_sync(partial(start_services, resolved, stream))
+        services = await anyio.to_thread.run_sync(partial(start_services, resolved))
         app.state.services = services
         try:
             yield

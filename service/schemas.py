@@ -209,12 +209,28 @@ class RoadOut(BaseModel):
     paper: dict[str, float] | None = Field(description="the paper's optimum on this road")
 
 
-class HealthOut(BaseModel):
-    status: Literal["ok"]
-    schema_revision: str
+class StoreOut(BaseModel):
+    writable: bool = Field(description="a write transaction could start within a second")
+    latency_ms: float = Field(description="how long the check took [ms]")
+
+
+class SchedulerOut(BaseModel):
+    id: str
+    host: str
+    pid: int
     executor: str
+    capacity: int = Field(description="simulation tasks it keeps in flight")
+    heartbeat_age_s: float = Field(description="since its last heartbeat, on the database's clock [s]")
+    alive: bool = Field(description="its heartbeat is younger than a lease")
+
+
+class HealthOut(BaseModel):
+    status: Literal["ok", "unavailable"]
+    store: StoreOut
+    schedulers: list[SchedulerOut] = Field(description="schedulers that have not stopped")
+    schema_revision: str
     engine_version: str
-    active_jobs: int
+    active_jobs: int | None = Field(description="queued, running and interrupted jobs (null when the store is down)")
 
 
 class ProblemItem(BaseModel):

@@ -9,6 +9,7 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from sqlalchemy.exc import InterfaceError, OperationalError, TimeoutError as PoolTimeout
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from finaldrive.service.schemas import Problem, ProblemItem
@@ -72,6 +73,18 @@ async def _on_validation_error(request: Request, exc: Exception) -> JSONResponse
     return problem_response(request, 422, detail, slug="validation-error", errors=items)
 
 
+#: Seconds a client should wait before repeating a request the store could not serve.
+RETRY_AFTER_S = 5
+
+
+async def _on_store_unavailable(request: Request, exc: Exception) -> JSONResponse:
+    """The store is locked past its timeout, full, or unreachable: 503, and the details only in the log."""
+    log.warning("store unavailable on %s %s: %s", request.method, request.url.path, " ".join(str(exc).split())[:500])
+    return problem_response(request, 503, "the results store is unavailable (locked, full or unreachable); "
+                            "nothing was changed; retry later", slug="store-unavailable",
+                            headers={"Retry-After": str(RETRY_AFTER_S)})
+
+
 async def _on_unexpected(request: Request, exc: Exception) -> JSONResponse:
     log.exception("unhandled error on %s %s", request.method, request.url.path, exc_info=exc)
     return problem_response(request, 500, "internal error; see the server log")
@@ -81,11 +94,14 @@ def install(app: FastAPI) -> None:
     app.add_exception_handler(ApiProblem, _on_api_problem)
     app.add_exception_handler(StarletteHTTPException, _on_http_exception)
     app.add_exception_handler(RequestValidationError, _on_validation_error)
+    for error in (OperationalError, InterfaceError, PoolTimeout):
+        app.add_exception_handler(error, _on_store_unavailable)
     app.add_exception_handler(Exception, _on_unexpected)
 
 
 def documented(*statuses: int) -> dict[int | str, dict[str, Any]]:
-    """``responses=`` entries for problem statuses (media type fixed in the OpenAPI hook)."""
+    """``responses=`` entries for problem statuses, and 503 (every route reads the store; media type
+    fixed in the OpenAPI hook)."""
     text = {
         400: "the body could not be read (its bytes are not UTF-8)",
         401: "missing or wrong bearer token (only when FINALDRIVE_API_TOKEN is set)",
@@ -93,8 +109,9 @@ def documented(*statuses: int) -> dict[int | str, dict[str, Any]]:
         409: "the resource is not ready for this (e.g. a recording still being produced)",
         413: "request body larger than FINALDRIVE_MAX_BODY_BYTES",
         422: "invalid request; `errors` names each field and the reason",
+        503: "the results store is unavailable (locked, full or unreachable); retry after Retry-After seconds",
     }
-    return {s: {"model": Problem, "description": text[s]} for s in statuses}
+    return {s: {"model": Problem, "description": text[s]} for s in (*statuses, 503)}
 
 
 def problem_media_types(openapi: dict[str, Any]) -> dict[str, Any]:

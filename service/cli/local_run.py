@@ -1,8 +1,9 @@
 """Running a study in this process and its workers (``optimize``, ``sweep``): no service, no store.
 
-The study's runs (finaldrive.engine.study) say what to simulate; each wave hands every run's
-ready requests to the executor as one stream, and results go back to their runs as they
-arrive. Progress goes to stderr. The executor is always closed, also on Ctrl-C.
+The study's runs (finaldrive.engine.study) say what to simulate; the dispatcher the service's
+schedulers use (finaldrive.workers.dispatch) keeps all their ready work in flight, and results go
+back to their runs as they arrive. Progress goes to stderr. The executor is always closed, also
+on Ctrl-C.
 """
 
 from __future__ import annotations
@@ -42,21 +43,37 @@ def open_executor(kind: str, workers: int | None) -> Executor:
         raise UsageError(str(exc)) from None
 
 
-def run_waves(runs: list[Run], plan: StudyPlan, settings: SimSettings, vehicle: Vehicle, executor: Executor,
+def run_study(runs: list[Run], plan: StudyPlan, settings: SimSettings, vehicle: Vehicle, executor: Executor,
               on_result: OnResult) -> None:
-    """Evaluate until every run is done: each wave is every run's ready work, in one stream."""
-    from finaldrive.engine import fitness_values
-    from finaldrive.workers import evaluate_roads_stream
+    """Evaluate until every run is done, all ready work in flight (the service's dispatcher, no store).
+
+    A part whose worker was lost comes back as failed designs with that reason, as in the service.
+    """
+    from finaldrive.engine import BatchResult, fitness_values
+    from finaldrive.workers.dispatch import Dispatcher, Work
+    from finaldrive.workers.evaluate import run_engine_on_roads, warm_up_engine
 
     by_index = {run.index: run for run in runs}
-    while requests := [q for run in runs if not run.done for q in run.take()]:
-        stream = evaluate_roads_stream(executor, [(plan.roads[q.road].road, q.designs) for q in requests],
-                                       settings, vehicle)
-        for i, rows, batch in stream:
-            part = requests[i].part(rows)
-            fitness = fitness_values(batch)
-            on_result(part, batch, fitness)
-            by_index[part.run].tell(part.road, part.step, part.candidates, fitness)
+
+    def delivered(part: Request, batch: BatchResult) -> None:
+        fitness = fitness_values(batch)
+        on_result(part, batch, fitness)
+        by_index[part.run].tell(part.road, part.step, part.candidates, fitness)
+
+    dispatcher = Dispatcher(executor, run_engine_on_roads, warmup=warm_up_engine)
+    work = Work(key="local", shared=(tuple(r.road for r in plan.roads), settings, vehicle), on_result=delivered,
+                on_failure=lambda part, reason: delivered(part, BatchResult.failed(part.designs, reason)))
+    dispatcher.add(work)
+    try:
+        while True:
+            for run in runs:
+                if not run.done:
+                    work.queue.extend(run.take())
+            if not work.queue and not dispatcher.in_flight():
+                return
+            dispatcher.step(0.1)
+    finally:
+        dispatcher.close()
 
 
 def design_dict(x: np.ndarray) -> dict[str, float]:

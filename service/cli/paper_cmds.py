@@ -118,8 +118,13 @@ def _run_server(args: argparse.Namespace, spec: dict[str, Any]) -> int:
 
 
 def _run_local(args: argparse.Namespace, spec_dict: dict[str, Any]) -> int:
+    """Submit to the store and run a scheduler in this process (its main thread) until the job ends."""
+    import threading
+
     from finaldrive.service.config import Settings
+    from finaldrive.service.db.engine import display_url
     from finaldrive.service.jobs.plan import PlanError
+    from finaldrive.service.jobs.scheduler import run_scheduler
     from finaldrive.service.jobs.submit import submit_job
     from finaldrive.service.schemas import JobSpec
     from finaldrive.service.services import start_services
@@ -130,22 +135,32 @@ def _run_local(args: argparse.Namespace, spec_dict: dict[str, Any]) -> int:
     try:
         try:
             job, created = submit_job(services.db, JobSpec.model_validate(spec_dict),
-                                      idempotency_key=idempotency_key(spec_dict), max_evaluations=10**9)
+                                      idempotency_key=idempotency_key(spec_dict), max_evaluations=10**9,
+                                      max_cpu_hours=settings.max_job_cpu_hours)
         except PlanError as exc:
             raise UsageError(exc.msg) from None
-        if created:
-            services.runner.submit(job.id)
-        print(f"job {job.id} ({'submitted' if created else 'existing'}) in {settings.db_url}: "
+        print(f"job {job.id} ({'submitted' if created else 'existing'}) in {display_url(settings.db_url)}: "
               f"{job.total:,} evaluations, executor {settings.executor}", flush=True)
-        started = printed = time.monotonic()
-        while (body := _local_job(services, job.id))["state"] not in TERMINAL:
-            if time.monotonic() - printed >= args.interval:
-                print(_line(body, started), flush=True)
-                printed = time.monotonic()
-            time.sleep(min(0.2, args.interval))
+        stop = threading.Event()
+        final: dict[str, Any] = {}
+
+        def follow() -> None:
+            started = printed = time.monotonic()
+            while (body := _local_job(services, job.id))["state"] not in TERMINAL and not stop.is_set():
+                if time.monotonic() - printed >= args.interval:
+                    print(_line(body, started), flush=True)
+                    printed = time.monotonic()
+                time.sleep(min(0.2, args.interval))
+            final.update(body)
+            stop.set()
+
+        threading.Thread(target=follow, name="finaldrive-progress", daemon=True).start()
+        run_scheduler(settings, stop, handle_signals=True)
     finally:
         services.close()
-    return _finish(body, f"--db {settings.db_url}")
+    if not final:  # stopped (Ctrl-C) before the job ended: it resumes at the next run
+        raise KeyboardInterrupt
+    return _finish(final, f"--db {display_url(settings.db_url)}")
 
 
 def _local_job(services: Any, job_id: int) -> dict[str, Any]:

@@ -33,7 +33,7 @@ from finaldrive.service.cli.common import (
     writable,
 )
 from finaldrive.service.cli.engine_cmds import EVALUATE_COLUMNS, batch_rows
-from finaldrive.service.cli.local_run import Tally, default_executor, design_dict, open_executor, run_waves
+from finaldrive.service.cli.local_run import Tally, default_executor, design_dict, open_executor, run_study
 from finaldrive.service.cli.progress import Progress
 
 
@@ -97,7 +97,7 @@ def run_optimize(args: argparse.Namespace) -> int:
     with open_executor(kind, args.workers) as executor:
         n_workers = executor.num_workers
         try:
-            run_waves(runs, plan, settings, vehicle, executor, tally)
+            run_study(runs, plan, settings, vehicle, executor, tally)
         finally:
             tally.progress.close()
     de_run = runs[0].de  # one DE: on one road, or robust over several
@@ -180,7 +180,7 @@ def run_sweep(args: argparse.Namespace) -> int:
                 writer.writerows({"road": plan.roads[part.road].name, **row} for row in batch_rows(batch))
 
         try:
-            run_waves(plan.runs(), plan, settings, vehicle, executor, on_result)
+            run_study(plan.runs(), plan, settings, vehicle, executor, on_result)
         finally:
             tally.progress.close()
     score = table[0] if not several else aggregate(table, args.objective)

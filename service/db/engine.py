@@ -1,10 +1,11 @@
 """Database engine and sessions.
 
-SQLite (the default) gets, on every new connection, ``busy_timeout`` (set first),
-``journal_mode=WAL``, ``synchronous=FULL`` and ``foreign_keys=ON``. pysqlite's implicit
-transactions are replaced by explicit ``BEGIN`` (SQLAlchemy's SQLite recipe), and write
+SQLite (the default) gets, on every new connection, ``journal_mode=WAL``, ``synchronous=FULL``
+and ``foreign_keys=ON``. pysqlite's implicit transactions are replaced by explicit ``BEGIN``
+(SQLAlchemy's SQLite recipe), each preceded by the transaction's ``busy_timeout``, and write
 transactions start with ``BEGIN IMMEDIATE`` so a reader never has to upgrade its lock.
-Any other SQLAlchemy URL is used as is.
+PostgreSQL connections time out after 5 s and a write transaction waits for locks at most its
+timeout (``lock_timeout``). Any other SQLAlchemy URL is used as is.
 """
 
 from __future__ import annotations
@@ -13,14 +14,16 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from sqlalchemy import Engine, create_engine, event
+from sqlalchemy import Engine, create_engine, event, text
 from sqlalchemy.engine import make_url
-from sqlalchemy.orm import Session, sessionmaker
+from sqlalchemy.orm import Session
 
-BUSY_TIMEOUT_MS = 10_000
-#: anyio's default worker threads (40) run the sync routes; plus the runner and SSE polls.
+#: How long a transaction waits for a lock before it fails (a failed write is retried or answered 503).
+LOCK_TIMEOUT_S = 10.0
+#: anyio's default worker threads (40) run the sync routes; plus the SSE polls.
 POOL_SIZE = 40
-_WRITE = {"sqlite_begin": "IMMEDIATE"}
+#: Seconds to open a connection to a database server before giving up.
+CONNECT_TIMEOUT_S = 5
 
 
 def display_url(url: str) -> str:
@@ -34,22 +37,28 @@ def display_url(url: str) -> str:
 class Database:
     """An engine plus read and write session factories."""
 
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, *, lock_timeout_s: float = LOCK_TIMEOUT_S) -> None:
         self.url = url
+        self.lock_timeout_s = lock_timeout_s
         self.engine = make_engine(url)
-        self._read = sessionmaker(self.engine, expire_on_commit=False)
-        self._write = sessionmaker(self.engine.execution_options(**_WRITE), expire_on_commit=False)
+        self._postgres = self.engine.dialect.name == "postgresql"
 
     @contextmanager
     def read(self) -> Iterator[Session]:
         """A session for queries; its transaction is rolled back at the end."""
-        with self._read() as session:
+        bind = self.engine.execution_options(lock_timeout_s=self.lock_timeout_s)
+        with Session(bind, expire_on_commit=False) as session:
             yield session
 
     @contextmanager
-    def write(self) -> Iterator[Session]:
-        """One write transaction: committed on success, rolled back on any exception."""
-        with self._write() as session, session.begin():
+    def write(self, *, timeout_s: float | None = None) -> Iterator[Session]:
+        """One write transaction: committed on success, rolled back on any exception; it waits for
+        locks at most ``timeout_s`` (default: the database's lock timeout)."""
+        timeout = self.lock_timeout_s if timeout_s is None else timeout_s
+        bind = self.engine.execution_options(sqlite_begin="IMMEDIATE", lock_timeout_s=timeout)
+        with Session(bind, expire_on_commit=False) as session, session.begin():
+            if self._postgres:
+                session.execute(text(f"SET LOCAL lock_timeout = '{int(timeout * 1000)}ms'"))
             yield session
 
     def dispose(self) -> None:
@@ -58,7 +67,10 @@ class Database:
 
 def make_engine(url: str, **kwargs: Any) -> Engine:
     """``create_engine`` with the SQLite connection set-up described in the module docstring."""
-    if make_url(url).get_backend_name() != "sqlite":
+    backend = make_url(url).get_backend_name()
+    if backend == "postgresql":
+        kwargs = {"pool_pre_ping": True, "connect_args": {"connect_timeout": CONNECT_TIMEOUT_S}, **kwargs}
+    if backend != "sqlite":
         return create_engine(url, **kwargs)
     memory = make_url(url).database in (None, "", ":memory:")
     if not memory:  # one pooled connection per API worker thread: no reconnect churn under load
@@ -70,7 +82,6 @@ def make_engine(url: str, **kwargs: Any) -> Engine:
         dbapi_conn.isolation_level = None  # we emit BEGIN ourselves (see _on_begin)
         cur = dbapi_conn.cursor()
         try:
-            cur.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
             if not memory:
                 mode = cur.execute("PRAGMA journal_mode = WAL").fetchone()[0]
                 if str(mode).lower() != "wal":
@@ -82,6 +93,8 @@ def make_engine(url: str, **kwargs: Any) -> Engine:
 
     @event.listens_for(engine, "begin")
     def _on_begin(conn: Any) -> None:
-        conn.exec_driver_sql(f"BEGIN {conn.get_execution_options().get('sqlite_begin', 'DEFERRED')}")
+        options = conn.get_execution_options()
+        conn.exec_driver_sql(f"PRAGMA busy_timeout = {int(1000 * options.get('lock_timeout_s', LOCK_TIMEOUT_S))}")
+        conn.exec_driver_sql(f"BEGIN {options.get('sqlite_begin', 'DEFERRED')}")
 
     return engine

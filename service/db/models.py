@@ -18,9 +18,11 @@ from sqlalchemy import (
     ForeignKey,
     Index,
     Integer,
+    LargeBinary,
     String,
     Text,
     UniqueConstraint,
+    false,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
@@ -70,10 +72,14 @@ class Job(Base):
     resumed_at: Mapped[datetime | None] = mapped_column(DateTime)
     completed_at_resume: Mapped[int] = mapped_column(Integer, default=0)
     finished_at: Mapped[datetime | None] = mapped_column(DateTime)
+    cost_cpu_s: Mapped[float | None] = mapped_column(Float)        # estimated at submission
+    owner: Mapped[str | None] = mapped_column(String(64))          # the scheduler holding the lease
+    lease_until: Mapped[datetime | None] = mapped_column(DateTime)  # on the database's clock
 
     __table_args__ = (
         Index("ix_jobs_state_id", "state", "id"),
         Index("ix_jobs_kind_id", "kind", "id"),
+        Index("ix_jobs_owner", "owner"),
     )
 
 
@@ -117,6 +123,8 @@ class Evaluation(Base):
     wall_s: Mapped[float] = mapped_column(Float)
     cached: Mapped[bool] = mapped_column(Boolean, default=False)
     cache_key: Mapped[str] = mapped_column(String(64))
+    #: the failure may not recur (a time limit, a lost worker): never reused from the result cache
+    transient: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
     created_at: Mapped[datetime] = mapped_column(DateTime)
 
     __table_args__ = (
@@ -150,7 +158,7 @@ class Generation(Base):
 
 
 class Recording(Base):
-    """A requested animation file of one design (produced by the recording worker)."""
+    """A requested animation file of designs (produced by a scheduler, under a lease like a job)."""
 
     __tablename__ = "recordings"
 
@@ -158,5 +166,24 @@ class Recording(Base):
     job_id: Mapped[int | None] = mapped_column(ForeignKey("jobs.id", ondelete="SET NULL"), index=True)
     spec: Mapped[dict[str, Any]] = mapped_column(JSON)
     status: Mapped[str] = mapped_column(String(16))
-    path: Mapped[str | None] = mapped_column(Text)
     created_at: Mapped[datetime] = mapped_column(DateTime)
+    #: the .rrd file, once produced (loaded only when asked for)
+    content: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
+    size_bytes: Mapped[int | None] = mapped_column(Integer)
+    owner: Mapped[str | None] = mapped_column(String(64))
+    lease_until: Mapped[datetime | None] = mapped_column(DateTime)
+
+
+class Scheduler(Base):
+    """A scheduler process: what it runs on and its heartbeat (on the database's clock)."""
+
+    __tablename__ = "schedulers"
+
+    id: Mapped[str] = mapped_column(String(64), primary_key=True)
+    host: Mapped[str] = mapped_column(String(255))
+    pid: Mapped[int] = mapped_column(Integer)
+    executor: Mapped[str] = mapped_column(String(16))
+    capacity: Mapped[int] = mapped_column(Integer)
+    started_at: Mapped[datetime] = mapped_column(DateTime)
+    heartbeat_at: Mapped[datetime] = mapped_column(DateTime)
+    stopped_at: Mapped[datetime | None] = mapped_column(DateTime)

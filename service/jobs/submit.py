@@ -7,6 +7,7 @@ import json
 
 from sqlalchemy.exc import IntegrityError
 
+from finaldrive.engine import estimate_cost
 from finaldrive.service.db.engine import Database
 from finaldrive.service.db.models import Job
 from finaldrive.service.db.repository import create_job, job_by_idempotency_key
@@ -24,9 +25,9 @@ def request_hash(spec: JobSpec) -> str:
 
 
 def submit_job(
-    db: Database, spec: JobSpec, *, idempotency_key: str | None, max_evaluations: int
+    db: Database, spec: JobSpec, *, idempotency_key: str | None, max_evaluations: int, max_cpu_hours: float
 ) -> tuple[Job, bool]:
-    """(job, created). Raises PlanError (bad field or too large) or IdempotencyKeyReused."""
+    """(job, created). Raises PlanError (bad field, too many evaluations, too costly) or IdempotencyKeyReused."""
     spec = spec.normalised()
     digest = request_hash(spec)
     if idempotency_key is not None:
@@ -40,11 +41,18 @@ def submit_job(
             (), f"the job needs {total} evaluations, more than the limit of {max_evaluations} "
             "(FINALDRIVE_MAX_JOB_EVALUATIONS)",
         )
+    cost = estimate_cost(plan.settings, total)
+    if cost.cpu_s > max_cpu_hours * 3600:
+        raise PlanError(
+            ("settings",), f"the job is estimated at {cost} ({total} simulations of {plan.settings.duration:g} s, "
+            f"method {plan.settings.method}, dt {plan.settings.dt:g} s), more than the limit of {max_cpu_hours:g} "
+            "CPU-hours (FINALDRIVE_MAX_JOB_CPU_HOURS)",
+        )
     try:
         with db.write() as session:
             job = create_job(
                 session, kind=spec.kind, spec=spec.model_dump(mode="json"), request_hash=digest,
-                idempotency_key=idempotency_key, total=total,
+                idempotency_key=idempotency_key, total=total, cost_cpu_s=cost.cpu_s,
                 roads=[(r.name, r.road.spec) for r in plan.study.roads],
             )
     except IntegrityError:  # a concurrent request with the same key won the race

@@ -8,26 +8,22 @@ from fastapi.testclient import TestClient
 
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
-from tests.service.svc_helpers import FakeStream
+from tests.service.svc_helpers import ToyTask, running_scheduler
 
 
 @pytest.fixture
 def settings(tmp_path: Path) -> Settings:
-    return Settings(
-        db_url=f"sqlite:///{tmp_path / 'fd.db'}",
-        executor="serial",
-        events_poll_seconds=0.02,
-        sweep_chunk=16,
-        status_cache_seconds=0,
-    )
+    return Settings(db_url=f"sqlite:///{tmp_path / 'fd.db'}", executor="serial", events_poll_seconds=0.02,
+                    status_cache_seconds=0)
 
 
 @pytest.fixture
-def fake() -> FakeStream:
-    return FakeStream()
+def fake() -> ToyTask:
+    return ToyTask()
 
 
 @pytest.fixture
-def client(settings: Settings, fake: FakeStream) -> Iterator[TestClient]:
-    with TestClient(create_app(settings, stream=fake)) as c:
+def client(settings: Settings, fake: ToyTask) -> Iterator[TestClient]:
+    """The API and, beside it, a scheduler thread that evaluates the toy fitness."""
+    with TestClient(create_app(settings)) as c, running_scheduler(settings, fake):
         yield c

@@ -1,60 +1,92 @@
-"""A fake evaluation stream: instant, deterministic, and failing where told to."""
+"""Test helpers of the service: a toy evaluation, a scheduler in a thread, waiting for jobs."""
 
 from __future__ import annotations
 
 import threading
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
 
-from finaldrive.engine.api import BatchResult, SimSettings
-from finaldrive.engine.model.road import Road
-from finaldrive.engine.vehicle import Vehicle
+from finaldrive.engine import BatchResult, Road, SimSettings, Vehicle
+from finaldrive.service.config import Settings
+from finaldrive.service.jobs.scheduler import Scheduler, SchedulerConfig
+from finaldrive.service.services import open_database
+from finaldrive.workers import Executor, SerialExecutor
 
 TERMINAL = {"succeeded", "failed", "cancelled"}
 
 
-class FakeStream:
+def toy_batch(x: np.ndarray, road: Road, fail_above_l2: float | None = None) -> BatchResult:
     """fitness = 20 - (a2 - 1)^2 - 10 (l2 - 0.1)^2 - 100 (rws - 0.09)^2 - road height;
     designs with l2 > ``fail_above_l2`` fail with reason "fake divergence"."""
+    fitness = 20 - (x[:, 0] - 1) ** 2 - 10 * (x[:, 1] - 0.1) ** 2 - 100 * (x[:, 2] - 0.09) ** 2 - road.height
+    failed = np.zeros(len(x), bool) if fail_above_l2 is None else x[:, 1] > fail_above_l2
+    fitness = np.where(failed, np.nan, fitness)
+    n = len(x)
+    return BatchResult(
+        designs=x, distance_m=fitness + 0.5, squat_ratio=np.full(n, 0.9), slack_m=np.full(n, 0.001),
+        fitness_m=fitness, chain_length_m=np.full(n, 1.2), wall_s=np.full(n, 0.01),
+        status=tuple("failed" if f else "ok" for f in failed),
+        reason=tuple("fake divergence" if f else "" for f in failed),
+    )
 
-    def __init__(self, *, batch_size: int = 4, fail_above_l2: float | None = None, delay: float = 0.0) -> None:
-        self.batch_size = batch_size
+
+def toy_rows(rows: np.ndarray, roads: tuple[Road, ...], settings: SimSettings,
+             vehicle: Vehicle | None) -> list[tuple[int, BatchResult]]:
+    """The worker task of the scheduler, with the toy fitness instead of the engine (picklable)."""
+    road = int(rows[0, 0])
+    return [(road, toy_batch(rows[:, 1:], roads[road]))]
+
+
+class ToyTask:
+    """:func:`toy_rows` run in this process (serial executor), with a counter, a delay and a gate."""
+
+    def __init__(self, *, fail_above_l2: float | None = None, delay: float = 0.0) -> None:
         self.fail_above_l2 = fail_above_l2
         self.delay = delay
         self.simulated = 0
         self.gate = threading.Event()
         self.gate.set()
 
-    def __call__(
-        self, designs: np.ndarray, road: Road, settings: SimSettings, vehicle: Vehicle | None
-    ) -> Iterator[tuple[np.ndarray, BatchResult]]:
-        for start in range(0, len(designs), self.batch_size):
-            self.gate.wait()
-            if self.delay:
-                threading.Event().wait(self.delay)
-            rows = np.arange(start, min(start + self.batch_size, len(designs)))
-            yield rows, self.batch(designs[rows], road)
-
-    def batch(self, x: np.ndarray, road: Road) -> BatchResult:
-        self.simulated += len(x)
-        fitness = 20 - (x[:, 0] - 1) ** 2 - 10 * (x[:, 1] - 0.1) ** 2 - 100 * (x[:, 2] - 0.09) ** 2 - road.height
-        failed = np.zeros(len(x), bool) if self.fail_above_l2 is None else x[:, 1] > self.fail_above_l2
-        fitness = np.where(failed, np.nan, fitness)
-        n = len(x)
-        return BatchResult(
-            designs=x, distance_m=fitness + 0.5, squat_ratio=np.full(n, 0.9), slack_m=np.full(n, 0.001),
-            fitness_m=fitness, chain_length_m=np.full(n, 1.2), wall_s=np.full(n, 0.01),
-            status=tuple("failed" if f else "ok" for f in failed),
-            reason=tuple("fake divergence" if f else "" for f in failed),
-        )
+    def __call__(self, rows: np.ndarray, roads: tuple[Road, ...], settings: SimSettings,
+                 vehicle: Vehicle | None) -> list[tuple[int, BatchResult]]:
+        self.gate.wait()
+        if self.delay:
+            time.sleep(self.delay)
+        self.simulated += len(rows)
+        road = int(rows[0, 0])
+        return [(road, toy_batch(rows[:, 1:], roads[road], self.fail_above_l2))]
 
 
-def wait_done(client: Any, job_id: int, timeout: float = 20.0, poll: float = 0.02) -> dict[str, Any]:
+#: Fast pacing for tests: leases short enough to take over quickly, heartbeats and writes often.
+FAST = SchedulerConfig(lease_s=3.0, heartbeat_s=0.05, flush_s=0.02, recordings=True)
+
+
+@contextmanager
+def running_scheduler(settings: Settings, task: Any, *, executor: Executor | None = None,
+                      config: SchedulerConfig = FAST, scheduler_id: str | None = None) -> Iterator[Scheduler]:
+    """A scheduler on ``settings.db_url`` in a thread, stopped (and its jobs given back) on exit."""
+    db = open_database(settings)
+    scheduler = Scheduler(db, executor or SerialExecutor(), config=config, task=task, warmup=None,
+                          scheduler_id=scheduler_id, executor_kind="serial")
+    stop = threading.Event()
+    thread = threading.Thread(target=scheduler.run, args=(stop,), name="test-scheduler", daemon=True)
+    thread.start()
+    try:
+        yield scheduler
+    finally:
+        stop.set()
+        thread.join(30)
+        db.dispose()
+
+
+def wait_done(client: Any, job_id: int, timeout: float = 30.0, poll: float = 0.02) -> dict[str, Any]:
     """Poll GET /v1/jobs/{id} until the job reaches a terminal state."""
     deadline = time.monotonic() + timeout
+    job: dict[str, Any] = {}
     while time.monotonic() < deadline:
         job = client.get(f"/v1/jobs/{job_id}").json()
         if job["state"] in TERMINAL:

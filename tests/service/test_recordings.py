@@ -5,6 +5,7 @@ from __future__ import annotations
 import shutil
 import subprocess
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ from finaldrive.engine import Design, Road, SimSettings, simulate
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
 from finaldrive.service.recording import PARTS, PLOTS, frame_count, record, scalars_of, series_settings
-from tests.service.svc_helpers import FakeStream, wait_done
+from tests.service.svc_helpers import ToyTask, running_scheduler, wait_done
 
 ROAD = Road.parse("sine:0.04:3")
 DURATION, FPS = 0.4, 50
@@ -70,14 +71,10 @@ def test_fps_must_divide_the_step_rate() -> None:
 
 
 @pytest.fixture
-def client(tmp_path: Path) -> TestClient:
-    settings = Settings(
-        db_url=f"sqlite:///{tmp_path / 'r.db'}",
-        executor="serial",
-        data_dir=str(tmp_path / "data"),
-        status_cache_seconds=0,
-    )
-    with TestClient(create_app(settings, stream=FakeStream())) as c:
+def client(tmp_path: Path) -> Iterator[TestClient]:
+    """The API and a scheduler (it produces the recordings; the jobs use the toy fitness)."""
+    settings = Settings(db_url=f"sqlite:///{tmp_path / 'r.db'}", executor="serial", status_cache_seconds=0)
+    with TestClient(create_app(settings)) as c, running_scheduler(settings, ToyTask()):
         yield c
 
 

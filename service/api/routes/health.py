@@ -1,21 +1,52 @@
-"""/v1/health: liveness plus what the service runs with."""
+"""/v1/health: the store, the schedulers' heartbeats, and what the service runs with.
+
+Answers 503 (with the same body) when the store cannot be written or no scheduler is alive: a
+load balancer or a supervisor then knows jobs would not progress.
+"""
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+import time
+
+import anyio
+from fastapi import APIRouter, Response
+from sqlalchemy import text
+from sqlalchemy.exc import SQLAlchemyError
 
 from finaldrive.service.api.deps import ServicesDep
+from finaldrive.service.db.leases import schedulers
 from finaldrive.service.db.repository import count_active
-from finaldrive.service.schemas import HealthOut
+from finaldrive.service.schemas import HealthOut, SchedulerOut, StoreOut
+from finaldrive.service.services import Services
 
 router = APIRouter(prefix="/health", tags=["health"])
 
 
-@router.get("", response_model=HealthOut, summary="Service health")
-def health(services: ServicesDep) -> HealthOut:
-    with services.db.read() as session:
-        active = count_active(session)
-    return HealthOut(
-        status="ok", schema_revision=services.schema_revision, executor=services.settings.executor,
-        engine_version=services.engine_version, active_jobs=active,
-    )
+def _check(services: Services) -> HealthOut:
+    start = time.perf_counter()
+    alive_within = services.settings.lease_seconds
+    try:
+        with services.db.write(timeout_s=1.0) as session:  # a real write transaction: the lock must be free
+            session.execute(text("UPDATE jobs SET id = id WHERE id = -1"))
+            active = count_active(session)
+            rows = schedulers(session)
+        store = StoreOut(writable=True, latency_ms=round(1000 * (time.perf_counter() - start), 1))
+    except SQLAlchemyError:
+        store = StoreOut(writable=False, latency_ms=round(1000 * (time.perf_counter() - start), 1))
+        active, rows = None, []
+    found = [SchedulerOut(id=row.id, host=row.host, pid=row.pid, executor=row.executor, capacity=row.capacity,
+                          heartbeat_age_s=round(age, 3), alive=age <= alive_within) for row, age in rows]
+    ok = store.writable and any(s.alive for s in found)
+    return HealthOut(status="ok" if ok else "unavailable", store=store, schedulers=found,
+                     schema_revision=services.schema_revision, engine_version=services.engine_version,
+                     active_jobs=active)
+
+
+@router.get("", response_model=HealthOut, responses={503: {"model": HealthOut, "description": "the store cannot be "
+            "written, or no scheduler is alive"}}, summary="Service health: the store and the schedulers")
+async def health(services: ServicesDep, response: Response) -> HealthOut:
+    out = await anyio.to_thread.run_sync(_check, services)
+    if out.status != "ok":
+        response.status_code = 503
+        response.headers["Retry-After"] = "5"
+    return out

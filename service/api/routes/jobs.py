@@ -40,6 +40,7 @@ def submit(
         job, created = submit_job(
             services.db, spec, idempotency_key=idempotency_key,
             max_evaluations=services.settings.max_job_evaluations,
+            max_cpu_hours=services.settings.max_job_cpu_hours,
         )
     except PlanError as exc:
         raise validation_problem(("body", *exc.loc), exc.msg) from None
@@ -48,8 +49,6 @@ def submit(
             422, "this Idempotency-Key was already used with a different request body",
             slug="idempotency-key-reused",
         ) from None
-    if created:
-        services.runner.submit(job.id)
     response.status_code = 201 if created else 200
     response.headers["Location"] = f"/v1/jobs/{job.id}"
     return load_job(services, job.id)
@@ -90,7 +89,6 @@ def cancel(job_id: JobId, services: ServicesDep) -> JobOut:
         if session.get(Job, job_id) is None:
             raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
         changed = cancel_job(session, job_id)
-    if changed:
-        services.runner.cancel(job_id)
+    if changed:  # the scheduler running it stops it at its next heartbeat
         services.status_cache.invalidate(job_id)
     return load_job(services, job_id)

@@ -15,7 +15,8 @@ from finaldrive.service.api.deps import JobId, ServicesDep
 from finaldrive.service.api.lookups import find_road
 from finaldrive.service.api.problems import ApiProblem, documented
 from finaldrive.service.db.models import Job, JobRoad
-from finaldrive.service.db.repository import last_generations, list_evaluations, roads_of
+from finaldrive.service.db.repository import list_evaluations, roads_of
+from finaldrive.service.db.results import last_generations
 
 router = APIRouter(prefix="/jobs", tags=["results"])
 

@@ -7,7 +7,7 @@ from datetime import UTC
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Response
-from fastapi.responses import FileResponse
+from sqlalchemy.orm import undefer
 
 from finaldrive.service.api.deps import MAX_ID, ServicesDep
 from finaldrive.service.api.lookups import load_job
@@ -15,7 +15,6 @@ from finaldrive.service.api.problems import ApiProblem, documented, validation_p
 from finaldrive.service.api.security import MutationAuth
 from finaldrive.service.db.models import Job, Recording
 from finaldrive.service.db.repository import create_recording
-from finaldrive.service.jobs.recordings import data_dir, recording_file
 from finaldrive.service.schemas import JobOut, RecordingDesign, RecordingOut, RecordingRequest
 from finaldrive.service.services import Services
 
@@ -96,8 +95,6 @@ def create(request: RecordingRequest, services: ServicesDep, response: Response)
         if request.job_id is not None and session.get(Job, request.job_id) is not None:
             job_id = request.job_id
         row = create_recording(session, job_id, spec)
-    assert services.recorder is not None
-    services.recorder.submit(row.id)
     response.headers["Location"] = f"/v1/recordings/{row.id}"
     return _out(row)
 
@@ -108,15 +105,19 @@ def get(recording_id: RecordingId, services: ServicesDep) -> RecordingOut:
     return _out(_load(services, recording_id))
 
 
-@router.get("/{recording_id}/file", response_class=FileResponse, responses=documented(404, 409, 422),
+_RRD = {200: {"content": {"application/octet-stream": {"schema": {"type": "string", "format": "binary"}}},
+               "description": "the .rrd file"}}
+
+
+@router.get("/{recording_id}/file", response_class=Response, responses={**_RRD, **documented(404, 409, 422)},
             summary="Download a finished recording (.rrd, open with `rerun FILE`)")
-def file(recording_id: RecordingId, services: ServicesDep) -> FileResponse:
-    row = _load(services, recording_id)
-    if row.status != "succeeded" or row.path is None:
-        raise ApiProblem(409, f"recording {recording_id} is {row.status}, not ready", slug="not-ready")
-    path = recording_file(data_dir(services.settings), recording_id)
-    if not path.is_file():
-        raise ApiProblem(404, f"the file of recording {recording_id} is gone from the server", slug="not-found")
-    return FileResponse(
-        path, media_type="application/octet-stream", filename=f"finaldrive-recording-{recording_id}.rrd"
-    )
+def file(recording_id: RecordingId, services: ServicesDep) -> Response:
+    with services.db.read() as session:
+        row = session.get(Recording, recording_id, options=[undefer(Recording.content)])
+        if row is None:
+            raise ApiProblem(404, f"recording {recording_id} does not exist", slug="not-found")
+        if row.status != "succeeded" or row.content is None:
+            raise ApiProblem(409, f"recording {recording_id} is {row.status}, not ready", slug="not-ready")
+        content = row.content
+    return Response(content, media_type="application/octet-stream",
+                    headers={"Content-Disposition": f'attachment; filename="finaldrive-recording-{recording_id}.rrd"'})

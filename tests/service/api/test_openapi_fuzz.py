@@ -20,7 +20,6 @@ from schemathesis.checks import (
 
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
-from tests.service.svc_helpers import FakeStream
 
 pytestmark = pytest.mark.slow  # starts servers or subprocesses
 
@@ -32,7 +31,7 @@ def app(tmp_path_factory: pytest.TempPathFactory) -> Iterator[FastAPI]:
     db = Path(tmp_path_factory.mktemp("fuzz")) / "fuzz.db"
     config = Settings(db_url=f"sqlite:///{db}", executor="serial", max_job_evaluations=500, events_poll_seconds=0.01,
                       api_token=SecretStr("fuzz-token"))
-    application = create_app(config, stream=FakeStream(batch_size=64))
+    application = create_app(config)
     with TestClient(application):  # runs the lifespan; schemathesis calls the started app
         yield application
 

@@ -1,4 +1,4 @@
-"""/v1/jobs: submit, idempotency, list, get, cancel, results (fake evaluation stream)."""
+"""/v1/jobs: submit, idempotency, list, get, cancel, results (a scheduler thread with the toy fitness)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import io
 
 from fastapi.testclient import TestClient
 
-from tests.service.svc_helpers import DE, SWEEP, FakeStream, wait_done
+from tests.service.svc_helpers import DE, SWEEP, ToyTask, wait_done
 
 
 def test_sweep_runs_and_streams_results(client: TestClient) -> None:
@@ -39,7 +39,7 @@ def test_sweep_runs_and_streams_results(client: TestClient) -> None:
     assert best["roads"][0]["best"]["id"] == best_flat["id"]
 
 
-def test_result_cache_spans_jobs(client: TestClient, fake: FakeStream) -> None:
+def test_result_cache_spans_jobs(client: TestClient, fake: ToyTask) -> None:
     first = wait_done(client, client.post("/v1/jobs", json=SWEEP).json()["id"])
     simulated = fake.simulated
     second = wait_done(client, client.post("/v1/jobs", json=SWEEP).json()["id"])
@@ -48,7 +48,7 @@ def test_result_cache_spans_jobs(client: TestClient, fake: FakeStream) -> None:
     assert second["roads"][0]["best"]["fitness_m"] == first["roads"][0]["best"]["fitness_m"]
 
 
-def test_de_job_and_best_is_never_a_failure(client: TestClient, fake: FakeStream) -> None:
+def test_de_job_and_best_is_never_a_failure(client: TestClient, fake: ToyTask) -> None:
     fake.fail_above_l2 = 0.1
     job = wait_done(client, client.post("/v1/jobs", json=DE).json()["id"])
     assert job["state"] == "succeeded"
@@ -92,7 +92,7 @@ def test_list_filters_and_paginates(client: TestClient) -> None:
     assert client.get("/v1/jobs", params={"state": "running"}).json()["items"] == []
 
 
-def test_cancel_is_idempotent_and_stops_dispatch(client: TestClient, fake: FakeStream) -> None:
+def test_cancel_is_idempotent_and_stops_dispatch(client: TestClient, fake: ToyTask) -> None:
     fake.gate.clear()
     job = client.post("/v1/jobs", json=SWEEP).json()
     first = client.post(f"/v1/jobs/{job['id']}/cancel")
@@ -118,10 +118,10 @@ def test_roads_and_health(client: TestClient) -> None:
     roads = client.get("/v1/roads").json()
     assert len(roads) == 23 and roads[0]["name"] == "flat"
     health = client.get("/v1/health").json()
-    assert health["status"] == "ok" and health["executor"] == "serial"
+    assert health["status"] == "ok" and [s["executor"] for s in health["schedulers"]] == ["serial"]
 
 
-def test_concurrent_jobs_share_the_executor_round_robin(client: TestClient, fake: FakeStream) -> None:
+def test_concurrent_jobs_share_the_executor_round_robin(client: TestClient, fake: ToyTask) -> None:
     fake.gate.clear()
     a = client.post("/v1/jobs", json=SWEEP).json()["id"]
     b = client.post("/v1/jobs", json=SWEEP | {"seed": 1, "roads": ["bump:0.01:0.5", "flat"]}).json()["id"]

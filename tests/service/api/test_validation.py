@@ -11,7 +11,7 @@ from pydantic import SecretStr
 
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
-from tests.service.svc_helpers import DE, SWEEP, FakeStream
+from tests.service.svc_helpers import DE, SWEEP, ToyTask
 
 BAD_SPECS = [
     ({**SWEEP, "roads": ["moon-road"]}, "roads.0", "unknown road 'moon-road'"),
@@ -54,8 +54,8 @@ def test_body_over_the_limit_is_413(client: TestClient) -> None:
     assert client.get("/v1/jobs").json()["items"] == []
 
 
-def test_job_over_the_size_limit(settings: Settings, fake: FakeStream) -> None:
-    with TestClient(create_app(settings.model_copy(update={"max_job_evaluations": 100}), stream=fake)) as c:
+def test_job_over_the_size_limit(settings: Settings, fake: ToyTask) -> None:
+    with TestClient(create_app(settings.model_copy(update={"max_job_evaluations": 100}))) as c:
         body = assert_problem(c.post("/v1/jobs", json={**DE, "de": {"np": 10, "iters": 10}}), 422)
         assert "110 evaluations" in body["detail"] and "limit of 100" in body["detail"]
         assert c.get("/v1/jobs").json()["items"] == []
@@ -67,8 +67,8 @@ def test_unknown_job_and_bad_cursor(client: TestClient) -> None:
     assert_problem(client.get("/v1/jobs", params={"cursor": "zz"}), 422)
 
 
-def test_token_guards_mutations(settings: Settings, fake: FakeStream) -> None:
-    with TestClient(create_app(settings.model_copy(update={"api_token": SecretStr("s3cret")}), stream=fake)) as c:
+def test_token_guards_mutations(settings: Settings, fake: ToyTask) -> None:
+    with TestClient(create_app(settings.model_copy(update={"api_token": SecretStr("s3cret")}))) as c:
         for headers in ({}, {"Authorization": "Bearer wrong"}):
             r = c.post("/v1/jobs", json=SWEEP, headers=headers)
             assert_problem(r, 401)

@@ -17,7 +17,7 @@ from finaldrive.service.config import Settings
 from finaldrive.service.jobs.plan import build_plan
 from finaldrive.service.main import create_app
 from finaldrive.service.schemas import JobSpec
-from tests.service.svc_helpers import FakeStream, wait_done
+from tests.service.svc_helpers import ToyTask, running_scheduler, wait_done
 
 TINY = {"kind": "paper-study", "roads": ["flat", "sine:0.04:3"], "grid": "a2_deg=0:300:60,l2=0.05|0.15",
         "de": {"np": 4, "iters": 3}, "seed": 1}
@@ -64,20 +64,20 @@ def test_one_job_with_one_progress_view(client: TestClient) -> None:
 
 def test_a_paper_study_resumes_in_both_parts(settings: Settings, tmp_path: Path) -> None:
     ref = settings.model_copy(update={"db_url": f"sqlite:///{tmp_path / 'ref.db'}"})
-    with TestClient(create_app(ref, stream=FakeStream())) as c:
+    with TestClient(create_app(ref)) as c, running_scheduler(ref, ToyTask()):
         reference = _slots(c.get(f"/v1/jobs/{wait_done(c, c.post('/v1/jobs', json=TINY).json()['id'])['id']}"
                                  "/evaluations", params={"limit": 1000}).json()["items"])
     job_id = 0
-    for stop_at in (10, 30):  # once in the sweep part, once in the DE part
-        with TestClient(create_app(settings, stream=FakeStream(batch_size=2, delay=0.01))) as c:
+    for stop_at in (10, 30):  # the sweep and the DEs run together: stopped twice mid-way
+        with TestClient(create_app(settings)) as c, running_scheduler(settings, ToyTask(delay=0.01)):
             job_id = c.post("/v1/jobs", json=TINY, headers={"Idempotency-Key": "tiny"}).json()["id"]
             while c.get(f"/v1/jobs/{job_id}").json()["done"] < stop_at:
                 time.sleep(0.01)
         with sqlite3.connect(settings.db_url.removeprefix("sqlite:///")) as db:
             state, done = db.execute("SELECT state, n_done FROM jobs WHERE id = ?", (job_id,)).fetchone()
         assert state == "interrupted" and stop_at <= done < TINY_TOTAL
-    fake = FakeStream()
-    with TestClient(create_app(settings, stream=fake)) as c:
+    fake = ToyTask()
+    with TestClient(create_app(settings)) as c, running_scheduler(settings, fake):
         job = wait_done(c, job_id)
         items = c.get(f"/v1/jobs/{job_id}/evaluations", params={"limit": 1000}).json()["items"]
     assert job["state"] == "succeeded" and job["done"] == TINY_TOTAL

@@ -1,0 +1,452 @@
+"""The scheduler: claims jobs from the store under leases and keeps the executor full with them.
+
+One process (``finaldrive scheduler``, or the one ``finaldrive serve`` starts beside the API)
+runs :meth:`Scheduler.run` in its main thread. Several schedulers, on several machines, may
+serve one database: a job belongs to the scheduler holding its lease (finaldrive.service.db.leases).
+
+Each turn of the loop: renew the heartbeat and leases (and learn of cancelled or lost jobs),
+claim new jobs, move every run's ready requests past the store (slots already stored, the
+result cache) into the dispatcher, let the dispatcher keep the executor full and deliver results,
+and write results in bulk. A DE generation is told to its optimiser when its last result arrives
+and stored after its evaluations, so a resumed job continues from its last stored generation
+with any stored evaluations of the next one reused.
+
+Faults: a database error (locked past the busy timeout, disk full, connection lost) never stops
+the scheduler and never finishes a job: the failed operation is retried with back-off while the
+results wait in memory (dispatching pauses when too many wait). Messages stored in jobs never
+carry SQL; the details go to the log.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import signal
+import socket
+import threading
+import time
+import uuid
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+import numpy as np
+from sqlalchemy.exc import SQLAlchemyError
+
+from finaldrive.engine import (
+    ENGINE_VERSION,
+    PAPER_SWEEP_STEP,
+    STATUS_OK,
+    BatchResult,
+    DERun,
+    PlanError,
+    Request,
+    Run,
+    fitness_values,
+)
+from finaldrive.service.config import Settings
+from finaldrive.service.db.engine import Database
+from finaldrive.service.db.leases import beat, claim_jobs, finish_job, register_scheduler, stop_scheduler
+from finaldrive.service.db.models import EvalStatus, Evaluation, Job, JobState
+from finaldrive.service.db.results import (
+    EvalRow,
+    LeaseLost,
+    cached_evaluations,
+    last_generations,
+    store_evaluations,
+    store_generation,
+    stored_fitness,
+    stored_slots,
+)
+from finaldrive.service.jobs.cache import context_prefix, design_keys
+from finaldrive.service.jobs.plan import JobPlan, build_plan
+from finaldrive.service.jobs.recordings import RecordingProducer
+from finaldrive.service.schemas import JobSpec
+from finaldrive.workers import Executor
+from finaldrive.workers.dispatch import Dispatcher, Task, Work
+from finaldrive.workers.evaluate import run_engine_on_roads, warm_up_engine
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
+
+#: How the engine's reason for a simulation stopped by its wall-time limit begins (not reused from the cache).
+TIME_LIMIT = "time limit"
+#: A scheduler's transactions wait this long for a lock, then retry later (the loop keeps dispatching).
+SCHEDULER_LOCK_TIMEOUT_S = 2.0
+
+
+@dataclass(frozen=True)
+class SchedulerConfig:
+    """How a scheduler paces itself (``finaldrive scheduler --help`` documents each)."""
+
+    lease_s: float = 15.0          # a job's lease, renewed every heartbeat
+    heartbeat_s: float = 1.0       # also how fast a cancel is obeyed
+    max_jobs: int = 32             # jobs run at once by this scheduler
+    flush_s: float = 0.25          # results are written at most this long after they arrive
+    max_backlog_rows: int = 50_000  # results waiting for the store before dispatching pauses
+    batch_size: int | None = None  # designs per task (None: adaptive)
+    recordings: bool = True        # also produce queued recordings
+
+
+@dataclass
+class _Writes:
+    """What a job has to store, in order: evaluations, then each completed generation."""
+
+    rows: list[EvalRow] = field(default_factory=list)
+    generations: list[dict[str, Any]] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.rows) + len(self.generations)
+
+
+class ActiveJob:
+    """A job this scheduler owns: its runs, what waits to be stored, and its dispatcher work."""
+
+    def __init__(self, job_id: int, plan: JobPlan, runs: list[Run], engine_version: str, resumed: bool) -> None:
+        self.id = job_id
+        self.plan = plan
+        self.runs = {run.index: run for run in runs}
+        self.resumed = resumed
+        self.intake: deque[Request] = deque()
+        self.writes = _Writes()
+        self.copies: dict[tuple[int, int, int], list[int]] = {}   # (road, step, first candidate) -> duplicates
+        self.keys: dict[tuple[int, int, int], str] = {}           # dispatched (road, step, candidate) -> key
+        self.prefixes = [context_prefix(r.road, plan.settings, plan.vehicle, engine_version)
+                         for r in plan.study.roads]
+        self.work: Work | None = None
+
+    def done(self, in_flight: int) -> bool:
+        return (all(run.done for run in self.runs.values()) and not self.intake and in_flight == 0
+                and self.work is not None and not self.work.queue)
+
+
+class Scheduler:
+    """Claims jobs, dispatches their simulations, stores results (one thread drives it)."""
+
+    def __init__(self, db: Database, executor: Executor, *, config: SchedulerConfig = SchedulerConfig(),
+                 task: Task = run_engine_on_roads, warmup: Callable[..., None] | None = warm_up_engine,
+                 scheduler_id: str | None = None, executor_kind: str = "?",
+                 engine_version: str = ENGINE_VERSION) -> None:
+        self.db = db
+        self.executor = executor
+        self.config = config
+        self.id = scheduler_id or f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
+        self.executor_kind = executor_kind
+        self.engine_version = engine_version
+        self.dispatcher = Dispatcher(executor, task, warmup=warmup, batch_size=config.batch_size)
+        self.jobs: dict[int, ActiveJob] = {}
+        self.recordings = RecordingProducer(db, self.id, lease_s=config.lease_s) if config.recordings else None
+        self._registered = False
+        self._next_beat = 0.0
+        self._next_flush = 0.0
+        self._backoff = 0.0
+        self._db_down_since: float | None = None
+
+    # ------------------------------------------------------------------ the loop
+    def run(self, stop: threading.Event) -> None:
+        """Serve until ``stop`` is set; then give the jobs back and release the workers."""
+        log.info("scheduler %s starting (executor %s, capacity %d)", self.id, self.executor_kind,
+                 self.executor.capacity)
+        if self.recordings is not None:
+            self.recordings.start()
+        try:
+            while not stop.is_set():
+                self.turn(0.05 if self.dispatcher.in_flight() else 0.2)
+        finally:
+            self.shutdown()
+
+    def turn(self, timeout: float) -> None:
+        """One turn of the loop (tests drive it step by step)."""
+        now = time.monotonic()
+        if now >= self._next_beat:
+            self._next_beat = now + self.config.heartbeat_s
+            self._maintain()
+        self._intake()
+        self.dispatcher.step(timeout)
+        self._finish_ready()
+        if time.monotonic() >= self._next_flush:
+            self._flush()
+
+    def shutdown(self) -> None:
+        """Cancel what runs, store what arrived, give the jobs back (``interrupted``)."""
+        self.dispatcher.close()
+        if self.recordings is not None:
+            self.recordings.stop()
+        deadline = time.monotonic() + 2.0
+        while any(len(j.writes) for j in self.jobs.values()) and time.monotonic() < deadline:
+            self._backoff = 0.0
+            self._flush()
+        self.jobs.clear()
+        self._db(lambda s: stop_scheduler(s, self.id), "give the jobs back")
+        log.info("scheduler %s stopped", self.id)
+
+    # ------------------------------------------------------------------ the store, guarded
+    def _db(self, fn: Callable[[Any], T], what: str) -> T | None:
+        """Run ``fn(session)`` in a write transaction; a database error is logged and returns None."""
+        if self._backoff and time.monotonic() < self._backoff:
+            return None
+        try:
+            with self.db.write() as session:
+                result = fn(session)
+        except LeaseLost:
+            raise
+        except SQLAlchemyError as exc:
+            now = time.monotonic()
+            if self._db_down_since is None:
+                self._db_down_since = now
+                log.warning("scheduler %s: the store is unavailable (%s): %s; retrying", self.id, what,
+                            " ".join(str(exc).split())[:500])
+            self._backoff = now + min(5.0, 0.25 + 0.5 * (now - self._db_down_since))
+            return None
+        if self._db_down_since is not None:
+            log.warning("scheduler %s: the store is back after %.1f s", self.id, time.monotonic() - self._db_down_since)
+            self._db_down_since = None
+        self._backoff = 0.0
+        return result
+
+    def _maintain(self) -> None:
+        if not self._registered:
+            done = self._db(lambda s: register_scheduler(s, self.id, host=socket.gethostname(), pid=os.getpid(),
+                                                           executor=self.executor_kind,
+                                                           capacity=self.executor.capacity) or True, "register")
+            self._registered = bool(done)
+            if not self._registered:
+                return
+        owned = self._db(lambda s: beat(s, self.id, lease_s=self.config.lease_s, capacity=self.executor.capacity),
+                         "heartbeat")
+        if owned is None:
+            return
+        for job_id in [j for j in self.jobs if j not in owned]:
+            log.info("scheduler %s: job %s is no longer ours (cancelled or taken over); stopping it", self.id, job_id)
+            self._drop(job_id)
+        room = self.config.max_jobs - len(owned)
+        claimed = self._db(lambda s: claim_jobs(s, self.id, lease_s=self.config.lease_s, limit=room), "claim jobs")
+        for job_id in sorted(owned.union(claimed or [])):  # owned but not open: a restart, or an open that failed
+            if job_id not in self.jobs:
+                self._open(job_id)
+
+    # ------------------------------------------------------------------ jobs
+    def _open(self, job_id: int) -> None:
+        loaded = self._db(lambda s: _load(s, job_id), f"open job {job_id}")
+        if loaded is None:
+            return  # retried at the next heartbeat: the job stays claimed by us
+        spec, resumed, sweep_done, de_states = loaded
+        try:
+            plan = build_plan(JobSpec.model_validate(spec))
+        except (PlanError, ValueError) as exc:
+            message = f"invalid job: {exc}"
+            self._db(lambda s: finish_job(s, self.id, job_id, JobState.failed, error=message), f"fail job {job_id}")
+            return
+        job = ActiveJob(job_id, plan, plan.study.runs(sweep_done=sweep_done, de_states=de_states),
+                        self.engine_version, resumed)
+        job.work = Work(
+            key=job_id, shared=(tuple(r.road for r in plan.study.roads), plan.settings, plan.vehicle),
+            on_result=lambda part, batch, job=job: self._on_result(job, part, batch),
+            on_failure=lambda part, reason, job=job: self._on_failure(job, part, reason),
+        )
+        self.dispatcher.add(job.work)
+        self.jobs[job_id] = job
+        log.info("scheduler %s: job %s %s", self.id, job_id, "resumed" if resumed else "started")
+
+    def _drop(self, job_id: int) -> None:
+        job = self.jobs.pop(job_id, None)
+        if job is not None and job.work is not None:
+            self.dispatcher.remove(job.work.key)
+
+    def _intake(self) -> None:
+        """Every run's ready requests: slots already stored and cache hits are taken from the store,
+        the rest (each distinct design once) goes to the dispatcher."""
+        for job in list(self.jobs.values()):
+            for run in job.runs.values():
+                if not run.done:
+                    job.intake.extend(run.take())
+            while job.intake:
+                request = job.intake[0]
+                found = self._db(lambda s, job=job, request=request: _lookup(s, job, request), f"job {job.id}")
+                if found is None:
+                    break  # the store is unavailable: keep the request, retry next turn
+                job.intake.popleft()
+                self._admit(job, request, *found)
+            assert job.work is not None
+            job.work.paused = len(job.writes) > self.config.max_backlog_rows
+
+    def _admit(self, job: ActiveJob, request: Request, stored: dict[int, float], keys: list[str],
+               hits: dict[str, Evaluation]) -> None:
+        """Tell what is known, queue the rest: each distinct design once (duplicates are copied)."""
+        keep = np.array([int(c) not in stored for c in request.candidates], dtype=bool)
+        if not keep.all():
+            known = request.part(np.flatnonzero(~keep))
+            self._tell(job, known, np.array([stored[int(c)] for c in known.candidates]))
+        request = request.part(np.flatnonzero(keep))
+        firsts: dict[str, int] = {}
+        todo, hit = [], []
+        for i, key in enumerate(keys):
+            slot = (request.road, request.step, int(request.candidates[i]))
+            if key in hits:
+                hit.append(i)
+            elif key in firsts:
+                job.copies.setdefault((request.road, request.step, int(request.candidates[firsts[key]])),
+                                      []).append(slot[2])
+            else:
+                firsts[key] = i
+                todo.append(i)
+                job.keys[slot] = key
+        if hit:
+            part = request.part(np.array(hit))
+            rows = [_row_from_cache(hits[keys[i]], part.road, part.step, int(part.candidates[j]), part.designs[j],
+                                    keys[i]) for j, i in enumerate(hit)]
+            job.writes.rows += rows
+            self._tell(job, part, np.array([math.nan if r.fitness_m is None else r.fitness_m for r in rows]))
+        if todo:
+            assert job.work is not None
+            job.work.queue.append(request.part(np.array(todo)))
+
+    def _on_result(self, job: ActiveJob, part: Request, batch: BatchResult, *, transient: bool = False) -> None:
+        if job.id not in self.jobs:
+            return
+        fitness = fitness_values(batch)
+        rows = []
+        for j, candidate in enumerate(part.candidates):
+            slot = (part.road, part.step, int(candidate))
+            key = job.keys.pop(slot)
+            rows.append(_row_from_result(batch, fitness, j, slot, part.designs[j], key, cached=False,
+                                         transient=transient))
+            for copy in job.copies.pop(slot, []):
+                rows.append(_row_from_result(batch, fitness, j, (part.road, part.step, copy), part.designs[j], key,
+                                             cached=True, transient=transient))
+        job.writes.rows += rows
+        told = Request(part.run, part.step, part.road, np.array([r.candidate for r in rows]),
+                       np.array([[r.a2, r.l2, r.rws] for r in rows]))
+        self._tell(job, told, np.array([math.nan if r.fitness_m is None else r.fitness_m for r in rows]))
+
+    def _on_failure(self, job: ActiveJob, part: Request, reason: str) -> None:
+        """A part that could not be evaluated: failed evaluations with the reason, never reused."""
+        log.warning("scheduler %s: job %s: %d designs failed: %s", self.id, job.id, len(part), reason)
+        self._on_result(job, part, BatchResult.failed(part.designs, reason), transient=True)
+
+    def _tell(self, job: ActiveJob, part: Request, fitness: np.ndarray) -> None:
+        if len(part) == 0:
+            return
+        run = job.runs[part.run]
+        if run.tell(part.road, part.step, part.candidates, fitness) and isinstance(run, DERun):
+            de = run.de
+            job.writes.generations.append({
+                "run": run.index, "generation": run.generation, "state": de.state(),
+                "population": de.population.tolist(), "fitness": _nullable(de.fitness),
+                "best_f": _nullable([de.best_f])[0], "n_evals": de.n_evals,
+            })
+
+    def _finish_ready(self) -> None:
+        for job in list(self.jobs.values()):
+            if not job.done(self.dispatcher.in_flight(job.id)) or job.writes:
+                continue
+            if self._db(lambda s, job=job: finish_job(s, self.id, job.id, JobState.succeeded),
+                        f"finish job {job.id}") is not None:
+                log.info("scheduler %s: job %s succeeded", self.id, job.id)
+                self._drop(job.id)
+
+    def _flush(self) -> None:
+        self._next_flush = time.monotonic() + self.config.flush_s
+        for job in list(self.jobs.values()):
+            if not job.writes:
+                continue
+            writes, job.writes = job.writes, _Writes()
+            try:
+                done = self._db(lambda s, job=job, writes=writes: _store(s, self.id, job.id, writes),
+                                f"store results of job {job.id}")
+            except LeaseLost:
+                log.info("scheduler %s: lost job %s before storing its results", self.id, job.id)
+                self._drop(job.id)
+                continue
+            if done is None:  # keep them, in order, before anything newer
+                job.writes = _Writes(writes.rows + job.writes.rows, writes.generations + job.writes.generations)
+                return
+
+
+def _load(session: Any, job_id: int) -> tuple[dict[str, Any], bool, set[tuple[int, int]], dict[int, Any]]:
+    """A claimed job's spec and, when it has stored results, what it needs to resume."""
+    job = session.get(Job, job_id)
+    assert job is not None
+    resumed = job.n_done + job.n_failed > 0
+    if not resumed:
+        return dict(job.spec), False, set(), {}
+    sweep_step = PAPER_SWEEP_STEP if job.kind == "paper-study" else 0
+    de_states = {i: (g.state, g.generation) for i, g in last_generations(session, job_id).items()}
+    return dict(job.spec), True, stored_slots(session, job_id, sweep_step), de_states
+
+
+def _lookup(session: Any, job: ActiveJob, request: Request) -> tuple[dict[int, float], list[str], dict[str, Any]]:
+    """What the store knows of a request: stored slots (a resumed job) and result-cache hits."""
+    stored = stored_fitness(session, job.id, request.road, request.step, request.candidates) if job.resumed else {}
+    rest = request.part(np.array([i for i, c in enumerate(request.candidates) if int(c) not in stored], dtype=int))
+    keys = design_keys(job.prefixes[request.road], rest.designs)
+    return stored, keys, cached_evaluations(session, keys)
+
+
+def _store(session: Any, owner: str, job_id: int, writes: _Writes) -> bool:
+    store_evaluations(session, owner, job_id, writes.rows)
+    for generation in writes.generations:
+        store_generation(session, owner, job_id, **generation)
+    return True
+
+
+def _row_from_result(batch: BatchResult, fitness: np.ndarray, j: int, slot: tuple[int, int, int],
+                     design: np.ndarray, key: str, *, cached: bool, transient: bool) -> EvalRow:
+    value = float(fitness[j])
+    ok = math.isfinite(value)
+    reason = batch.reason[j] or ("" if ok else f"non-finite fitness ({batch.fitness_m[j]})")
+    transient = transient or (batch.status[j] != STATUS_OK and reason.startswith(TIME_LIMIT))
+    return EvalRow(
+        road_index=slot[0], step=slot[1], candidate=slot[2], a2=float(design[0]), l2=float(design[1]),
+        rws=float(design[2]), distance_m=_finite(batch.distance_m[j]), squat_ratio=_finite(batch.squat_ratio[j]),
+        slack_m=_finite(batch.slack_m[j]), fitness_m=value if ok else None,
+        chain_length_m=_finite(batch.chain_length_m[j]),
+        status=EvalStatus.ok.value if ok else EvalStatus.failed.value, reason=reason,
+        wall_s=0.0 if cached else float(batch.wall_s[j]), cached=cached, cache_key=key, transient=transient,
+    )
+
+
+def _row_from_cache(hit: Evaluation, road: int, step: int, candidate: int, design: np.ndarray, key: str) -> EvalRow:
+    return EvalRow(
+        road_index=road, step=step, candidate=candidate, a2=float(design[0]), l2=float(design[1]),
+        rws=float(design[2]), distance_m=hit.distance_m, squat_ratio=hit.squat_ratio, slack_m=hit.slack_m,
+        fitness_m=hit.fitness_m, chain_length_m=hit.chain_length_m, status=hit.status, reason=hit.reason,
+        wall_s=0.0, cached=True, cache_key=key,
+    )
+
+
+def _finite(v: float) -> float | None:
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def _nullable(values: Sequence[float] | np.ndarray) -> list[float | None]:
+    return [float(v) if math.isfinite(v) else None for v in values]
+
+
+
+
+def run_scheduler(settings: Settings, stop: threading.Event, *, scheduler_id: str | None = None,
+                  handle_signals: bool = False) -> None:
+    """A scheduler on ``settings.db_url`` with the configured executor, until ``stop`` is set
+    (or, with ``handle_signals``, SIGTERM or SIGINT arrives: installed once the executor, which may
+    start Ray, is up, so they are ours)."""
+    from finaldrive.service.services import open_database
+    from finaldrive.workers import make_executor
+
+    db = open_database(settings)
+    db.lock_timeout_s = SCHEDULER_LOCK_TIMEOUT_S
+    executor = make_executor(settings.executor, num_workers=settings.num_workers, address=settings.ray_address,
+                             niceness=settings.niceness)
+    config = SchedulerConfig(lease_s=settings.lease_seconds, heartbeat_s=settings.heartbeat_seconds,
+                             max_jobs=settings.max_jobs, batch_size=settings.batch_size)
+    if handle_signals:
+        for signum in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(signum, lambda *_: stop.set())
+    try:
+        Scheduler(db, executor, config=config, scheduler_id=scheduler_id, executor_kind=settings.executor).run(stop)
+    finally:
+        executor.close()
+        db.dispose()

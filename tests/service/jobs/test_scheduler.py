@@ -1,0 +1,228 @@
+"""The scheduler: resuming, leases between schedulers, fencing, cancel, faults of the store.
+
+In-process: the API through TestClient, schedulers in threads, the toy fitness of svc_helpers.
+Both stores where it matters: a SQLite file and a real PostgreSQL server (tests/pg.py).
+"""
+
+from __future__ import annotations
+
+import sqlite3
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from sqlalchemy import select
+
+from finaldrive.service.config import Settings
+from finaldrive.service.db.leases import claim_jobs
+from finaldrive.service.db.models import Evaluation, Generation, Job
+from finaldrive.service.jobs.scheduler import Scheduler, SchedulerConfig
+from finaldrive.service.main import create_app
+from finaldrive.service.services import open_database
+from finaldrive.workers import SerialExecutor
+from tests.service.svc_helpers import DE, SWEEP, ToyTask, running_scheduler, wait_done
+
+
+def _submit(settings: Settings, spec: dict[str, Any]) -> int:
+    with TestClient(create_app(settings)) as c:
+        response = c.post("/v1/jobs", json=spec)
+        assert response.status_code == 201, response.text
+        return int(response.json()["id"])
+
+
+def _job(settings: Settings, job_id: int) -> dict[str, Any]:
+    with TestClient(create_app(settings)) as c:
+        return dict(c.get(f"/v1/jobs/{job_id}").json())
+
+
+def _wait(settings: Settings, job_id: int, timeout: float = 60.0) -> dict[str, Any]:
+    with TestClient(create_app(settings)) as c:
+        return wait_done(c, job_id, timeout=timeout)
+
+
+def _slots(settings: Settings, job_id: int) -> list[tuple[int, int, int]]:
+    db = open_database(settings)
+    with db.read() as session:
+        rows = session.execute(select(Evaluation.road_index, Evaluation.step, Evaluation.candidate)
+                               .where(Evaluation.job_id == job_id)).all()
+    db.dispose()
+    return [tuple(r) for r in rows]  # type: ignore[misc]
+
+
+def _final_population(settings: Settings, job_id: int) -> dict[int, list[list[float]]]:
+    db = open_database(settings)
+    with db.read() as session:
+        rows = session.execute(select(Generation.run, Generation.generation, Generation.population)
+                               .where(Generation.job_id == job_id)).all()
+    db.dispose()
+    last: dict[int, tuple[int, list[list[float]]]] = {}
+    for run, generation, population in rows:
+        if run not in last or generation > last[run][0]:
+            last[run] = (generation, population)
+    return {run: population for run, (_, population) in last.items()}
+
+
+def _drive(scheduler: Scheduler, until: Any, timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not until():
+        assert time.monotonic() < deadline, "timed out"
+        scheduler.turn(0.01)
+
+
+def test_a_sweep_resumes_with_only_what_is_missing(settings: Settings) -> None:
+    job_id = _submit(settings, SWEEP)
+    slow = ToyTask(delay=0.02)
+    with running_scheduler(settings, slow):
+        while _job(settings, job_id)["done"] < 6:
+            time.sleep(0.02)
+    stopped = _job(settings, job_id)
+    assert stopped["state"] == "interrupted" and 6 <= stopped["done"] < 24
+    fresh = ToyTask()
+    with running_scheduler(settings, fresh):
+        job = _wait(settings, job_id)
+    assert job["state"] == "succeeded" and job["done"] == 24
+    assert fresh.simulated == 24 - stopped["done"]
+    assert len(set(_slots(settings, job_id))) == len(_slots(settings, job_id)) == 24
+
+
+def test_a_de_resumes_and_ends_bit_identical_to_an_uninterrupted_run(settings: Settings, tmp_path: Path) -> None:
+    spec = {**DE, "roads": ["flat,sine:0.02:3"], "de": {"np": 6, "iters": 8}}
+    reference = settings.model_copy(update={"db_url": f"sqlite:///{tmp_path / 'ref.db'}"})
+    ref_id = _submit(reference, spec)
+    with running_scheduler(reference, ToyTask()):
+        assert _wait(reference, ref_id)["state"] == "succeeded"
+    job_id = _submit(settings, spec)
+    for stop_at in (13, 40):  # mid-generation, twice
+        with running_scheduler(settings, ToyTask(delay=0.01)):
+            while _job(settings, job_id)["done"] < stop_at:
+                time.sleep(0.01)
+    with running_scheduler(settings, ToyTask()):
+        assert _wait(settings, job_id)["state"] == "succeeded"
+    assert sorted(_slots(settings, job_id)) == sorted(_slots(reference, ref_id))
+    assert _final_population(settings, job_id) == _final_population(reference, ref_id)
+
+
+def test_a_failed_simulation_is_stored_and_the_sweep_succeeds(client: TestClient, fake: ToyTask) -> None:
+    fake.fail_above_l2 = 0.12
+    job = wait_done(client, client.post("/v1/jobs", json=SWEEP).json()["id"])
+    assert job["state"] == "succeeded" and (job["done"], job["failed"]) == (16, 8)
+    items = client.get(f"/v1/jobs/{job['id']}/evaluations", params={"limit": 100}).json()["items"]
+    failed = [e for e in items if e["status"] == "failed"]
+    assert {(e["l2"], e["reason"], e["fitness_m"]) for e in failed} == {(0.15, "fake divergence", None)}
+    assert all(road["best"]["status"] == "ok" for road in job["roads"])
+
+
+def test_two_schedulers_share_a_database_and_store_every_slot_once(store_url: str, tmp_path: Path) -> None:
+    settings = Settings(db_url=store_url, executor="serial", status_cache_seconds=0)
+    specs = [{**DE, "roads": ["flat,sine:0.02:3"], "de": {"np": 8, "iters": 6}, "seed": s} for s in (1, 2, 3)]
+    alone = Settings(db_url=f"sqlite:///{tmp_path / 'alone.db'}", executor="serial", status_cache_seconds=0)
+    reference = [_submit(alone, spec) for spec in specs]
+    with running_scheduler(alone, ToyTask()):
+        for job_id in reference:
+            assert _wait(alone, job_id)["state"] == "succeeded"
+    jobs = [_submit(settings, spec) for spec in specs]
+    with running_scheduler(settings, ToyTask(delay=0.002), scheduler_id="a"), \
+            running_scheduler(settings, ToyTask(delay=0.002), scheduler_id="b"):
+        done = [_wait(settings, job_id) for job_id in jobs]
+    assert all(job["state"] == "succeeded" for job in done)
+    for job_id, ref_id in zip(jobs, reference, strict=True):
+        slots = _slots(settings, job_id)
+        assert len(slots) == len(set(slots)) == len(_slots(alone, ref_id))
+        assert _final_population(settings, job_id) == _final_population(alone, ref_id)
+
+
+def test_a_dead_schedulers_job_is_taken_over_and_it_can_no_longer_write(settings: Settings) -> None:
+    job_id = _submit(settings, {**DE, "de": {"np": 6, "iters": 6}})
+    short = SchedulerConfig(lease_s=1.0, heartbeat_s=0.05, flush_s=0.0, recordings=False)
+    db = open_database(settings)
+    dead = Scheduler(db, SerialExecutor(), config=short, task=ToyTask(), warmup=None, scheduler_id="dead")
+    _drive(dead, lambda: _job(settings, job_id)["done"] >= 12)   # then it "dies": no more turns, no shutdown
+    with db.write() as session:
+        assert claim_jobs(session, "other", lease_s=1.0, limit=5) == []  # its lease still holds
+    time.sleep(1.2)
+    with running_scheduler(settings, ToyTask(), config=short, scheduler_id="heir"):
+        assert _wait(settings, job_id)["state"] == "succeeded"
+    dead.turn(0.01)   # it wakes up: its results may not be written, and it lets the job go
+    dead._flush()
+    assert job_id not in dead.jobs
+    slots = _slots(settings, job_id)
+    assert len(slots) == len(set(slots)) == 6 * 7
+    db.dispose()
+
+
+def test_cancel_is_obeyed_by_the_owner_within_two_seconds(settings: Settings) -> None:
+    slow = ToyTask(delay=0.05)
+    with TestClient(create_app(settings)) as c, running_scheduler(settings, slow):
+        job_id = c.post("/v1/jobs", json={**SWEEP, "grid": "a2_deg=0:358:2,l2=0.1,rws=0.09"}).json()["id"]
+        while c.get(f"/v1/jobs/{job_id}").json()["done"] < 2:
+            time.sleep(0.01)
+        start = time.monotonic()
+        assert c.post(f"/v1/jobs/{job_id}/cancel").json()["state"] == "cancelled"
+        before = slow.simulated
+        time.sleep(2.0)
+        settled = slow.simulated
+        time.sleep(0.5)
+        assert slow.simulated == settled and settled - before <= 8, "still simulating after the cancel"
+        job = c.get(f"/v1/jobs/{job_id}").json()
+    assert job["state"] == "cancelled" and time.monotonic() - start < 10
+
+
+def test_a_store_locked_for_a_while_delays_the_job_but_never_fails_it(settings: Settings) -> None:
+    path = settings.db_url.removeprefix("sqlite:///")
+    with TestClient(create_app(settings)) as c, running_scheduler(settings, ToyTask(delay=0.01)):
+        job_id = c.post("/v1/jobs", json={**DE, "de": {"np": 6, "iters": 12}}).json()["id"]
+        while c.get(f"/v1/jobs/{job_id}").json()["done"] < 6:
+            time.sleep(0.01)
+        locker = sqlite3.connect(path, timeout=30)
+        locker.execute("BEGIN EXCLUSIVE")
+        try:
+            during = c.get("/v1/health")
+            time.sleep(5.0)  # longer than the scheduler's lock timeout (2 s): its writes fail and are retried
+            refused = c.post("/v1/jobs", json=DE)
+        finally:
+            locker.rollback()
+            locker.close()
+        assert during.status_code == 503 and during.json()["store"]["writable"] is False
+        assert refused.status_code == 503 and refused.headers["Retry-After"] and "SELECT" not in refused.text
+        job = wait_done(c, job_id)
+        assert c.get("/v1/health").status_code == 200
+    assert job["state"] == "succeeded" and job["error"] is None and job["done"] == 6 * 13
+
+
+def test_health_reports_each_scheduler_and_is_503_without_one(settings: Settings) -> None:
+    with TestClient(create_app(settings)) as c:
+        alone = c.get("/v1/health")
+        assert alone.status_code == 503 and alone.json()["schedulers"] == []
+        with running_scheduler(settings, ToyTask(), scheduler_id="s1"):
+            time.sleep(0.2)
+            body = c.get("/v1/health").json()
+        assert body["status"] == "ok" and [s["id"] for s in body["schedulers"]] == ["s1"]
+        assert body["schedulers"][0]["heartbeat_age_s"] < 1.0 and body["store"]["writable"]
+        assert c.get("/v1/health").status_code == 503  # it stopped
+
+
+def test_a_job_that_cannot_be_planned_fails_with_a_clean_message(settings: Settings) -> None:
+    job_id = _submit(settings, DE)
+    db = open_database(settings)
+    with db.write() as session:  # a spec damaged in the store
+        session.get(Job, job_id).spec = {**session.get(Job, job_id).spec, "roads": ["nowhere"]}
+    db.dispose()
+    with running_scheduler(settings, ToyTask()):
+        job = _wait(settings, job_id)
+    assert job["state"] == "failed" and job["error"].startswith("invalid job: roads.0: unknown road")
+
+
+@pytest.mark.parametrize("n", [1, 3])
+def test_concurrent_jobs_progress_together(settings: Settings, n: int) -> None:
+    slow = ToyTask(delay=0.005)
+    ids = [_submit(settings, {**DE, "seed": s, "de": {"np": 6, "iters": 20}}) for s in range(n)]
+    with running_scheduler(settings, slow):
+        time.sleep(0.8)
+        progress = [_job(settings, job_id)["done"] for job_id in ids]
+        for job_id in ids:
+            assert _wait(settings, job_id)["state"] == "succeeded"
+    assert all(p > 0 for p in progress), progress  # none waits for another to finish
+    assert np.ptp(progress) <= max(progress) * 0.8 + 6

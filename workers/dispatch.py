@@ -1,0 +1,175 @@
+"""Keeping an executor full: the independent work of many sources, in batches, shared fairly.
+
+A source of work (:class:`Work`: a job of the service, or a study run from the command line)
+holds requests that are ready to simulate, each designs on one road (the study layer's
+:class:`~finaldrive.engine.Request`). The :class:`Dispatcher` cuts them into batches and keeps
+up to the executor's capacity in flight, taking one batch from each source with ready work in
+turn, so concurrent jobs share the executor fairly and none waits for another's request to end.
+Results go back to their source as each batch completes, in any order.
+
+Batch sizes adapt per source (:mod:`finaldrive.workers.batching`): a source's estimates of
+per-design time and per-task overhead last as long as the source, not one request.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field
+from functools import partial
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from finaldrive.workers.base import Executor
+from finaldrive.workers.batching import BatchSizer
+from finaldrive.workers.task import Timed, call_timed
+
+if TYPE_CHECKING:
+    from finaldrive.engine import BatchResult, Request
+
+#: What a worker runs: ``task(rows, *shared)`` with rows (road index, a2, L2, R_WS) -> [(road, BatchResult)].
+Task = Callable[..., list[tuple[int, "BatchResult"]]]
+
+
+@dataclass(eq=False)
+class Work:
+    """One source of work: its ready requests, the values its tasks share, and where results go.
+
+    ``on_result(part, results)``: a finished part of a request and its results, rows in order;
+    ``on_failure(part, reason)``: the part could not be evaluated (its worker was lost, or the
+    task raised); the source decides what that means (the service stores failed evaluations).
+    ``paused``: while True, none of the source's requests are started (back-pressure).
+    """
+
+    key: Hashable
+    shared: tuple[Any, ...]
+    on_result: Callable[[Request, BatchResult], None]
+    on_failure: Callable[[Request, str], None]
+    queue: deque[Request] = field(default_factory=deque)
+    paused: bool = False
+    sizer: BatchSizer | None = None
+
+    def queued(self) -> int:
+        """Designs waiting to be started."""
+        return sum(len(q) for q in self.queue)
+
+
+@dataclass(frozen=True)
+class _Task:
+    work: Work
+    part: Request
+    handed_at: float
+
+
+class Dispatcher:
+    """Feeds an executor from many :class:`Work` sources; one thread drives it (``step``)."""
+
+    def __init__(self, executor: Executor, task: Task, *, warmup: Callable[..., None] | None = None,
+                 batch_size: int | None = None) -> None:
+        """``task`` runs in the workers (``warmup(*shared)`` once per worker process first);
+        ``batch_size`` fixes the designs per task instead of adapting it."""
+        self.executor = executor
+        self._fn = partial(call_timed, task, warmup)
+        self._batch_size = batch_size
+        self._works: dict[Hashable, tuple[Work, tuple[Any, ...]]] = {}
+        self._tasks: dict[int, _Task] = {}
+        self._turn: deque[Hashable] = deque()
+
+    # ------------------------------------------------------------------ sources
+    def add(self, work: Work) -> None:
+        if work.key in self._works:
+            raise ValueError(f"work {work.key!r} is already dispatched")
+        if work.sizer is None:
+            work.sizer = BatchSizer(self.executor.num_workers)
+        handles = tuple(self.executor.share(value) for value in work.shared)
+        self._works[work.key] = (work, handles)
+        self._turn.append(work.key)
+
+    def remove(self, key: Hashable) -> None:
+        """Stop a source: its queued requests are dropped, its running tasks cancelled."""
+        entry = self._works.pop(key, None)
+        if entry is None:
+            return
+        work, handles = entry
+        work.queue.clear()
+        ids = [task_id for task_id, t in self._tasks.items() if t.work is work]
+        self.executor.cancel(ids)
+        for task_id in ids:
+            del self._tasks[task_id]
+        for handle in handles:
+            self.executor.release(handle)
+        self._turn.remove(key)
+
+    def __contains__(self, key: Hashable) -> bool:
+        return key in self._works
+
+    def in_flight(self, key: Hashable | None = None) -> int:
+        """Tasks started and not yet returned (of one source, or all)."""
+        if key is None:
+            return len(self._tasks)
+        return sum(1 for t in self._tasks.values() if t.work.key == key)
+
+    # ------------------------------------------------------------------ driving
+    def step(self, timeout: float) -> int:
+        """Start what fits, then wait up to ``timeout`` s for results and deliver them; returns
+        how many tasks finished."""
+        self.fill()
+        finished = self.collect(timeout)
+        self.fill()
+        return finished
+
+    def fill(self) -> int:
+        """Start batches, one source at a time in turn, until the executor is full; returns how many."""
+        started = 0
+        idle = 0
+        while self._turn and len(self._tasks) < self.executor.capacity and idle < len(self._turn):
+            key = self._turn[0]
+            self._turn.rotate(-1)
+            work, handles = self._works[key]
+            if work.paused or not work.queue:
+                idle += 1
+                continue
+            idle = 0
+            self._start(work, handles)
+            started += 1
+        return started
+
+    def _start(self, work: Work, handles: tuple[Any, ...]) -> None:
+        request = work.queue[0]
+        assert work.sizer is not None
+        size = self._batch_size or work.sizer.next_size(work.queued())
+        if size >= len(request):
+            part = work.queue.popleft()
+        else:
+            part = request.part(np.arange(size))
+            work.queue[0] = request.part(np.arange(size, len(request)))
+        rows = np.column_stack([np.full(len(part), float(part.road)), part.designs])
+        task_id = self.executor.submit(self._fn, rows, *handles)
+        self._tasks[task_id] = _Task(work, part, time.perf_counter())
+
+    def collect(self, timeout: float) -> int:
+        """Deliver the results of finished tasks (waiting up to ``timeout`` s for the first)."""
+        done = self.executor.poll(timeout)
+        for d in done:
+            task = self._tasks.pop(d.task, None)
+            if task is None or d.cancelled:
+                continue  # its source was removed
+            work, part = task.work, task.part
+            if d.lost:
+                work.on_failure(part, "worker lost: its process died repeatedly while simulating")
+            elif d.error is not None:
+                work.on_failure(part, f"error in the worker: {type(d.error).__name__}: {d.error}")
+            else:
+                timed: Timed = d.result
+                assert work.sizer is not None
+                work.sizer.observe(len(part), time.perf_counter() - task.handed_at, timed.busy_s, timed.compute_s)
+                ((_, batch),) = timed.result
+                work.on_result(part, batch)
+        return len(done)
+
+    def close(self) -> None:
+        """Remove every source (cancelling what runs); the executor stays open."""
+        for key in list(self._works):
+            self.remove(key)
