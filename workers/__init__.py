@@ -1,7 +1,9 @@
-"""Execution backends for batches of simulations: serial, process pool, Ray.
+"""Execution backends for tasks (batches of simulations): serial, process pool, Ray.
 
-``service`` and the CLI see only :class:`Executor`; Ray is imported only when
-``make_executor("ray")`` is called.
+``service`` and the CLI see only :class:`Executor` and the streaming helpers. Importing this
+package is light: no engine, numba or Ray (worker processes import it first). The engine
+helpers (``evaluate_*``) are loaded on first use, and Ray only when ``make_executor("ray")``
+is called.
 """
 
 from __future__ import annotations
@@ -9,19 +11,30 @@ from __future__ import annotations
 if __name__ != "finaldrive.workers":  # never importable as a top-level `workers` (it would shadow others)
     raise ImportError(f"this is finaldrive.workers; import it by that name, not as {__name__!r}")
 
-from typing import Literal
+import importlib
+from typing import TYPE_CHECKING, Any, Literal
 
-from finaldrive.workers.base import Executor, WorkerLostError
-from finaldrive.workers.evaluate import evaluate_all, evaluate_roads_stream, evaluate_stream
+from finaldrive.workers.base import Done, Executor, Shared, WorkerLostError, map_batches
 from finaldrive.workers.process import ProcessExecutor
 from finaldrive.workers.serial import SerialExecutor
+
+if TYPE_CHECKING:
+    from finaldrive.workers.evaluate import evaluate_all, evaluate_roads_stream, evaluate_stream
 
 ExecutorKind = Literal["serial", "process", "ray"]
 
 __all__ = [
-    "Executor", "ExecutorKind", "WorkerLostError", "evaluate_all", "evaluate_roads_stream", "evaluate_stream",
-    "make_executor",
+    "Done", "Executor", "ExecutorKind", "Shared", "WorkerLostError", "evaluate_all", "evaluate_roads_stream",
+    "evaluate_stream", "make_executor", "map_batches",
 ]
+
+_LAZY = {"evaluate_all", "evaluate_roads_stream", "evaluate_stream"}   # from finaldrive.workers.evaluate
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(importlib.import_module("finaldrive.workers.evaluate"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def make_executor(
@@ -30,19 +43,21 @@ def make_executor(
     num_workers: int | None = None,
     max_retries: int = 3,
     address: str | None = None,
+    niceness: int = 0,
 ) -> Executor:
     """Build an executor.
 
     ``num_workers``: worker processes (process) or CPUs of a local Ray (ray); default: this
     machine's cores, or the cluster's CPUs when joining one; ignored by serial.
-    ``max_retries``: re-runs of a batch whose worker died (worker loss), not of failed
+    ``max_retries``: re-runs of a task whose worker died (worker loss), not of failed
     simulations. ``address``: Ray cluster to join (else ``RAY_ADDRESS``, else a local Ray);
-    ignored by serial and process.
+    ignored by serial and process. ``niceness``: added to the worker processes' OS niceness
+    (``os.nice``, once per process), so the calling process keeps its core; ignored by serial.
     """
     if kind == "serial":
         return SerialExecutor()
     if kind == "process":
-        return ProcessExecutor(num_workers=num_workers, max_retries=max_retries)
+        return ProcessExecutor(num_workers=num_workers, max_retries=max_retries, niceness=niceness)
     if kind == "ray":
         try:
             from finaldrive.workers.ray_executor import RayExecutor
@@ -51,5 +66,5 @@ def make_executor(
                 "make_executor('ray') needs Ray: pip install ray "
                 f"(import failed: {error})"
             ) from error
-        return RayExecutor(num_workers=num_workers, max_retries=max_retries, address=address)
+        return RayExecutor(num_workers=num_workers, max_retries=max_retries, address=address, niceness=niceness)
     raise ValueError(f"unknown executor kind {kind!r}: expected 'serial', 'process' or 'ray'")

@@ -26,25 +26,39 @@ What ``ray.init`` changes in this process, and what the executor does about it (
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import os
 import secrets
 import signal
 import sys
 import threading
-from collections.abc import Callable, Generator, Iterable
+import time
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import ray
-from ray.exceptions import LocalRayletDiedError, NodeDiedError, OutOfMemoryError, WorkerCrashedError
+from ray.exceptions import (
+    LocalRayletDiedError,
+    NodeDiedError,
+    ObjectLostError,
+    OutOfMemoryError,
+    TaskCancelledError,
+    WorkerCrashedError,
+)
 
-from finaldrive.workers.base import IN_FLIGHT_PER_WORKER, ClosingMixin, WorkerLostError
+from finaldrive.workers.base import IN_FLIGHT_PER_WORKER, Done, ExecutorMixin, Shared
+
+#: How often ``poll`` reads the cluster's CPUs again (``capacity``) [s].
+CAPACITY_REFRESH_S = 10.0
+#: The longest single ``ray.wait`` in ``poll`` [s]: a cancel from another thread is reported within it.
+POLL_SLICE_S = 0.2
 
 #: Environment variables ``ray.init`` reads or sets for token authentication; restored on close.
 _AUTH_ENV = ("RAY_AUTH_MODE", "RAY_AUTH_TOKEN")
 
-#: Ray errors that mean the batch's worker (or node) was lost after all retries.
-_WORKER_LOSS = (WorkerCrashedError, NodeDiedError, OutOfMemoryError, LocalRayletDiedError)
+#: Ray errors that mean the task's worker (or node, or its result) was lost after all retries.
+_WORKER_LOSS = (WorkerCrashedError, NodeDiedError, OutOfMemoryError, LocalRayletDiedError, ObjectLostError)
 
 #: Signals whose handlers Ray's failure-signal handler (Abseil) takes over in ``ray.init``.
 _FAILURE_SIGNALS = tuple(
@@ -150,20 +164,40 @@ def _reload_auth(config: bool = True) -> None:
     raylet.AuthenticationTokenLoader.instance().reset_cache()
 
 
+#: In a Ray worker process: the niceness ``_run_task`` has added to it (``os.nice``, once per process).
+_nice_added = 0
+
+
 @ray.remote
-def _run_batch(fn: Callable[..., Any], batch: Any, *shared: Any) -> Any:
+def _run_task(niceness: int, fn: Callable[..., Any], batch: Any, *shared: Any) -> Any:
+    """The one remote function: lower this worker's priority to ``niceness`` (once), run ``fn``."""
+    global _nice_added
+    if niceness > _nice_added:
+        os.nice(niceness - _nice_added)
+        _nice_added = niceness
     return fn(batch, *shared)
 
 
-class RayExecutor(ClosingMixin):
-    """One Ray task per batch, with ``max_retries`` for worker loss; shared args ``ray.put`` once."""
+class RayExecutor(ExecutorMixin):
+    """One Ray task per ``submit``, with ``max_retries`` for worker loss; shared values ``ray.put`` once.
+
+    ``cancel`` uses ``ray.cancel(force=True)``: a queued task is dropped, a running one's worker
+    process is killed (Ray starts another when needed). ``capacity`` is 2 x the cluster's CPUs,
+    read again every ``CAPACITY_REFRESH_S`` by ``poll``, so nodes that join get work.
+    """
 
     def __init__(
-        self, num_workers: int | None = None, max_retries: int = 3, address: str | None = None
+        self, num_workers: int | None = None, max_retries: int = 3, address: str | None = None, niceness: int = 0
     ) -> None:
+        super().__init__()
         if max_retries < 0:
             raise ValueError("max_retries must be >= 0")
+        if niceness < 0:
+            raise ValueError("niceness must be >= 0 (it lowers the workers' priority)")
+        if num_workers is not None and num_workers < 1:
+            raise ValueError("num_workers must be >= 1")
         self.max_retries = max_retries
+        self.niceness = niceness
         self._started = not ray.is_initialized()
         self._env_before = {name: os.environ.get(name) for name in _AUTH_ENV}
         self._signals: _Signals | None = None
@@ -184,42 +218,125 @@ class RayExecutor(ClosingMixin):
                 self._started = False
                 raise
             self._signals.after_init()
-        self.num_workers = num_workers or max(1, int(ray.cluster_resources().get("CPU", 1)))  # type: ignore[no-untyped-call]
-        self._task = _run_batch.options(max_retries=max_retries, retry_exceptions=False)
+        self._fixed_workers = num_workers
+        cpus = self._cluster_cpus()
+        self.num_workers = num_workers or cpus
+        self.capacity = IN_FLIGHT_PER_WORKER * cpus
+        self._capacity_at = time.monotonic()
+        self._task = _run_task.options(max_retries=max_retries, retry_exceptions=False)
+        self._lock = threading.RLock()
+        self._ids = 0
+        self._refs: dict[ray.ObjectRef[Any], int] = {}     # in flight: result ref -> task id
+        self._by_task: dict[int, ray.ObjectRef[Any]] = {}
+        self._done: list[Done] = []
+        self._shared: dict[int, ray.ObjectRef[Any]] = {}   # live handles (the executor holds the only ref)
+        self._closed = False
 
-    def map_batches(
-        self, fn: Callable[..., Any], batches: Iterable[Any], shared: tuple[Any, ...] = ()
-    ) -> Generator[tuple[int, Any], None, None]:
-        shared_refs = [ray.put(value) for value in shared]
-        source = enumerate(batches)
-        pending: dict[ray.ObjectRef[Any], int] = {}
-        limit = IN_FLIGHT_PER_WORKER * self.num_workers
+    @staticmethod
+    def _cluster_cpus() -> int:
+        return max(1, int(ray.cluster_resources().get("CPU", 1)))  # type: ignore[no-untyped-call]
 
-        def fill() -> None:
-            while len(pending) < limit and (item := next(source, None)) is not None:
-                index, batch = item
-                pending[self._task.remote(fn, batch, *shared_refs)] = index
+    def share(self, value: Any) -> Shared:
+        """``ray.put`` once; the object is freed after ``release`` and the tasks using it."""
+        ref = ray.put(value)
+        handle = Shared.new(None)
+        with self._lock:
+            self._shared[handle.key] = ref
+        return handle
 
+    def release(self, shared: Shared) -> None:
+        with self._lock:
+            self._shared.pop(shared.key, None)   # tasks in flight keep their own references
+
+    def submit(self, fn: Callable[..., Any], batch: Any, *shared: Shared) -> int:
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("the executor is closed")
+            try:
+                refs = [self._shared[handle.key] for handle in shared]
+            except KeyError:
+                raise ValueError("unknown or released shared handle") from None
+            ref = self._task.remote(self.niceness, fn, batch, *refs)
+            self._ids += 1
+            self._refs[ref] = self._ids
+            self._by_task[self._ids] = ref
+            return self._ids
+
+    def poll(self, timeout: float) -> list[Done]:
+        """``ray.wait`` in slices of ``POLL_SLICE_S`` (so a ``cancel`` from another thread is reported
+        promptly), then fetch every result that is ready."""
+        deadline = time.monotonic() + max(0.0, timeout)
+        while True:
+            self._refresh_capacity()
+            with self._lock:
+                if self._done or not self._refs:
+                    done, self._done = self._done, []
+                    return done
+                refs = list(self._refs)
+            wait_s = min(POLL_SLICE_S, max(0.0, deadline - time.monotonic()))
+            ready, rest = ray.wait(refs, num_returns=1, timeout=wait_s)
+            if ready and rest:
+                more, _ = ray.wait(rest, num_returns=len(rest), timeout=0)
+                ready += more
+            outcomes = self._fetch(ready)
+            with self._lock:
+                for ref, outcome in zip(ready, outcomes, strict=True):
+                    task = self._refs.pop(ref, None)
+                    if task is not None:          # else: cancelled meanwhile, and reported so
+                        del self._by_task[task]
+                        self._done.append(Done(task, **outcome))
+                if self._done or not self._refs or time.monotonic() >= deadline:
+                    done, self._done = self._done, []
+                    return done
+
+    def _fetch(self, ready: list[ray.ObjectRef[Any]]) -> list[dict[str, Any]]:
+        """Each ready task's outcome: its result, or how it ended (``Done``'s fields)."""
+        if not ready:
+            return []
         try:
-            fill()
-            while pending:
-                ready, rest = ray.wait(list(pending), num_returns=1)
-                if rest:
-                    more, _ = ray.wait(rest, num_returns=len(rest), timeout=0)
-                    ready += more
-                try:
-                    values = ray.get(ready)
-                except _WORKER_LOSS as error:
-                    raise WorkerLostError(
-                        f"a batch's worker died more than max_retries={self.max_retries} times: {error}"
-                    ) from error
-                finished = [(pending.pop(ref), value) for ref, value in zip(ready, values, strict=True)]
-                fill()
-                yield from finished
-        finally:
-            if ray.is_initialized():
-                for ref in pending:
-                    ray.cancel(ref)
+            return [{"result": value} for value in ray.get(ready)]
+        except Exception:
+            pass                                   # one of them failed: take them one by one
+        outcomes: list[dict[str, Any]] = []
+        for ref in ready:
+            try:
+                outcomes.append({"result": ray.get(ref)})
+            except TaskCancelledError:
+                outcomes.append({"cancelled": True})
+            except _WORKER_LOSS:
+                outcomes.append({"lost": True})
+            except Exception as error:             # fn raised: a RayTaskError, also an instance of fn's error
+                outcomes.append({"error": error})
+        return outcomes
+
+    def _refresh_capacity(self) -> None:
+        if self._closed or time.monotonic() - self._capacity_at < CAPACITY_REFRESH_S:
+            return
+        self._capacity_at = time.monotonic()
+        cpus = self._cluster_cpus()
+        self.capacity = IN_FLIGHT_PER_WORKER * cpus
+        if self._fixed_workers is None:
+            self.num_workers = cpus
+
+    def cancel(self, tasks: Iterable[int]) -> None:
+        """``ray.cancel(force=True)``: a queued task is dropped, a running one's worker killed."""
+        with self._lock:
+            for task in tasks:
+                ref = self._by_task.pop(task, None)
+                if ref is None:
+                    continue
+                del self._refs[ref]
+                self._cancel(ref)
+                self._done.append(Done(task, cancelled=True))
+
+    @staticmethod
+    def _cancel(ref: ray.ObjectRef[Any]) -> None:
+        with contextlib.suppress(Exception):       # finished already, or Ray is gone
+            ray.cancel(ref, force=True)
+
+    def in_flight(self) -> int:
+        with self._lock:
+            return len(self._refs) + len(self._done)
 
     def _use_own_token(self) -> None:
         """A local Ray gets a random token in ``RAY_AUTH_TOKEN``, so Ray writes none to ``~/.ray``."""
@@ -246,7 +363,13 @@ class RayExecutor(ClosingMixin):
             _reload_auth()
 
     def close(self) -> None:
-        """Shut Ray down if this executor started it; idempotent."""
+        """Cancel every task in flight (their workers are killed), then shut Ray down if this
+        executor started it; idempotent."""
+        with self._lock:
+            if not self._closed:
+                self._closed = True
+                self.cancel(list(self._by_task))
+                self._shared.clear()
         if self._started:
             self._undo_init()
         self._started = False

@@ -30,10 +30,10 @@ executor = ProcessExecutor(num_workers=2)
 stream = executor.map_batches(toyfns.sleep_then_add, [[i] for i in range(4)], shared=(60.0,))
 import threading
 threading.Thread(target=lambda: list(stream), daemon=True).start()
-while len(executor._pool._processes if executor._pool else ()) < 2:
+while len(executor.worker_pids()) < 2:
     time.sleep(0.05)
 time.sleep(1.0)                                   # workers initialised and inside their batches
-print(" ".join(str(pid) for pid in executor._pool._processes), flush=True)
+print(" ".join(str(pid) for pid in executor.worker_pids()), flush=True)
 time.sleep(120)
 """
 

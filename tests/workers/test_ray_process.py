@@ -8,12 +8,15 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
 pytest.importorskip("ray")
 pytestmark = pytest.mark.slow
+
+REPO = Path(__file__).resolve().parents[2]
 
 DRIVER = r"""
 import ctypes, faulthandler, json, operator, os, signal, sys, time
@@ -69,3 +72,52 @@ def test_sigterm_prints_no_stack_dump(tmp_path: Path) -> None:
     assert "SIGTERM received" not in err and "Traceback" not in err, err[-3000:]
     assert proc.returncode == 15     # while Ray runs, ray.init's handler in the main thread: sys.exit(15)
     assert not (tmp_path / ".ray").exists()
+
+
+BUSY = r"""
+import json, sys, time
+from pathlib import Path
+import psutil
+from tests.workers import toyfns
+from finaldrive.workers import make_executor
+
+directory = Path(sys.argv[1])
+executor = make_executor("ray", num_workers=2)
+d, s = executor.share(str(directory)), executor.share(60.0)
+for i in range(4):                                       # two running, two queued
+    executor.submit(toyfns.sleep_marked, i, d, s)
+while len(list(directory.glob("*.pid"))) < 2:
+    time.sleep(0.05)
+ray_processes = [p.pid for p in psutil.Process().children(recursive=True)]
+start = time.monotonic()
+executor.close()
+close_s = time.monotonic() - start
+print(json.dumps({"close_s": close_s, "tasks": [int(p.read_text()) for p in directory.glob("*.pid")],
+                  "ray_processes": ray_processes, "cancelled": sum(d.cancelled for d in executor.poll(0))}))
+"""
+
+
+def test_close_with_running_tasks_stops_the_local_ray_within_2s(tmp_path: Path) -> None:
+    psutil = pytest.importorskip("psutil")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
+    env.update(HOME=str(tmp_path), PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")])))
+    markers = tmp_path / "markers"
+    markers.mkdir()
+    proc = subprocess.run([sys.executable, "-c", BUSY, str(markers)], env=env, cwd=REPO, text=True,
+                          capture_output=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout.splitlines()[-1])
+    print(f"\nray (own local Ray): close() with 2 running tasks took {out['close_s']:.3f} s")
+    assert out["close_s"] < 2.0 and out["cancelled"] == 4 and len(out["tasks"]) == 2
+
+    def running(pid: int) -> bool:
+        try:
+            return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+        except psutil.NoSuchProcess:
+            return False
+
+    assert not any(running(pid) for pid in out["tasks"])              # the workers, at once
+    deadline = time.monotonic() + 5.0
+    while any(running(pid) for pid in out["ray_processes"]) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not [pid for pid in out["ray_processes"] if running(pid)]  # and the rest of that Ray

@@ -84,3 +84,94 @@ def crash_once(designs: np.ndarray, marked_a2: float, marker: str, log: str) -> 
 
 def always_crash(batch: object) -> None:
     os._exit(1)
+
+
+# ---------------------------------------------------------------------- for the executor interface tests
+def mark_started(directory: str, batch: object) -> None:
+    """Write ``<directory>/<batch>.pid`` (this process's pid), atomically: the task is running."""
+    path = Path(directory) / f"{batch}.pid"
+    tmp = path.with_suffix(f".tmp{os.getpid()}")
+    tmp.write_text(str(os.getpid()))
+    tmp.rename(path)
+
+
+def sleep_marked(batch: int, directory: str, seconds: float) -> int:
+    """Mark the task started, sleep, return the batch."""
+    mark_started(directory, batch)
+    time.sleep(seconds)
+    return batch
+
+
+def spin_marked(batch: int, directory: str) -> bytes:
+    """Mark the task started, then spin for minutes inside one compiled call (PBKDF2 in OpenSSL's C),
+    which no Python-level signal or exception can interrupt."""
+    import hashlib
+
+    mark_started(directory, batch)
+    return hashlib.pbkdf2_hmac("sha256", b"finaldrive", b"salt", 10**9)
+
+
+def log_line(path: str, line: object) -> None:
+    with open(path, "a") as f:
+        f.write(f"{line}\n")
+
+
+def crash_first_time(batch: int, directory: str, target: int) -> int:
+    """2 x batch; the worker running ``target`` dies on its first attempt (a marker file remembers)."""
+    log_line(str(Path(directory) / "attempts.log"), batch)
+    marker = Path(directory) / "crashed"
+    if batch == target and not marker.exists():
+        marker.touch()
+        os._exit(1)
+    return 2 * batch
+
+
+def log_then_crash(batch: object, path: str) -> None:
+    log_line(path, os.getpid())
+    os._exit(1)
+
+
+def log_then_raise(batch: object, path: str) -> None:
+    log_line(path, os.getpid())
+    raise ValueError("bug in task")
+
+
+def niceness(batch: object) -> int:
+    return os.nice(0)
+
+
+def sigint_state(batch: object) -> tuple[bool, bool]:
+    """(SIGINT ignored, SIGINT blocked) in this process."""
+    import signal
+
+    ignored = signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+    blocked = signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    return ignored, blocked
+
+
+class CountPickling:
+    """A shared value that counts its picklings (in the pickling process) and logs every
+    unpickling (pid to a file)."""
+
+    pickled = 0
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+
+    def __reduce__(self):  # type: ignore[no-untyped-def]
+        CountPickling.pickled += 1
+        return (_count_unpickled, (self.path,))
+
+
+def _count_unpickled(path: str) -> CountPickling:
+    log_line(path, os.getpid())
+    return CountPickling(path)
+
+
+def pid_with(batch: object, value: object) -> int:
+    return os.getpid()
+
+
+def first_quick(batch: int, directory: str, seconds: float) -> int:
+    """Batch 0 returns at once; the others are ``sleep_marked``."""
+    return 0 if batch == 0 else sleep_marked(batch, directory, seconds)
