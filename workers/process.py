@@ -86,7 +86,11 @@ def _worker_main(conn: Connection, parent_pid: int, niceness: int) -> None:
                 values.pop(key, None)
         elif message[0] == "task":
             _, task, payload, new, drops = message
-            conn.send_bytes(_run_task(task, payload, new, drops, values))
+            reply = _run_task(task, payload, new, drops, values)
+            try:
+                conn.send_bytes(reply)
+            except OSError:               # the parent is gone
+                return
 
 
 def _watch_parent(parent_pid: int) -> None:
@@ -253,6 +257,7 @@ class ProcessExecutor(ExecutorMixin):
     def cancel(self, tasks: Iterable[int]) -> None:
         """Queued: dropped. Running: its worker is SIGKILLed (a replacement starts when there is work)."""
         with self._lock:
+            dropped: set[int] = set()
             for task_id in tasks:
                 task = self._tasks.get(task_id)
                 if task is None:
@@ -262,8 +267,10 @@ class ProcessExecutor(ExecutorMixin):
                     worker.task, task.worker = None, None
                     self._remove(worker, kill=True)
                 else:
-                    self._queue.remove(task)
+                    dropped.add(task.id)
                 self._finish(task, cancelled=True)
+            if dropped:
+                self._queue = deque(task for task in self._queue if task.id not in dropped)
             self._dispatch()
             self._wake()
 
