@@ -68,13 +68,22 @@ class RemoteTraceback(Exception):
 
 
 # ---------------------------------------------------------------------- the worker process
+#: In a worker process: the shared values it has received, by handle key.
+_values: dict[int, Any] = {}
+
+
+def held_keys() -> list[int]:
+    """In a worker process: the keys of the shared values it holds (for tests and diagnostics)."""
+    return sorted(_values)
+
+
 def _worker_main(conn: Connection, parent_pid: int, niceness: int) -> None:
     """A worker: ignore Ctrl-C, lower the priority, watch the parent, then run tasks until EOF."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if niceness:
         os.nice(niceness)
     threading.Thread(target=_watch_parent, args=(parent_pid,), name="parent-watchdog", daemon=True).start()
-    values: dict[int, Any] = {}           # shared values received, by handle key
+    values = _values
     conn.send(("ready", os.getpid()))
     while True:
         try:
