@@ -297,6 +297,7 @@ class ProcessExecutor(ExecutorMixin):
                 task.worker = None
                 self._finish(task, cancelled=True)
             self._queue.clear()
+            self._values.clear()
             for worker in self._slots:
                 if worker is not None:
                     busy, worker.task = worker.task is not None or not worker.ready, None
