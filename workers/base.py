@@ -90,8 +90,8 @@ class Executor(Protocol):
     Thread safety: ``submit``, ``share``, ``release``, ``cancel``, ``in_flight`` and ``close``
     may be called from any thread; ``poll`` from one thread at a time (it returns every
     finished task, so there is one consumer per executor). A ``map_batches`` stream is such a
-    consumer: while one is open, nothing else may poll the executor (the process and Ray
-    executors refuse a second open stream with ``RuntimeError``).
+    consumer: while one is open, nothing else may poll the executor (a second open stream
+    raises ``RuntimeError``).
     """
 
     num_workers: int

@@ -68,13 +68,22 @@ class RemoteTraceback(Exception):
 
 
 # ---------------------------------------------------------------------- the worker process
+#: In a worker process: the shared values it has received, by handle key.
+_values: dict[int, Any] = {}
+
+
+def held_keys() -> list[int]:
+    """In a worker process: the keys of the shared values it holds (for tests and diagnostics)."""
+    return sorted(_values)
+
+
 def _worker_main(conn: Connection, parent_pid: int, niceness: int) -> None:
     """A worker: ignore Ctrl-C, lower the priority, watch the parent, then run tasks until EOF."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if niceness:
         os.nice(niceness)
     threading.Thread(target=_watch_parent, args=(parent_pid,), name="parent-watchdog", daemon=True).start()
-    values: dict[int, Any] = {}           # shared values received, by handle key
+    values = _values
     conn.send(("ready", os.getpid()))
     while True:
         try:
@@ -86,7 +95,11 @@ def _worker_main(conn: Connection, parent_pid: int, niceness: int) -> None:
                 values.pop(key, None)
         elif message[0] == "task":
             _, task, payload, new, drops = message
-            conn.send_bytes(_run_task(task, payload, new, drops, values))
+            reply = _run_task(task, payload, new, drops, values)
+            try:
+                conn.send_bytes(reply)
+            except OSError:               # the parent is gone
+                return
 
 
 def _watch_parent(parent_pid: int) -> None:
@@ -253,6 +266,7 @@ class ProcessExecutor(ExecutorMixin):
     def cancel(self, tasks: Iterable[int]) -> None:
         """Queued: dropped. Running: its worker is SIGKILLed (a replacement starts when there is work)."""
         with self._lock:
+            dropped: set[int] = set()
             for task_id in tasks:
                 task = self._tasks.get(task_id)
                 if task is None:
@@ -262,8 +276,10 @@ class ProcessExecutor(ExecutorMixin):
                     worker.task, task.worker = None, None
                     self._remove(worker, kill=True)
                 else:
-                    self._queue.remove(task)
+                    dropped.add(task.id)
                 self._finish(task, cancelled=True)
+            if dropped:
+                self._queue = deque(task for task in self._queue if task.id not in dropped)
             self._dispatch()
             self._wake()
 
@@ -281,6 +297,7 @@ class ProcessExecutor(ExecutorMixin):
                 task.worker = None
                 self._finish(task, cancelled=True)
             self._queue.clear()
+            self._values.clear()
             for worker in self._slots:
                 if worker is not None:
                     busy, worker.task = worker.task is not None or not worker.ready, None

@@ -2,7 +2,19 @@
 
 Local by default (``ray.init(address="local")`` with ``num_workers`` CPUs); joins an existing
 cluster when ``address`` or ``RAY_ADDRESS`` is set. If Ray is already initialised in this
-process, the executor uses that session and leaves it running on ``close()``.
+process, the executor uses that session and leaves it running on ``close()`` (after cancelling
+its own tasks).
+
+The interface (``workers/base.py``): ``share`` is one ``ray.put``; ``submit`` one call of the
+remote function ``_run_task``, with ``max_retries`` for worker loss and ``retry_exceptions=False``;
+``poll`` is ``ray.wait``, then every ready result at once; ``cancel`` is
+``ray.cancel(force=True)``, which drops a queued task and kills the worker process of a running
+one (Ray starts another when needed); a ``TaskCancelledError`` means cancelled, and Ray's
+worker-loss errors after the retries mean ``lost``. ``capacity`` is 2 x the cluster's CPUs, read
+again every ``CAPACITY_REFRESH_S`` by ``poll``. Ray runs its workers in process groups of their
+own with SIGINT blocked (a terminal's Ctrl-C reaches only the driver), at its own worker
+niceness (``RAY_worker_niceness``, 15 by default); ``niceness`` is added to that, once per worker
+process (the OS caps it at 19).
 
 What ``ray.init`` changes in this process, and what the executor does about it (Ray 2.60):
 
@@ -28,6 +40,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import importlib
 import os
 import secrets
 import signal
@@ -218,6 +231,8 @@ class RayExecutor(ExecutorMixin):
                 self._started = False
                 raise
             self._signals.after_init()
+            with contextlib.suppress(ImportError):   # ray.shutdown() imports it: take the 0.1 s now, not in close()
+                importlib.import_module("ray.dag.compiled_dag_node")
         self._fixed_workers = num_workers
         cpus = self._cluster_cpus()
         self.num_workers = num_workers or cpus

@@ -272,15 +272,18 @@ def test_cancel_running_task_frees_the_executor_within_2s(make: Make, kind: str,
     executor.cancel(others)
 
 
-def test_cancel_from_another_thread_wakes_poll(make: Make, kind: str, tmp_path: Path) -> None:
+@pytest.mark.parametrize("action", ["cancel", "close"])
+def test_cancel_or_close_from_another_thread_wakes_poll(make: Make, kind: str, action: str, tmp_path: Path) -> None:
     needs_workers(kind, "poll would be running the task itself")
     executor = make()
     task = executor.submit(toyfns.sleep_marked, 0, executor.share(str(tmp_path)), executor.share(60.0))
     wait_started(tmp_path, 1)
-    threading.Timer(0.3, executor.cancel, args=([task],)).start()
+    stop = (lambda: executor.cancel([task])) if action == "cancel" else executor.close
+    threading.Timer(0.3, stop).start()
     start = time.monotonic()
     assert executor.poll(10.0) == [Done(task, cancelled=True)]
     assert time.monotonic() - start < 1.0
+    assert executor.in_flight() == 0
 
 
 def test_poll_waits_for_its_timeout_while_tasks_run(make: Make, kind: str, tmp_path: Path) -> None:

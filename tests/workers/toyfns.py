@@ -175,3 +175,15 @@ def pid_with(batch: object, value: object) -> int:
 def first_quick(batch: int, directory: str, seconds: float) -> int:
     """Batch 0 returns at once; the others are ``sleep_marked``."""
     return 0 if batch == 0 else sleep_marked(batch, directory, seconds)
+
+
+def held_keys(batch: object) -> tuple[int, list[int]]:
+    """(pid, keys of the shared values this process-pool worker holds)."""
+    from finaldrive.workers.process import held_keys
+
+    return os.getpid(), held_keys()
+
+
+def held_keys_after(batch: object, seconds: float) -> tuple[int, list[int]]:
+    time.sleep(seconds)
+    return held_keys(batch)
