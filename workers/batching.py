@@ -11,8 +11,11 @@ The rule (docs/workers.md, "Batching"):
    least-queued task; cold-start tasks only overestimate it, and later tasks lower it).
 3. **Size.** Overhead fraction ``o / (b c) <= 0.05`` needs ``b >= o / (0.05 c)``; take the
    smallest such ``b``, but at most ``remaining // (num_workers * 4)`` (at least 1), so at
-   least four waves remain: every worker gets work, the tail balances, and progress streams.
-   When both cannot hold, giving every worker work wins.
+   least four waves remain: every worker gets work, the tail balances, and progress streams;
+   and at most ``MAX_TASK_S / c`` (at least 1), so no task runs much longer than half a
+   second: a cancel waits for little, a DE generation is not held by one long task, and a
+   queueing delay mistaken for overhead cannot grow batches without bound. When the rules
+   cannot all hold, giving every worker work wins.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from dataclasses import dataclass
 TARGET_OVERHEAD = 0.05   # overhead / compute per task
 MIN_WAVES = 4            # batches per worker that must remain
 PROBE_SIZE = 1           # designs per batch before any measurement
+MAX_TASK_S = 0.5         # longest task aimed for [s]
 
 
 def batch_size(
@@ -38,6 +42,8 @@ def batch_size(
     if remaining <= 0:
         return 0
     cap = max(1, remaining // (max(1, num_workers) * min_waves))
+    if per_design_s > 0.0:
+        cap = min(cap, max(1, int(MAX_TASK_S / per_design_s)))
     if per_design_s <= 0.0:
         return cap
     needed = math.ceil(max(0.0, overhead_s) / (target * per_design_s))

@@ -120,6 +120,7 @@ def problem_media_types(openapi: dict[str, Any]) -> dict[str, Any]:
         for operation in path.values():
             for status, response in operation.get("responses", {}).items():
                 content = response.get("content")
-                if status[0] in "45" and content:  # the route's media type (JSON, SSE) -> problem
+                schema = next(iter(content.values())).get("schema", {}) if content else {}
+                if status[0] in "45" and str(schema.get("$ref", "")).endswith("/Problem"):  # JSON, SSE -> problem
                     response["content"] = {PROBLEM_MEDIA_TYPE: next(iter(content.values()))}
     return openapi

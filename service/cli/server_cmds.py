@@ -51,6 +51,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                            "FINALDRIVE_NUM_WORKERS)")
     scheduler.add_argument("--id", dest="scheduler_id", help="this scheduler's name in the store (default: "
                            "host:pid:random); a restart with the same id takes its jobs back at once")
+    scheduler.add_argument("--exit-with-parent", action="store_true",
+                           help="stop (giving the jobs back) when the parent process ends; finaldrive serve uses it")
     scheduler.set_defaults(run=run_scheduler_command)
 
     db = subparsers.add_parser("db", help="manage the results database", **parser_options())
@@ -153,7 +155,8 @@ def run_serve(args: argparse.Namespace) -> int:
     if not args.no_scheduler:
         # the same id across restarts: a restarted scheduler takes its jobs back at once
         env = {**os.environ, "FINALDRIVE_DB_URL": settings.db_url, "FINALDRIVE_EXECUTOR": settings.executor}
-        child = SchedulerChild(["--id", f"serve-{os.uname().nodename}-{os.getpid()}"], env).start()
+        child = SchedulerChild(["--id", f"serve-{os.uname().nodename}-{os.getpid()}",
+                                "--exit-with-parent"], env).start()
     try:
         uvicorn.run(create_app(settings), host=settings.host, port=settings.port, workers=1)
     finally:
@@ -170,8 +173,19 @@ def run_scheduler_command(args: argparse.Namespace) -> int:
     settings = _settings(args)
     _check_store(settings)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    run_scheduler(settings, threading.Event(), scheduler_id=args.scheduler_id, handle_signals=True)
+    stop = threading.Event()
+    if args.exit_with_parent:
+        threading.Thread(target=_stop_with_parent, args=(os.getppid(), stop), daemon=True,
+                         name="finaldrive-parent-watch").start()
+    run_scheduler(settings, stop, scheduler_id=args.scheduler_id, handle_signals=True)
     return 0
+
+
+def _stop_with_parent(parent: int, stop: threading.Event) -> None:
+    """Set ``stop`` once the parent process has ended (this process was re-parented; checked twice a second)."""
+    while not stop.wait(0.5):
+        if os.getppid() != parent:
+            stop.set()
 
 
 def run_db_upgrade(args: argparse.Namespace) -> int:

@@ -42,7 +42,7 @@ def toy_rows(rows: np.ndarray, roads: tuple[Road, ...], settings: SimSettings,
 
 
 class ToyTask:
-    """:func:`toy_rows` run in this process (serial executor), with a counter, a delay and a gate."""
+    """:func:`toy_rows` run in this process (serial executor), with a counter, a delay a design and a gate."""
 
     def __init__(self, *, fail_above_l2: float | None = None, delay: float = 0.0) -> None:
         self.fail_above_l2 = fail_above_l2
@@ -55,7 +55,7 @@ class ToyTask:
                  vehicle: Vehicle | None) -> list[tuple[int, BatchResult]]:
         self.gate.wait()
         if self.delay:
-            time.sleep(self.delay)
+            time.sleep(self.delay * len(rows))
         self.simulated += len(rows)
         road = int(rows[0, 0])
         return [(road, toy_batch(rows[:, 1:], roads[road], self.fail_above_l2))]

@@ -20,6 +20,7 @@ from schemathesis.checks import (
 
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
+from tests.service.svc_helpers import ToyTask, running_scheduler
 
 pytestmark = pytest.mark.slow  # starts servers or subprocesses
 
@@ -32,7 +33,8 @@ def app(tmp_path_factory: pytest.TempPathFactory) -> Iterator[FastAPI]:
     config = Settings(db_url=f"sqlite:///{db}", executor="serial", max_job_evaluations=500, events_poll_seconds=0.01,
                       api_token=SecretStr("fuzz-token"))
     application = create_app(config)
-    with TestClient(application):  # runs the lifespan; schemathesis calls the started app
+    # runs the lifespan (schemathesis calls the started app); a scheduler keeps /v1/health at 200
+    with TestClient(application), running_scheduler(config, ToyTask()):
         yield application
 
 

@@ -143,14 +143,3 @@ def test_local_record_simulate_record_and_series_plot(tmp_path: Any, capsys: pyt
     png = tmp_path / "s.png"
     assert main(["plot", "--series", "0,0,0.093", "--road", "flat", "--duration", "0.2", "--out", str(png)]) == 0
     assert png.read_bytes().startswith(b"\x89PNG")
-
-
-def test_recordings_default_beside_the_sqlite_file() -> None:
-    from pathlib import Path
-
-    from finaldrive.service.config import Settings
-    from finaldrive.service.jobs.recordings import data_dir
-
-    assert data_dir(Settings(db_url="sqlite:////srv/fd/x.db")) == Path("/srv/fd/finaldrive-data")
-    assert data_dir(Settings(db_url="postgresql://h/db")) == Path("finaldrive-data")
-    assert data_dir(Settings(data_dir="/d")) == Path("/d")
