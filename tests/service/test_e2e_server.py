@@ -1,13 +1,9 @@
-"""End to end: a real uvicorn process, the real engine, the serial executor, a tmp SQLite file."""
+"""End to end: ``finaldrive serve`` (uvicorn and its scheduler), the real engine, the serial executor, SQLite."""
 
 from __future__ import annotations
 
 import json
-import signal
-import socket
 import sqlite3
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -20,6 +16,7 @@ import pytest
 from finaldrive.engine import evaluate
 from finaldrive.service.jobs.plan import build_plan
 from finaldrive.service.schemas import JobSpec
+from tests.service.processes import Server
 from tests.service.svc_helpers import wait_done
 
 pytestmark = pytest.mark.slow  # starts servers or subprocesses
@@ -33,43 +30,23 @@ LONG_DE = {"kind": "de", "roads": ["flat"], "de": {"np": 8, "iters": 14}, "seed"
 TERMINAL = {"succeeded", "failed", "cancelled"}
 
 
-class Server:
-    """``finaldrive serve`` (``python -m service.cli serve``) on a free loopback port."""
-
-    def __init__(self, db: Path, log: Path) -> None:
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            self.port = s.getsockname()[1]
-        self.url = f"http://127.0.0.1:{self.port}"
-        self.db_url = f"sqlite:///{db}"
-        self.log = log
-        self.proc: subprocess.Popen[bytes] | None = None
-
-    def start(self) -> httpx.Client:
-        cmd = [sys.executable, "-m", "finaldrive.service.cli", "serve", "--port", str(self.port),
-               "--db", self.db_url, "--executor", "serial"]
-        with self.log.open("ab") as out:
-            self.proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT)
-        client = httpx.Client(base_url=self.url, timeout=10)
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            assert self.proc.poll() is None, self.log.read_text()
-            try:
-                if client.get("/v1/health").status_code == 200:
-                    return client
-            except httpx.TransportError:
-                time.sleep(0.1)
-        raise AssertionError("server did not start:\n" + self.log.read_text())
-
-    def kill(self) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGKILL)
-            self.proc.wait(10)
-
-
 @pytest.fixture
-def server(tmp_path: Path) -> Iterator[Server]:
-    srv = Server(tmp_path / "e2e.db", tmp_path / "server.log")
+def server(tmp_path: Path) -> Iterator[Any]:
+    """``finaldrive serve`` with the serial executor; ``server.start()`` returns its client."""
+
+    class Restartable:
+        def __init__(self) -> None:
+            self.proc: Server | None = None
+
+        def start(self) -> httpx.Client:
+            self.proc = Server(f"sqlite:///{tmp_path / 'e2e.db'}", tmp_path / "server.log", "--executor", "serial")
+            return self.proc.start().client
+
+        def kill(self) -> None:
+            if self.proc is not None:
+                self.proc.kill()
+
+    srv = Restartable()
     try:
         yield srv
     finally:
@@ -91,7 +68,7 @@ def reference_de(spec: dict[str, Any]) -> Any:
     return de
 
 
-def test_sweep_and_de_over_http_match_in_process(server: Server) -> None:
+def test_sweep_and_de_over_http_match_in_process(server: Any) -> None:
     client = server.start()
     sweep = client.post("/v1/jobs", json=SWEEP)
     de = client.post("/v1/jobs", json=DE)
@@ -127,7 +104,7 @@ def test_sweep_and_de_over_http_match_in_process(server: Server) -> None:
     assert [best["a2"], best["l2"], best["rws"]] == pytest.approx(reference.best_x.tolist(), rel=1e-12)
 
 
-def test_de_survives_three_sigkills(server: Server, tmp_path: Path) -> None:
+def test_de_survives_three_sigkills(server: Any, tmp_path: Path) -> None:
     client = server.start()
     job_id = client.post("/v1/jobs", json=LONG_DE).json()["id"]
     total = client.get(f"/v1/jobs/{job_id}").json()["total"]

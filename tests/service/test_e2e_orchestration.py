@@ -1,0 +1,208 @@
+"""End to end, real processes: several services and schedulers on one store, crashes, locks, cancel, SIGTERM.
+
+``finaldrive serve`` and ``finaldrive scheduler`` run as processes with the real engine (short
+simulations), on a SQLite file and on a real PostgreSQL server (tests/pg.py).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import sqlite3
+import time
+from pathlib import Path
+from typing import Any
+
+import psutil
+import pytest
+from sqlalchemy import create_engine, text
+
+from tests.service.processes import Proc, Server
+from tests.service.svc_helpers import TERMINAL, wait_done
+
+pytestmark = pytest.mark.slow
+
+SIM = {"duration": 0.3}
+DE = {"kind": "de", "roads": ["flat,sine:0.02:3"], "de": {"np": 8, "iters": 5}, "seed": 5, "settings": SIM}
+#: A paper-study in small: the sweep and a DE on each of three roads.
+STUDY = {"kind": "paper-study", "roads": ["flat,sine:0.02:3,bump:0.02:0.5"], "grid": "a2_deg=0:300:60,l2=0.02|0.1",
+         "de": {"np": 8, "iters": 6}, "seed": 2, "settings": SIM}
+#: Fast leases, so a killed scheduler's job is taken over in seconds.
+LEASES = {"FINALDRIVE_LEASE_SECONDS": "2", "FINALDRIVE_HEARTBEAT_SECONDS": "0.2"}
+
+
+def rows(db_url: str, query: str, **params: Any) -> list[tuple[Any, ...]]:
+    engine = create_engine(db_url)
+    try:
+        with engine.connect() as conn:
+            return [tuple(r) for r in conn.execute(text(query), params)]
+    finally:
+        engine.dispose()
+
+
+def slots(db_url: str, job_id: int) -> list[tuple[int, int, int]]:
+    return rows(db_url, "SELECT road_index, step, candidate FROM evaluations WHERE job_id = :j", j=job_id)
+
+
+def final_populations(db_url: str, job_id: int) -> dict[int, str]:
+    found = rows(db_url, "SELECT run, generation, population FROM generations WHERE job_id = :j", j=job_id)
+    last: dict[int, tuple[int, str]] = {}
+    for run, generation, population in found:
+        if run not in last or generation > last[run][0]:
+            last[run] = (generation, str(population))
+    return {run: population for run, (_, population) in last.items()}
+
+
+def reference(tmp_path: Path, spec: dict[str, Any]) -> tuple[str, int]:
+    """The same job run by one service alone: (its database, job id)."""
+    url = f"sqlite:///{tmp_path / 'alone.db'}"
+    server = Server(url, tmp_path / "alone.log", "--executor", "serial").start()
+    try:
+        job_id = server.client.post("/v1/jobs", json=spec).json()["id"]
+        assert wait_done(server.client, job_id, timeout=300, poll=0.2)["state"] == "succeeded"
+    finally:
+        server.terminate()
+    return url, job_id
+
+
+def test_two_services_on_one_sqlite_file(tmp_path: Path) -> None:
+    url = f"sqlite:///{tmp_path / 'shared.db'}"
+    ref_url, ref_id = reference(tmp_path, DE)
+    one = Server(url, tmp_path / "one.log", "--executor", "serial").start()
+    two = Server(url, tmp_path / "two.log", "--executor", "serial").start()
+    try:
+        ids = [one.client.post("/v1/jobs", json={**DE, "seed": s}).json()["id"] for s in (5, 6)]
+        ids.append(two.client.post("/v1/jobs", json={**DE, "seed": 7}).json()["id"])
+        deadline = time.monotonic() + 60  # the second service's scheduler registers after its API answers
+        while len([s for s in one.client.get("/v1/health").json()["schedulers"] if s["alive"]]) < 2:
+            assert time.monotonic() < deadline, "the second scheduler never registered"
+            time.sleep(0.2)
+        jobs = [wait_done(two.client, job_id, timeout=300, poll=0.2) for job_id in ids]
+        assert all(job["state"] == "succeeded" for job in jobs)
+        for job_id in ids:
+            found = slots(url, job_id)
+            assert len(found) == len(set(found)) == len(slots(ref_url, ref_id))
+        assert final_populations(url, ids[0]) == final_populations(ref_url, ref_id)
+    finally:
+        one.terminate()
+        two.terminate()
+
+
+@pytest.mark.parametrize("store", ["sqlite", "postgresql"])
+def test_a_scheduler_killed_three_times_loses_and_repeats_nothing(store: str, tmp_path: Path,
+                                                                  request: pytest.FixtureRequest) -> None:
+    if store == "sqlite":
+        url = f"sqlite:///{tmp_path / 'study.db'}"
+    else:
+        url = request.getfixturevalue("postgres").new_database()
+    ref_url, ref_id = reference(tmp_path, STUDY)
+    api = Server(url, tmp_path / "api.log", "--no-scheduler").start()
+    try:
+        job = api.client.post("/v1/jobs", json=STUDY).json()
+        total = job["total"]
+        for kill in range(4):
+            scheduler = Proc(["scheduler", "--db", url, "--executor", "serial", "--id", f"s{kill}"],
+                             tmp_path / "scheduler.log", LEASES).start()
+            if kill == 3:
+                break
+            target = total * (kill + 1) // 4
+            while (now := api.client.get(f"/v1/jobs/{job['id']}").json())["done"] + now["failed"] < target:
+                assert now["state"] not in TERMINAL and scheduler.alive(), (tmp_path / "scheduler.log").read_text()
+                time.sleep(0.05)
+            scheduler.kill()  # SIGKILL: its lease lapses; the next one (another id) waits it out
+        done = wait_done(api.client, job["id"], timeout=300, poll=0.2)
+        scheduler.terminate()
+    finally:
+        api.terminate()
+    assert done["state"] == "succeeded" and done["done"] + done["failed"] == total
+    found = slots(url, job["id"])
+    assert len(found) == len(set(found)) == total
+    assert sorted(found) == sorted(slots(ref_url, ref_id))
+    assert final_populations(url, job["id"]) == final_populations(ref_url, ref_id)
+
+
+def test_an_exclusive_lock_of_30_s_delays_the_job_and_health_says_so(tmp_path: Path) -> None:
+    path = tmp_path / "locked.db"
+    server = Server(f"sqlite:///{path}", tmp_path / "server.log", "--executor", "serial").start()
+    try:
+        job = server.client.post("/v1/jobs", json={**DE, "de": {"np": 8, "iters": 12}}).json()
+        while server.client.get(f"/v1/jobs/{job['id']}").json()["done"] < 8:
+            time.sleep(0.05)
+        locker = sqlite3.connect(path, timeout=60)
+        locker.execute("BEGIN EXCLUSIVE")
+        statuses = []
+        try:
+            end = time.monotonic() + 30
+            while time.monotonic() < end:
+                statuses.append(server.client.get("/v1/health").status_code)
+                time.sleep(1.0)
+        finally:
+            locker.rollback()
+            locker.close()
+        assert set(statuses) == {503}
+        done = wait_done(server.client, job["id"], timeout=300, poll=0.2)
+        assert server.client.get("/v1/health").status_code == 200
+    finally:
+        server.terminate()
+    assert done["state"] == "succeeded" and done["error"] is None and done["done"] + done["failed"] == 2 * 8 * 13
+
+
+def _busy(procs: list[psutil.Process], window: float = 0.5) -> list[int]:
+    """Pids of the processes that used the CPU for more than a fifth of ``window``."""
+    before = {}
+    for p in procs:
+        with contextlib.suppress(psutil.NoSuchProcess):
+            before[p.pid] = sum(p.cpu_times()[:2])
+    time.sleep(window)
+    busy = []
+    for p in procs:
+        try:
+            if sum(p.cpu_times()[:2]) - before.get(p.pid, 0.0) > 0.2 * window:
+                busy.append(p.pid)
+        except psutil.NoSuchProcess:
+            pass
+    return busy
+
+
+#: Simulations of 30 s or more each (the paper's method at a fine step: 600,000 steps).
+LONG = {"kind": "sweep", "roads": ["flat"], "grid": "a2_deg=0:90:30,l2=0.05,rws=0.09",
+        "settings": {"method": "reference", "duration": 60.0, "dt": 0.0001}}
+
+
+def test_cancel_frees_the_workers_of_long_simulations_within_2_s(tmp_path: Path) -> None:
+    server = Server(f"sqlite:///{tmp_path / 'long.db'}", tmp_path / "server.log", "--executor", "process",
+                    env={"FINALDRIVE_NUM_WORKERS": "2"}).start()
+    try:
+        job = server.client.post("/v1/jobs", json=LONG).json()
+        deadline = time.monotonic() + 60
+        while len(working := _busy(server.descendants())) < 2:  # both workers simulate
+            assert time.monotonic() < deadline, "the simulations never started"
+        assert server.client.post(f"/v1/jobs/{job['id']}/cancel").json()["state"] == "cancelled"
+        start = time.monotonic()
+        simulating = [psutil.Process(pid) for pid in working]
+        while _busy(simulating, 0.2):  # the workers that were simulating stop (killed, or idle)
+            assert time.monotonic() - start < 3.0, "workers still simulating after the cancel"
+        assert time.monotonic() - start <= 2.0
+        assert server.client.get(f"/v1/jobs/{job['id']}").json()["state"] == "cancelled"
+    finally:
+        server.terminate()
+
+
+def test_sigterm_stops_long_simulations_within_2_s_and_gives_the_job_back(tmp_path: Path) -> None:
+    url = f"sqlite:///{tmp_path / 'long.db'}"
+    server = Server(url, tmp_path / "server.log", "--executor", "process", env={"FINALDRIVE_NUM_WORKERS": "2"}).start()
+    job = server.client.post("/v1/jobs", json=LONG).json()
+    deadline = time.monotonic() + 60
+    while len(working := _busy(server.descendants())) < 2:  # both workers simulate
+        assert time.monotonic() < deadline, "the simulations never started"
+    simulating = [psutil.Process(pid) for pid in working]
+    start = time.monotonic()
+    assert server.proc is not None
+    server.proc.send_signal(signal.SIGTERM)
+    _, alive = psutil.wait_procs(simulating, timeout=2.0)
+    alive = [p for p in alive if p.status() != psutil.STATUS_ZOMBIE]
+    assert not alive, f"workers still running 2 s after SIGTERM: {[p.pid for p in alive]}"
+    server.terminate(timeout=20)
+    assert time.monotonic() - start < 10
+    assert not [p for p in server.descendants() if p.status() != psutil.STATUS_ZOMBIE]
+    assert rows(url, "SELECT state, owner FROM jobs WHERE id = :j", j=job["id"]) == [("interrupted", None)]
