@@ -194,6 +194,15 @@ class BatchResult:
         )
 
     @classmethod
+    def failed(cls, designs: np.ndarray, reason: str) -> BatchResult:
+        """Every design failed, for ``reason`` (e.g. its worker was lost)."""
+        rows = np.asarray(designs, dtype=float).reshape(-1, 3)
+        n = len(rows)
+        return cls(designs=rows, distance_m=np.full(n, np.nan), squat_ratio=np.full(n, np.nan),
+                   slack_m=np.full(n, np.nan), fitness_m=np.full(n, np.nan), chain_length_m=np.full(n, np.nan),
+                   wall_s=np.zeros(n), status=(STATUS_FAILED,) * n, reason=(reason,) * n)
+
+    @classmethod
     def concat(cls, parts: list[BatchResult]) -> BatchResult:
         """Join batches in the given order."""
         if not parts:

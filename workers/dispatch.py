@@ -9,6 +9,9 @@ Results go back to their source as each batch completes, in any order.
 
 Batch sizes adapt per source (:mod:`finaldrive.workers.batching`): a source's estimates of
 per-design time and per-task overhead last as long as the source, not one request.
+
+A batch whose task raised, or whose worker was lost for good, is tried again one design a
+task, so only the design at fault fails (``on_failure``), never its neighbours in the batch.
 """
 
 from __future__ import annotations
@@ -50,10 +53,12 @@ class Work:
     queue: deque[Request] = field(default_factory=deque)
     paused: bool = False
     sizer: BatchSizer | None = None
+    #: single designs of a failed batch, tried again alone (before the queue)
+    alone: deque[Request] = field(default_factory=deque)
 
     def queued(self) -> int:
         """Designs waiting to be started."""
-        return sum(len(q) for q in self.queue)
+        return sum(len(q) for q in self.queue) + len(self.alone)
 
 
 @dataclass(frozen=True)
@@ -94,6 +99,7 @@ class Dispatcher:
             return
         work, handles = entry
         work.queue.clear()
+        work.alone.clear()
         ids = [task_id for task_id, t in self._tasks.items() if t.work is work]
         self.executor.cancel(ids)
         for task_id in ids:
@@ -128,7 +134,7 @@ class Dispatcher:
             key = self._turn[0]
             self._turn.rotate(-1)
             work, handles = self._works[key]
-            if work.paused or not work.queue:
+            if work.paused or not (work.queue or work.alone):
                 idle += 1
                 continue
             idle = 0
@@ -137,14 +143,17 @@ class Dispatcher:
         return started
 
     def _start(self, work: Work, handles: tuple[Any, ...]) -> None:
-        request = work.queue[0]
-        assert work.sizer is not None
-        size = self._batch_size or work.sizer.next_size(work.queued())
-        if size >= len(request):
-            part = work.queue.popleft()
+        if work.alone:
+            part = work.alone.popleft()
         else:
-            part = request.part(np.arange(size))
-            work.queue[0] = request.part(np.arange(size, len(request)))
+            request = work.queue[0]
+            assert work.sizer is not None
+            size = self._batch_size or work.sizer.next_size(work.queued())
+            if size >= len(request):
+                part = work.queue.popleft()
+            else:
+                part = request.part(np.arange(size))
+                work.queue[0] = request.part(np.arange(size, len(request)))
         rows = np.column_stack([np.full(len(part), float(part.road)), part.designs])
         task_id = self.executor.submit(self._fn, rows, *handles)
         self._tasks[task_id] = _Task(work, part, time.perf_counter())
@@ -157,7 +166,9 @@ class Dispatcher:
             if task is None or d.cancelled:
                 continue  # its source was removed
             work, part = task.work, task.part
-            if d.lost:
+            if (d.lost or d.error is not None) and len(part) > 1:
+                work.alone.extend(part.part(np.array([i])) for i in range(len(part)))  # find the one at fault
+            elif d.lost:
                 work.on_failure(part, "worker lost: its process died repeatedly while simulating")
             elif d.error is not None:
                 work.on_failure(part, f"error in the worker: {type(d.error).__name__}: {d.error}")

@@ -227,3 +227,30 @@ def test_concurrent_jobs_progress_together(settings: Settings, n: int) -> None:
             assert _wait(settings, job_id)["state"] == "succeeded"
     assert all(p > 0 for p in progress), progress  # none waits for another to finish
     assert np.ptp(progress) <= max(progress) * 0.8 + 6
+
+
+class Raising(ToyTask):
+    """A task that raises (a bug in the worker) for designs with l2 > 0.12."""
+
+    def __call__(self, rows: Any, roads: Any, settings: Any, vehicle: Any) -> Any:
+        if (rows[:, 2] > 0.12).any():
+            raise RuntimeError("boom")
+        return super().__call__(rows, roads, settings, vehicle)
+
+
+def test_a_task_that_raises_fails_its_designs_never_the_job_and_is_never_reused(settings: Settings) -> None:
+    client = TestClient(create_app(settings)).__enter__()
+    with running_scheduler(settings, Raising()):
+        job = wait_done(client, client.post("/v1/jobs", json=SWEEP).json()["id"])
+    assert job["state"] == "succeeded" and (job["done"], job["failed"]) == (16, 8)
+    items = client.get(f"/v1/jobs/{job['id']}/evaluations", params={"limit": 100}).json()["items"]
+    assert {e["reason"] for e in items if e["status"] == "failed"} == {"error in the worker: RuntimeError: boom"}
+    db = open_database(settings)
+    with db.read() as session:
+        flags = set(session.scalars(select(Evaluation.transient).where(Evaluation.status == "failed")))
+    db.dispose()
+    assert flags == {True}
+    with running_scheduler(settings, ToyTask()):  # a healthy worker: the failures are simulated again
+        again = wait_done(client, client.post("/v1/jobs", json=SWEEP).json()["id"])
+    client.__exit__(None, None, None)
+    assert (again["done"], again["failed"], again["cached"]) == (24, 0, 16)

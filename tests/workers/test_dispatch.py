@@ -1,0 +1,97 @@
+"""The dispatcher: every source's ready work in flight up to capacity, fair turns, failures isolated."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from finaldrive.engine import BatchResult, Request
+from finaldrive.workers import ProcessExecutor, SerialExecutor
+from finaldrive.workers.dispatch import Dispatcher, Work
+from tests.service.svc_helpers import toy_batch
+
+
+def task(rows: np.ndarray, roads: Any, *_: Any) -> list[tuple[int, BatchResult]]:
+    """The toy fitness; raises for a design with l2 > 0.15 (a bug in the worker)."""
+    if (rows[:, 2] > 0.15).any():
+        raise RuntimeError("boom")
+    return [(int(rows[0, 0]), toy_batch(rows[:, 1:], roads[int(rows[0, 0])]))]
+
+
+def request(n: int, road: int = 0, run: int = 0, l2: float = 0.1) -> Request:
+    designs = np.column_stack([np.linspace(0, 1, n), np.full(n, l2), np.full(n, 0.09)])
+    return Request(run, 0, road, np.arange(n), designs)
+
+
+class Sink:
+    def __init__(self) -> None:
+        self.results: list[tuple[Request, BatchResult]] = []
+        self.failures: list[tuple[Request, str]] = []
+
+    def work(self, key: str, *requests: Request) -> Work:
+        from finaldrive.engine import Road
+
+        w = Work(key=key, shared=((Road(), Road.parse("sine:0.02:3")),),
+                 on_result=lambda p, b: self.results.append((p, b)),
+                 on_failure=lambda p, r: self.failures.append((p, r)))
+        w.queue.extend(requests)
+        return w
+
+
+def drain(dispatcher: Dispatcher, *works: Work) -> None:
+    while any(w.queue or w.alone for w in works) or dispatcher.in_flight():
+        dispatcher.step(1.0)
+
+
+def test_every_design_comes_back_once_in_any_batching() -> None:
+    sink = Sink()
+    dispatcher = Dispatcher(SerialExecutor(), task, batch_size=3)
+    work = sink.work("a", request(10), request(7, road=1))
+    dispatcher.add(work)
+    drain(dispatcher, work)
+    got = sorted((p.road, int(c)) for p, _ in sink.results for c in p.candidates)
+    assert got == [(0, c) for c in range(10)] + [(1, c) for c in range(7)]
+    for part, batch in sink.results:
+        np.testing.assert_array_equal(batch.designs, part.designs)
+
+
+def test_sources_take_turns_and_the_executor_stays_full() -> None:
+    sink = Sink()
+    with ProcessExecutor(num_workers=2) as executor:
+        dispatcher = Dispatcher(executor, task, batch_size=1)
+        a, b = sink.work("a", request(12)), sink.work("b", request(12))
+        dispatcher.add(a)
+        dispatcher.add(b)
+        assert dispatcher.fill() == executor.capacity
+        assert dispatcher.in_flight("a") == dispatcher.in_flight("b") == executor.capacity // 2
+        drain(dispatcher, a, b)
+    assert len(sink.results) == 24 and not sink.failures
+
+
+def test_a_batch_that_raises_is_tried_again_design_by_design() -> None:
+    sink = Sink()
+    bad = request(6)
+    bad.designs[4, 1] = 0.2  # one design makes the worker raise
+    dispatcher = Dispatcher(SerialExecutor(), task, batch_size=6)
+    work = sink.work("a", bad)
+    dispatcher.add(work)
+    drain(dispatcher, work)
+    assert [int(p.candidates[0]) for p, _ in sink.failures] == [4]
+    assert sink.failures[0][1] == "error in the worker: RuntimeError: boom"
+    assert sorted(int(c) for p, _ in sink.results for c in p.candidates) == [0, 1, 2, 3, 5]
+
+
+def test_removing_a_source_cancels_its_tasks_and_drops_its_queue() -> None:
+    removed, kept = Sink(), Sink()
+    with ProcessExecutor(num_workers=2) as executor:
+        dispatcher = Dispatcher(executor, task, batch_size=1)
+        a, b = removed.work("a", request(50)), kept.work("b", request(4))
+        dispatcher.add(a)
+        dispatcher.add(b)
+        dispatcher.fill()
+        dispatcher.remove("a")
+        assert "a" not in dispatcher and not a.queue and dispatcher.in_flight("a") == 0
+        drain(dispatcher, b)
+    assert removed.results == [] and removed.failures == []
+    assert sorted(int(p.candidates[0]) for p, _ in kept.results) == [0, 1, 2, 3]
