@@ -76,7 +76,7 @@ class Dispatcher:
         """``task`` runs in the workers (``warmup(*shared)`` once per worker process first);
         ``batch_size`` fixes the designs per task instead of adapting it."""
         self.executor = executor
-        self._fn = partial(call_timed, task, warmup)
+        self._fn = executor.share(partial(call_timed, task, warmup))  # sent to each worker once, not per task
         self._batch_size = batch_size
         self._works: dict[Hashable, tuple[Work, tuple[Any, ...]]] = {}
         self._tasks: dict[int, _Task] = {}
@@ -155,7 +155,7 @@ class Dispatcher:
                 part = request.part(np.arange(size))
                 work.queue[0] = request.part(np.arange(size, len(request)))
         rows = np.column_stack([np.full(len(part), float(part.road)), part.designs])
-        task_id = self.executor.submit(self._fn, rows, *handles)
+        task_id = self.executor.submit(_apply, rows, self._fn, *handles)
         self._tasks[task_id] = _Task(work, part, time.perf_counter())
 
     def collect(self, timeout: float) -> int:
@@ -184,3 +184,8 @@ class Dispatcher:
         """Remove every source (cancelling what runs); the executor stays open."""
         for key in list(self._works):
             self.remove(key)
+
+
+def _apply(rows: np.ndarray, fn: Callable[..., Timed], *shared: Any) -> Timed:
+    """What every task runs: the dispatcher's shared task function on the batch."""
+    return fn(rows, *shared)

@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from datetime import datetime, timedelta
 
-from sqlalchemy import and_, or_, select, text, update
+from sqlalchemy import ColumnElement, and_, or_, select, text, update
 from sqlalchemy.orm import Session
 
 from finaldrive.service.db.models import Job, JobState, Recording, Scheduler as SchedulerRow
@@ -33,15 +33,14 @@ def db_now(session: Session) -> datetime:
         value = session.execute(text("SELECT clock_timestamp() AT TIME ZONE 'UTC'")).scalar_one()
     else:
         value = session.execute(text("SELECT CURRENT_TIMESTAMP")).scalar_one()
-    if isinstance(value, str):
-        value = datetime.fromisoformat(value)
-    return value.replace(tzinfo=None)
+    moment: datetime = datetime.fromisoformat(value) if isinstance(value, str) else value
+    return moment.replace(tzinfo=None)
 
 
 # ---------------------------------------------------------------------- schedulers
 def register_scheduler(session: Session, scheduler_id: str, *, host: str, pid: int, executor: str,
-                       capacity: int) -> None:
-    """Insert (or revive, after a restart with the same id) this scheduler's row."""
+                       capacity: int) -> str:
+    """Insert (or revive, after a restart with the same id) this scheduler's row; returns its id."""
     now = db_now(session)
     row = session.get(SchedulerRow, scheduler_id)
     if row is None:
@@ -51,6 +50,7 @@ def register_scheduler(session: Session, scheduler_id: str, *, host: str, pid: i
         row.host, row.pid, row.executor, row.capacity = host, pid, executor, capacity
         row.started_at = row.heartbeat_at = now
         row.stopped_at = None
+    return scheduler_id
 
 
 def beat(session: Session, scheduler_id: str, *, lease_s: float, capacity: int) -> set[int]:
@@ -90,7 +90,7 @@ def schedulers(session: Session) -> list[tuple[SchedulerRow, float]]:
 
 
 # ---------------------------------------------------------------------- jobs
-def _claimable(now: datetime) -> object:
+def _claimable(now: datetime) -> ColumnElement[bool]:
     return or_(Job.state.in_(_CLAIMABLE),
                and_(Job.state == JobState.running.value, or_(Job.lease_until.is_(None), Job.lease_until < now)))
 

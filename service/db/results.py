@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
-from sqlalchemy import func, insert, select
+from sqlalchemy import Table, func, insert, select
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.orm import Session
 
@@ -51,8 +51,11 @@ class EvalRow:
     transient: bool = False
 
 
+_ROW_FIELDS = tuple(f.name for f in fields(EvalRow))
+
+
 def stored_fitness(session: Session, job_id: int, road_index: int, step: int,
-                   candidates: Sequence[int]) -> dict[int, float]:
+                   candidates: Iterable[int]) -> dict[int, float]:
     """Candidates of (road, step) the job has stored already, with their fitness (NaN when failed)."""
     out: dict[int, float] = {}
     wanted = sorted({int(c) for c in candidates})
@@ -108,18 +111,21 @@ def store_evaluations(session: Session, scheduler_id: str, job_id: int, rows: Se
     if not rows:
         return 0
     now = db_now(session)
-    values = [{**asdict(row), "job_id": job_id, "created_at": now} for row in rows]
+    values = [{**{name: getattr(row, name) for name in _ROW_FIELDS}, "job_id": job_id, "created_at": now}
+              for row in rows]
     dialect = session.get_bind().dialect.name
     statement: Any
+    table = Evaluation.__table__  # Core, not the ORM: a bulk insert of plain rows
+    assert isinstance(table, Table)
     if dialect == "sqlite":
-        statement = sqlite.insert(Evaluation).on_conflict_do_nothing()
+        statement = sqlite.insert(table).on_conflict_do_nothing()
     elif dialect == "postgresql":
-        statement = postgresql.insert(Evaluation).on_conflict_do_nothing()
+        statement = postgresql.insert(table).on_conflict_do_nothing()
     else:
-        statement = insert(Evaluation)
-    returned = session.execute(
-        statement.returning(Evaluation.id, Evaluation.road_index, Evaluation.step, Evaluation.candidate), values)
-    ids = {(int(r), int(s), int(c)): int(i) for i, r, s, c in returned}
+        statement = insert(table)
+    c = table.c
+    returned = session.execute(statement.returning(c.id, c.road_index, c.step, c.candidate), values)
+    ids = {(int(r), int(s), int(k)): int(i) for i, r, s, k in returned}
     new = [row for row in rows if (row.road_index, row.step, row.candidate) in ids]
     ok = [row for row in new if row.status == EvalStatus.ok.value]
     job = session.get(Job, job_id)

@@ -30,6 +30,7 @@ import uuid
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any, TypeVar
 
 import numpy as np
@@ -183,12 +184,13 @@ class Scheduler:
         log.info("scheduler %s stopped", self.id)
 
     # ------------------------------------------------------------------ the store, guarded
-    def _db(self, fn: Callable[[Any], T], what: str) -> T | None:
-        """Run ``fn(session)`` in a write transaction; a database error is logged and returns None."""
+    def _db(self, fn: Callable[[Any], T], what: str, *, write: bool = True) -> T | None:
+        """Run ``fn(session)`` in a write (or read) transaction; a database error is logged and
+        returns None."""
         if self._backoff and time.monotonic() < self._backoff:
             return None
         try:
-            with self.db.write() as session:
+            with self.db.write() if write else self.db.read() as session:
                 result = fn(session)
         except LeaseLost:
             raise
@@ -208,10 +210,10 @@ class Scheduler:
 
     def _maintain(self) -> None:
         if not self._registered:
-            done = self._db(lambda s: register_scheduler(s, self.id, host=socket.gethostname(), pid=os.getpid(),
-                                                           executor=self.executor_kind,
-                                                           capacity=self.executor.capacity) or True, "register")
-            self._registered = bool(done)
+            done = self._db(partial(register_scheduler, scheduler_id=self.id, host=socket.gethostname(),
+                                    pid=os.getpid(), executor=self.executor_kind, capacity=self.executor.capacity),
+                            "register")
+            self._registered = done is not None
             if not self._registered:
                 return
         owned = self._db(lambda s: beat(s, self.id, lease_s=self.config.lease_s, capacity=self.executor.capacity),
@@ -229,7 +231,7 @@ class Scheduler:
 
     # ------------------------------------------------------------------ jobs
     def _open(self, job_id: int) -> None:
-        loaded = self._db(lambda s: _load(s, job_id), f"open job {job_id}")
+        loaded = self._db(lambda s: _load(s, job_id), f"open job {job_id}", write=False)
         if loaded is None:
             return  # retried at the next heartbeat: the job stays claimed by us
         spec, resumed, sweep_done, de_states = loaded
@@ -243,8 +245,8 @@ class Scheduler:
                         self.engine_version, resumed)
         job.work = Work(
             key=job_id, shared=(tuple(r.road for r in plan.study.roads), plan.settings, plan.vehicle),
-            on_result=lambda part, batch, job=job: self._on_result(job, part, batch),
-            on_failure=lambda part, reason, job=job: self._on_failure(job, part, reason),
+            on_result=partial(self._on_result, job),
+            on_failure=partial(self._on_failure, job),
         )
         self.dispatcher.add(job.work)
         self.jobs[job_id] = job
@@ -264,7 +266,7 @@ class Scheduler:
                     job.intake.extend(run.take())
             while job.intake:
                 request = job.intake[0]
-                found = self._db(lambda s, job=job, request=request: _lookup(s, job, request), f"job {job.id}")
+                found = self._db(partial(_lookup, job=job, request=request), f"job {job.id}", write=False)
                 if found is None:
                     break  # the store is unavailable: keep the request, retry next turn
                 job.intake.popleft()
@@ -342,8 +344,8 @@ class Scheduler:
         for job in list(self.jobs.values()):
             if not job.done(self.dispatcher.in_flight(job.id)) or job.writes:
                 continue
-            if self._db(lambda s, job=job: finish_job(s, self.id, job.id, JobState.succeeded),
-                        f"finish job {job.id}") is not None:
+            finished = partial(finish_job, scheduler_id=self.id, job_id=job.id, state=JobState.succeeded)
+            if self._db(finished, f"finish job {job.id}") is not None:
                 log.info("scheduler %s: job %s succeeded", self.id, job.id)
                 self._drop(job.id)
 
@@ -354,7 +356,7 @@ class Scheduler:
                 continue
             writes, job.writes = job.writes, _Writes()
             try:
-                done = self._db(lambda s, job=job, writes=writes: _store(s, self.id, job.id, writes),
+                done = self._db(partial(_store, owner=self.id, job_id=job.id, writes=writes),
                                 f"store results of job {job.id}")
             except LeaseLost:
                 log.info("scheduler %s: lost job %s before storing its results", self.id, job.id)

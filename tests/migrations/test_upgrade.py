@@ -12,7 +12,7 @@ from alembic.runtime.migration import MigrationContext
 from fastapi.testclient import TestClient
 from sqlalchemy import text
 
-from finaldrive.service.cli import server_cmds
+from finaldrive.service.cli import main, server_cmds
 from finaldrive.service.config import Settings
 from finaldrive.service.db.engine import make_engine
 from finaldrive.service.db.migrate import SchemaMismatchError, alembic_config, current_revision, head_revision, upgrade
@@ -71,8 +71,8 @@ def test_service_refuses_tables_without_a_revision_and_says_what_to_run(
     with engine.begin() as conn:
         conn.exec_driver_sql("CREATE TABLE legacy (id INTEGER PRIMARY KEY)")
     engine.dispose()
-    args = argparse.Namespace(db=url, host=None, port=None, executor=None)
-    assert server_cmds.run_serve(args) == 1
+    assert main(["serve", "--db", url]) == 2
+    assert main(["scheduler", "--db", url]) == 2
     err = capsys.readouterr().err
     assert "revision none" in err and f"finaldrive db upgrade --db {url}" in err
     assert server_cmds.run_db_upgrade(argparse.Namespace(db=url)) == 0

@@ -105,8 +105,9 @@ def get(recording_id: RecordingId, services: ServicesDep) -> RecordingOut:
     return _out(_load(services, recording_id))
 
 
-_RRD = {200: {"content": {"application/octet-stream": {"schema": {"type": "string", "format": "binary"}}},
-               "description": "the .rrd file"}}
+_RRD: dict[int | str, dict[str, Any]] = {
+    200: {"content": {"application/octet-stream": {"schema": {"type": "string", "format": "binary"}}},
+          "description": "the .rrd file"}}
 
 
 @router.get("/{recording_id}/file", response_class=Response, responses={**_RRD, **documented(404, 409, 422)},
