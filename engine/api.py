@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields, replace
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -259,8 +259,11 @@ class BatchResult:
             distance_m=float(self.distance_m[i]), squat_ratio=float(self.squat_ratio[i]),
             slack_m=float(self.slack_m[i]), fitness_m=float(self.fitness_m[i]),
             chain_length_m=float(self.chain_length_m[i]), wall_s=float(self.wall_s[i]),
-            **{name: float(getattr(self, name)[i]) for name in DIAGNOSTICS},
+            **self._diagnostics_of(i),
         )
+
+    def _diagnostics_of(self, i: int) -> dict[str, Any]:
+        return {name: float(getattr(self, name)[i]) for name in DIAGNOSTICS}
 
     @classmethod
     def from_results(cls, designs: np.ndarray, results: list[SimResult]) -> BatchResult:

@@ -9,6 +9,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -202,7 +203,7 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
                      time.perf_counter() - start, out, **values)
 
 
-def _diagnostics(ext: np.ndarray, led: np.ndarray, kinetic: float, potential: float) -> dict[str, float]:
+def _diagnostics(ext: np.ndarray, led: np.ndarray, kinetic: float, potential: float) -> dict[str, Any]:
     """The result's diagnostics (api.DIAGNOSTICS) from the loop's records and the end state's energies."""
     slip = float(led[D.L_SLIP])
     values = {

@@ -85,7 +85,6 @@ def _state(vehicle, design, spec, seed):
 @pytest.mark.parametrize("spec", ["flat", "sine:0.04:2"])
 def test_chain_terms_against_the_position_analysis(vehicle, design, spec):
     p, road, y = _state(vehicle, design, spec, 1)
-    kind, rp = road.packed()
     geo = minimal.design_constants(p)
     z, zd = y[:6], y[6:12]
     th, ph = z[minimal.ZTHETA], z[minimal.ZPHI]
@@ -115,7 +114,7 @@ def test_linearly_implicit_terms(vehicle, design, spec, lever):
     p, road, y = _state(vehicle.replace(fx_lever_loaded=lever), design, spec, 2)
     kind, rp = road.packed()
     sigma = 0.05
-    out, aux, L, b, c_row = _rhs(y, p, kind, rp, sigma)
+    _, aux, L, b, c_row = _rhs(y, p, kind, rp, sigma)
     assert aux[AUX_FZ_REAR] > 0, "the rear tyre is on the road"
     h = 1e-6
     for k in range(6):  # d(u')/dz'_k: u' is linear in z' (eq. 42): central differences exact

@@ -94,7 +94,8 @@ def test_slip_power_splits_into_carcass_storage_and_non_negative_dissipation(veh
         aux[:] = 0.0
         rear_tyre(rt, rng.normal(), vx, omega, u, sigma, p, True, aux)
         D.powers(aux, p, pw)
-        assert pw[D.L_SLIP] == pytest.approx(pw[D.L_CARCASS] + pw[D.L_TYRE_DISSIPATION], abs=1e-9 * (1 + abs(pw[D.L_SLIP])))
+        split = pw[D.L_CARCASS] + pw[D.L_TYRE_DISSIPATION]
+        assert pw[D.L_SLIP] == pytest.approx(split, abs=1e-9 * (1 + abs(pw[D.L_SLIP])))
         assert pw[D.L_TYRE_DISSIPATION] >= 0.0
 
 

@@ -10,8 +10,8 @@ import math
 import numpy as np
 import pytest
 
+import finaldrive.engine.simulation as sim
 from finaldrive.engine import DIAGNOSTICS, STATUS_FAILED, Design, Road, SimSettings, evaluate, simulate
-from finaldrive.engine import simulation as sim
 
 TABLE11 = Design.from_deg(195.3, 0.037, 0.088)
 GEOMETRY1 = Design.from_deg(0, 0.0, 0.093)
