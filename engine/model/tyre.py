@@ -8,8 +8,8 @@ uses K_vlow * V_sx / K_xk, and pKx1 is 25.939. The algebraic loop of eq. (41) (s
 and kappa', which need sigma*) is closed with the values of the last accepted step: sigma* is
 held through each step.
 
-Choices where the paper is silent (docs/engine.md): the load dependence of eqs. (47)-(52) is
-held at the bounds of the load range [Fz_min, Fz_max] (like MF 6.1's FZMIN/FZMAX); the rear
+Choices where the paper is silent (docs/engine.md): eqs. (47)-(52) see the vertical load held
+inside the load range [Fz_min, Fz_max] (like MF 6.1's FZMIN/FZMAX); the rear
 tyre bottoms on a stiff bump stop at the deflection rt_bottoming; F_x turns the wheel with the
 lever arm R_e + fx_lever_loaded (rt - R_e), R_e by default (energy-consistent with eq. 40).
 """
@@ -74,28 +74,36 @@ def lever_arm(rt: float, re: float, p: np.ndarray) -> float:
 
 
 @jit
+def range_load(fz: float, p: np.ndarray) -> float:
+    """The load eqs. (47)-(52) see: F_z held inside the load range [Fz_min, Fz_max] (MF 6.1's
+    FZMIN/FZMAX: beyond the range the tyre's load dependence stays that of the bound)."""
+    return min(max(fz, p[P.FZ_MIN]), p[P.FZ_MAX])
+
+
+@jit
 def load_increment(fz: float, p: np.ndarray) -> float:
-    """df_z of eq. (52), with F_z held inside the load range [Fz_min, Fz_max]."""
-    fzc = min(max(fz, p[P.FZ_MIN]), p[P.FZ_MAX])
-    return (fzc - p[P.FZ0]) / p[P.FZ0]
+    """df_z of eq. (52) at the load held in the range."""
+    return (range_load(fz, p) - p[P.FZ0]) / p[P.FZ0]
 
 
 @jit
 def slip_stiffness(fz: float, p: np.ndarray) -> float:
-    """K_xk, eq. (50), with df_z from eq. (52) held in the load range."""
-    dfz = load_increment(fz, p)
-    return fz * (p[P.PKX1] + p[P.PKX2] * dfz) * math.exp(p[P.PKX3] * dfz)
+    """K_xk, eq. (50), at the load held in the range (df_z from eq. 52)."""
+    fzr = range_load(fz, p)
+    dfz = (fzr - p[P.FZ0]) / p[P.FZ0]
+    return fzr * (p[P.PKX1] + p[P.PKX2] * dfz) * math.exp(p[P.PKX3] * dfz)
 
 
 @jit
 def magic_formula_slope(fz: float, kappa: float, p: np.ndarray) -> tuple[float, float]:
     """Steady-state F_x(F_z, kappa) of eqs. (45)-(52) and dF_x/dkappa (for linearly implicit
-    steps and the tests); zero off the road."""
+    steps and the tests); zero off the road; the load held in the range."""
     if fz <= FZ_CONTACT_MIN:
         return 0.0, 0.0
-    dfz = load_increment(fz, p)                                               # (52)
+    fzr = range_load(fz, p)
+    dfz = (fzr - p[P.FZ0]) / p[P.FZ0]                                         # (52)
     cx = p[P.PCX1]                                                            # (46)
-    dx = (p[P.PDX1] + p[P.PDX2] * dfz) * fz                                   # (47)-(48)
+    dx = (p[P.PDX1] + p[P.PDX2] * dfz) * fzr                                  # (47)-(48)
     sgn = 1.0 if kappa > 0.0 else (-1.0 if kappa < 0.0 else 0.0)
     ex = (p[P.PEX1] + p[P.PEX2] * dfz + p[P.PEX3] * dfz * dfz) * (1.0 - p[P.PEX4] * sgn)  # (49)
     bx = slip_stiffness(fz, p) / (cx * dx)                                    # (50)-(51)
