@@ -33,6 +33,7 @@ from finaldrive.engine.model.coordinates import BETA, FS, N_CONSTRAINTS, N_COORD
 from finaldrive.engine.model.elements import N_AUX
 from finaldrive.engine.model.kinematics import (
     GeometryError,
+    assemble,
     chain_length,
     design_squat_ratio,
     pose_from_minimal,
@@ -129,6 +130,7 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
     kind, rp = road.packed()
     ext = np.zeros(D.N_EXT)
     led = np.zeros(D.N_LED)
+    qg = gravity_forces(p)
     if settings.method == "fast":
         # series rows every series_stride x dt, by dense output (the steps do not land on them)
         n_out = max(1, math.ceil(settings.duration / (settings.dt * settings.series_stride) - 1e-9))
@@ -159,7 +161,7 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
         lam = np.zeros(N_CONSTRAINTS)
         sigma = np.zeros(1)
         aux = np.zeros(N_AUX)
-        M, qg = mass_matrix(p), gravity_forces(p)
+        M = mass_matrix(p)
         max_air_steps = math.ceil(settings.max_airborne_time / dt)
 
         def chunk() -> int:
@@ -179,7 +181,8 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
     if settings.method == "fast":
         x1_end = float(y[minimal.ZX1])
         kinetic = float(minimal.kinetic_energy(y, p, kind, rp))
-        q_end = pose_from_minimal(y[:minimal.N_DOF], p, road)
+        x1, y1, theta, phi, fs = (float(c) for c in y[:minimal.ZBETA])
+        q_end = assemble(p, road, x1, y1, theta, phi, fs, 0.0, 0.0)  # the pose, but for alpha and beta
         rows = int(st[S_ROW])
     else:
         x1_end = float(y[X1])
@@ -191,7 +194,7 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
     slack_m = slack(ext[D.E_TAUT_MIN], ext[D.E_TAUT_MAX])
     fit = fitness(distance, setup.squat_ratio, slack_m, eps1=p[P.EPS1], eps2=p[P.EPS2],
                   sr_optimum=p[P.SR_OPTIMUM], floor=p[P.FLOOR])
-    values = _diagnostics(ext, led, kinetic, potential_energy(q_end, p) - potential_energy(setup.q0, p))
+    values = _diagnostics(ext, led, kinetic, potential_energy(q_end, p, qg) - potential_energy(setup.q0, p, qg))
     out = None
     if settings.series:
         if settings.method == "fast":

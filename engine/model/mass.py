@@ -92,10 +92,14 @@ def centre_of_mass(q: np.ndarray, p: np.ndarray) -> tuple[float, float, float]:
 
 
 
-def potential_energy(q: np.ndarray, p: np.ndarray) -> float:
-    """Potential energy at pose q [J]: gravity (V = -Q_g . q, Q_g constant) and the springs of
-    the suspensions (34)-(35) and tyres (36)-(37), the rear bump stop included."""
+def potential_energy(q: np.ndarray, p: np.ndarray, qg: np.ndarray | None = None) -> float:
+    """Potential energy at pose q [J]: gravity (V = -Q_g . q, Q_g constant: pass gravity_forces(p)
+    to save its cost) and the springs of the suspensions (34)-(35) and tyres (36)-(37), the rear
+    bump stop included. The sprocket angles alpha, beta do not enter it (both centres of mass sit
+    on their axes)."""
+    if qg is None:
+        qg = gravity_forces(p)
     springs = 0.5 * p[P.K_RS] * (q[RS] - p[P.S_RS]) ** 2 + 0.5 * p[P.K_FS] * (q[FS] - p[P.S_FS]) ** 2
     springs += radial_energy(q[RT], p[P.RT0], p[P.K_RT], p[P.RT_BOTTOMING], p[P.K_RT_BOTTOMING])
     springs += radial_energy(q[FT], p[P.FT0], p[P.K_FT], math.inf, 0.0)
-    return float(-gravity_forces(p) @ q + springs)
+    return float(-qg @ q + springs)
