@@ -244,6 +244,13 @@ def main() -> None:
             print(f"| {label}, {name} | {x.chain_tension_max_n:,.0f} | {x.chain_tension_min_n:,.0f} | "
                   f"{x.chain_compression_s * 1e3:.1f} | {x.fz_rear_max_n:,.0f} | "
                   f"{x.tyre_compression_rear_max_m * 1e3:.1f} | {x.airborne_rear_s * 1e3:.0f} |")
+    g2 = t14["reference"]["g2"]
+    print(f"\nGeometry 2's rear tyre now bottoms (compression {g2.tyre_compression_rear_max_m * 1e3:.1f} mm, beyond "
+          f"rt_bottoming = {v['rt_bottoming'] * 1e3:.1f} mm): the bump stop")
+    print("stops the swingarm within a few ms, and the low, far engine sprocket (L2 = 0.15 m below the pivot) turns")
+    print("with the swingarm (Fig. 5), so the sprocket's inertia (0.5 kg m^2, Table 2) loads the rigid chain: the")
+    print(f"peak tension of {g2.chain_tension_max_n / 1e3:.0f} kN is that impact, a shock load the chain would have "
+          "to survive (the diagnostic is there to show it).")
     strides = [simulate(GEOMETRIES["g2_150"], sine3, SimSettings(series=True, series_stride=k)) for k in (1, 10, 20)]
     print("\nPeak chain tension of geometry 2 with R_WS = 0.150 m (fast) read off the series at strides 1, 10 and 20 "
           "(1, 10 and 20 ms): " + ", ".join(f"{float(r.series['chain_tension'].max()):,.0f} N" for r in strides)

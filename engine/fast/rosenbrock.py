@@ -60,8 +60,8 @@ MIN_STEP = 1.0e-7
 FIRST_STEP = 1.0e-3
 
 # Slots of the loop's saved state (st): everything a paused run needs to continue exactly.
-S_T, S_H, S_SIGMA, S_PREV_TAUT, S_PREV_RATE, S_AIR_REAR, S_AIR_FRONT, S_ROW, S_STARTED, S_STEPS = range(10)
-N_ST = 10
+S_T, S_H, S_SIGMA, S_PREV_TAUT, S_PREV_RATE, S_AIR_REAR, S_AIR_FRONT, S_ROW, S_STARTED = range(9)
+N_ST = 9
 
 
 @jit

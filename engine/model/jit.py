@@ -32,7 +32,7 @@ def _source_fingerprint() -> str:
 
 if not os.environ.get("NUMBA_CACHE_DIR"):
     _base = _ENGINE / "__pycache__" if os.access(_ENGINE, os.W_OK) else Path(tempfile.gettempdir()) / "finaldrive"
-    config.CACHE_DIR = str(_base / f"numba-{_source_fingerprint()}")
+    config.CACHE_DIR = str(_base / f"numba-{_source_fingerprint()}")  # type: ignore[attr-defined]
 
 #: Decorator for compiled model and solver functions: cached on disk, fast math off so the
 #: results are bit-reproducible across runs on one machine.
