@@ -327,6 +327,9 @@ def main() -> None:
     print("  formula's slope (inside and beyond the load range), the chain terms d(alpha)/dz, alpha'' at z'' = 0,")
     print("  L_taut' (against the natural-coordinate position analysis), and the W matrix's d(u')/dz', d(u')/du,")
     print("  dz''/du = M^-1 b dF_x/du with both lever arms; the radial tyre force against its energy.")
+    print("- One model: the fast path's accelerations equal the reference model (mass matrix, gravity, every force")
+    print("  element, constraints 1-33) projected onto its minimal coordinates, to 1e-5 at random states with every")
+    print("  force on (test_projections.py).")
     print("- Fig. 5: with the engine sprocket held, rotating the swingarm 8 deg turns the wheel as the "
           "tangent geometry gives,")
     print("  to 1e-10 rad; concentric sprocket: exactly half the swingarm's rotation (test_final_drive.py).")
