@@ -6,7 +6,8 @@ tyre force, the generalized forces on the free coordinates vanish. The free coor
 y1, theta, phi and fs; the rear contact point stays at x = 0 (x = 0 at the rear tyre's initial
 contact point: docs/engine.md#reading-notes-reference-choices), which ties x1 to phi:
 x1 = -L_SA cos(phi). The forces come from the compiled minimal-coordinate model
-(engine.fast.minimal), by Newton's method.
+(engine.fast.minimal), by Newton's method. This is the fast path's start; the reference method
+solves its own model's equilibrium (engine.solver.equilibrium).
 """
 
 from __future__ import annotations
