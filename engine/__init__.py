@@ -14,12 +14,12 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 #: Bumped whenever a change alters simulation results (part of the result-cache key).
-ENGINE_VERSION = "0.1.0"
+ENGINE_VERSION = "0.2.0"
 
 #: Public name -> module that defines it.
 _EXPORTS: dict[str, str] = {
-    **dict.fromkeys(("STATUS_FAILED", "STATUS_OK", "BatchResult", "Design", "DesignError", "Method", "SimResult",
-                     "SimSettings"), "finaldrive.engine.api"),
+    **dict.fromkeys(("DIAGNOSTICS", "STATUS_FAILED", "STATUS_OK", "BatchResult", "Design", "DesignError", "Method",
+                     "SimResult", "SimSettings"), "finaldrive.engine.api"),
     **dict.fromkeys(("evaluate", "simulate"), "finaldrive.engine.simulation"),
     **dict.fromkeys(("Road", "RoadError"), "finaldrive.engine.model.road"),
     **dict.fromkeys(("coordinate_index", "point_positions"), "finaldrive.engine.model.coordinates"),
@@ -60,6 +60,7 @@ def __dir__() -> list[str]:
 
 if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
     from finaldrive.engine.api import (
+        DIAGNOSTICS as DIAGNOSTICS,
         STATUS_FAILED as STATUS_FAILED,
         STATUS_OK as STATUS_OK,
         BatchResult as BatchResult,

@@ -8,12 +8,28 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields, replace
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
 STATUS_OK = "ok"
 STATUS_FAILED = "failed"
+
+#: What every result reports besides distance, SR, slack and fitness, tracked at every integrator
+#: step (never read off the output series; docs/engine.md#extremes-and-the-energy-ledger), units in
+#: the names: the extremes of the chain tension, of the tyre loads and of the slip |kappa'|, the time
+#: each wheel spends off the road and the upper chain run in compression, the largest tyre
+#: compressions, and the energy ledger [J] (drive work = kinetic + potential energy + damper
+#: dissipation + tyre slip work - lever-arm work + residual; slip work = carcass energy + tyre
+#: dissipation), with the smallest tyre dissipation rate seen [W] (>= 0: the tyre creates no energy).
+DIAGNOSTICS: tuple[str, ...] = (
+    "chain_tension_max_n", "chain_tension_min_n", "chain_compression_s",
+    "fz_rear_max_n", "fz_rear_min_n", "fz_front_max_n", "fz_front_min_n", "slip_max",
+    "airborne_rear_s", "airborne_front_s", "tyre_compression_rear_max_m", "tyre_compression_front_max_m",
+    "drive_work_j", "kinetic_energy_j", "potential_energy_j", "damper_dissipation_j", "tyre_slip_work_j",
+    "tyre_carcass_energy_j", "tyre_dissipation_j", "tyre_lever_work_j", "ledger_residual_j",
+    "tyre_dissipation_min_w",
+)
 
 Method = Literal["fast", "reference"]
 
@@ -86,7 +102,9 @@ class SimSettings:
     max_airborne_time: float = 0.5   # s a wheel may stay off the road before the run fails
     series: bool = False             # keep time series (Fig. 13 quantities)
     series_stride: int = 10          # series rows every stride * dt (fast: steps land there too)
-    tyre_longitudinal: bool = True   # False only for verification (energy balance)
+    tyre_longitudinal: bool = True   # False only for verification
+    max_wall_s: float | None = 60.0  # wall-time limit of one simulation [s] (None: none); changes no
+                                     # result that finishes within it (not part of a result's identity)
 
     def __post_init__(self) -> None:
         if not (self.duration > 0 and math.isfinite(self.duration)):
@@ -105,6 +123,8 @@ class SimSettings:
             raise ValueError("penalty_alpha must be > 0, baumgarte xi and omega >= 0")
         if self.series_stride < 1:
             raise ValueError("series_stride must be >= 1")
+        if self.max_wall_s is not None and not self.max_wall_s > 0:
+            raise ValueError("max_wall_s must be > 0 s or None")
 
     def steps(self) -> tuple[int, float]:
         """(number of steps, step) covering the duration exactly with a step <= dt."""
@@ -117,7 +137,8 @@ class SimSettings:
 
 @dataclass(frozen=True)
 class SimResult:
-    """One simulation's outcome. Lengths in m (slack_m too), SR dimensionless."""
+    """One simulation's outcome. Lengths in m (slack_m too), SR dimensionless; the diagnostics
+    (:data:`DIAGNOSTICS`) carry their units in their names and are NaN for a failed run."""
 
     status: str
     reason: str
@@ -128,6 +149,32 @@ class SimResult:
     chain_length_m: float
     wall_s: float
     series: dict[str, np.ndarray] | None = field(default=None, compare=False)
+    chain_tension_max_n: float = math.nan
+    chain_tension_min_n: float = math.nan
+    chain_compression_s: float = math.nan
+    fz_rear_max_n: float = math.nan
+    fz_rear_min_n: float = math.nan
+    fz_front_max_n: float = math.nan
+    fz_front_min_n: float = math.nan
+    slip_max: float = math.nan
+    airborne_rear_s: float = math.nan
+    airborne_front_s: float = math.nan
+    tyre_compression_rear_max_m: float = math.nan
+    tyre_compression_front_max_m: float = math.nan
+    drive_work_j: float = math.nan
+    kinetic_energy_j: float = math.nan
+    potential_energy_j: float = math.nan
+    damper_dissipation_j: float = math.nan
+    tyre_slip_work_j: float = math.nan
+    tyre_carcass_energy_j: float = math.nan
+    tyre_dissipation_j: float = math.nan
+    tyre_lever_work_j: float = math.nan
+    ledger_residual_j: float = math.nan
+    tyre_dissipation_min_w: float = math.nan
+
+    def diagnostics(self) -> dict[str, float]:
+        """The diagnostics (:data:`DIAGNOSTICS`) by name."""
+        return {name: getattr(self, name) for name in DIAGNOSTICS}
 
     @property
     def ok(self) -> bool:
@@ -148,12 +195,18 @@ class SimResult:
             "fitness_m": self.fitness_m,
             "chain_length_m": self.chain_length_m,
             "wall_s": self.wall_s,
+            **self.diagnostics(),
         }
+
+
+def _unset() -> np.ndarray:
+    return np.zeros(0)
 
 
 @dataclass(frozen=True)
 class BatchResult:
-    """Results of a batch, one entry per input design row, in order."""
+    """Results of a batch, one entry per input design row, in order. The diagnostics
+    (:data:`DIAGNOSTICS`) are arrays too; left out, they are NaN."""
 
     designs: np.ndarray          # (n, 3): a2 [rad], L2 [m], R_WS [m]
     distance_m: np.ndarray
@@ -164,6 +217,34 @@ class BatchResult:
     wall_s: np.ndarray
     status: tuple[str, ...]
     reason: tuple[str, ...]
+    chain_tension_max_n: np.ndarray = field(default_factory=_unset)
+    chain_tension_min_n: np.ndarray = field(default_factory=_unset)
+    chain_compression_s: np.ndarray = field(default_factory=_unset)
+    fz_rear_max_n: np.ndarray = field(default_factory=_unset)
+    fz_rear_min_n: np.ndarray = field(default_factory=_unset)
+    fz_front_max_n: np.ndarray = field(default_factory=_unset)
+    fz_front_min_n: np.ndarray = field(default_factory=_unset)
+    slip_max: np.ndarray = field(default_factory=_unset)
+    airborne_rear_s: np.ndarray = field(default_factory=_unset)
+    airborne_front_s: np.ndarray = field(default_factory=_unset)
+    tyre_compression_rear_max_m: np.ndarray = field(default_factory=_unset)
+    tyre_compression_front_max_m: np.ndarray = field(default_factory=_unset)
+    drive_work_j: np.ndarray = field(default_factory=_unset)
+    kinetic_energy_j: np.ndarray = field(default_factory=_unset)
+    potential_energy_j: np.ndarray = field(default_factory=_unset)
+    damper_dissipation_j: np.ndarray = field(default_factory=_unset)
+    tyre_slip_work_j: np.ndarray = field(default_factory=_unset)
+    tyre_carcass_energy_j: np.ndarray = field(default_factory=_unset)
+    tyre_dissipation_j: np.ndarray = field(default_factory=_unset)
+    tyre_lever_work_j: np.ndarray = field(default_factory=_unset)
+    ledger_residual_j: np.ndarray = field(default_factory=_unset)
+    tyre_dissipation_min_w: np.ndarray = field(default_factory=_unset)
+
+    def __post_init__(self) -> None:
+        n = len(self.status)
+        for name in DIAGNOSTICS:  # results built without diagnostics (older callers): NaN
+            if getattr(self, name).size == 0 and n > 0:
+                object.__setattr__(self, name, np.full(n, math.nan))
 
     def __len__(self) -> int:
         return len(self.status)
@@ -178,7 +259,11 @@ class BatchResult:
             distance_m=float(self.distance_m[i]), squat_ratio=float(self.squat_ratio[i]),
             slack_m=float(self.slack_m[i]), fitness_m=float(self.fitness_m[i]),
             chain_length_m=float(self.chain_length_m[i]), wall_s=float(self.wall_s[i]),
+            **self._diagnostics_of(i),
         )
+
+    def _diagnostics_of(self, i: int) -> dict[str, Any]:
+        return {name: float(getattr(self, name)[i]) for name in DIAGNOSTICS}
 
     @classmethod
     def from_results(cls, designs: np.ndarray, results: list[SimResult]) -> BatchResult:
@@ -191,6 +276,7 @@ class BatchResult:
             slack_m=col("slack_m"), fitness_m=col("fitness_m"),
             chain_length_m=col("chain_length_m"), wall_s=col("wall_s"),
             status=tuple(r.status for r in results), reason=tuple(r.reason for r in results),
+            **{name: col(name) for name in DIAGNOSTICS},
         )
 
     @classmethod

@@ -1,9 +1,10 @@
-"""What both solvers report: failure codes of a run and the columns of its time series."""
+"""What both solvers report: the codes of a run and the columns of its time series."""
 
 from __future__ import annotations
 
-# Failure codes of a run (0 = ok); engine.simulation turns them into reasons.
-OK, NONFINITE, RESIDUAL, CORRECTOR, REAR_AIRBORNE, FRONT_AIRBORNE = 0, 1, 2, 3, 4, 5
+# Codes of a run (0 = ok); engine.simulation turns the failures into reasons. PAUSED: the compiled
+# loop did its share of steps and returns its whole state; called again it continues exactly.
+OK, NONFINITE, RESIDUAL, CORRECTOR, REAR_AIRBORNE, FRONT_AIRBORNE, PAUSED = 0, 1, 2, 3, 4, 5, 6
 
 # Columns of the time series (engine.simulation names them).
 SERIES_COLUMNS = ("t", "x1", "theta", "chain_tension", "fz_rear", "fz_front", "kappa",

@@ -7,32 +7,50 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from finaldrive.engine import outcome
-from finaldrive.engine.api import STATUS_FAILED, STATUS_OK, BatchResult, Design, DesignError, SimResult, SimSettings
+from finaldrive.engine.api import (
+    DIAGNOSTICS,
+    STATUS_FAILED,
+    STATUS_OK,
+    BatchResult,
+    Design,
+    DesignError,
+    SimResult,
+    SimSettings,
+)
 from finaldrive.engine.fast import minimal
 from finaldrive.engine.fast.equilibrium import EquilibriumError, static_equilibrium
-from finaldrive.engine.fast.rosenbrock import run_fast
+from finaldrive.engine.fast.rosenbrock import N_ST as FAST_N_ST, S_ROW, S_T, run_fast
 from finaldrive.engine.fitness import fitness, slack
-from finaldrive.engine.model import params as P
-from finaldrive.engine.model.coordinates import BETA, FS, N_COORDS, PHI, THETA, X1, X14, Y1, Y14
+from finaldrive.engine.model import diagnostics as D, params as P
+from finaldrive.engine.model.coordinates import BETA, FS, N_CONSTRAINTS, N_COORDS, PHI, THETA, X1, X14, Y1, Y14
+from finaldrive.engine.model.elements import N_AUX
 from finaldrive.engine.model.kinematics import (
     GeometryError,
+    assemble,
     chain_length,
     design_squat_ratio,
     pose_from_minimal,
     squat_ratio_at,
 )
-from finaldrive.engine.model.mass import gravity_forces, mass_matrix
+from finaldrive.engine.model.mass import gravity_forces, mass_matrix, potential_energy
 from finaldrive.engine.model.road import Road
 from finaldrive.engine.solver import reference
+from finaldrive.engine.solver.equilibrium import ReferenceEquilibriumError, reference_equilibrium
 from finaldrive.engine.vehicle import Vehicle, default_vehicle
 
 #: The natural coordinates that are the fast path's minimal coordinates z, in order.
 MINIMAL_COORDS = (X1, Y1, THETA, PHI, FS, BETA)
+#: Steps of a compiled loop between two looks at the wall clock and at should_stop: about
+#: 5-20 ms of work on one core (fast path ~2 us a step, reference ~60 us a step).
+FAST_CHUNK_STEPS = 4096
+REFERENCE_CHUNK_STEPS = 256
 
 _REASONS = {
     outcome.NONFINITE: "the state became non-finite (diverged)",
@@ -41,6 +59,7 @@ _REASONS = {
     outcome.REAR_AIRBORNE: "rear wheel off the road for longer than the limit",
     outcome.FRONT_AIRBORNE: "front wheel off the road for longer than the limit",
 }
+REASON_CANCELLED = "cancelled"
 
 
 def pack_parameters(vehicle: Vehicle, design: Design, settings: SimSettings) -> np.ndarray:
@@ -64,9 +83,10 @@ class Setup:
 
 
 def prepare(design: Design, road: Road, settings: SimSettings, vehicle: Vehicle) -> Setup:
-    """Parameters, static equilibrium and the chain length L of eq. (69) at t = 0."""
+    """Parameters, static equilibrium and the chain length L of eq. (69) at t = 0. Each method
+    finds the equilibrium of its own model (the reference in its 39 natural coordinates)."""
     p = pack_parameters(vehicle, design, settings)
-    q0 = static_equilibrium(p, road)
+    q0 = reference_equilibrium(p, road) if settings.method == "reference" else static_equilibrium(p, road)
     p[P.L_CHAIN] = chain_length(q0, p)
     return Setup(p=p, q0=q0, squat_ratio=float(design_squat_ratio(p)))
 
@@ -76,55 +96,145 @@ def _failed(reason: str, sr: float, chain: float, start: float) -> SimResult:
                      time.perf_counter() - start)
 
 
+def _run_chunks(chunk: Callable[[], int], settings: SimSettings,
+                should_stop: Callable[[], bool] | None) -> tuple[int, str]:
+    """Run a resumable compiled loop to its end, one chunk at a time; between chunks, stop it when
+    should_stop() says so or the wall-time limit has passed. (code, reason why it was stopped).
+
+    The limit's clock starts when the first chunk returns: in a fresh process numba compiles the
+    model during its first call (tens of seconds on a loaded machine), which is not the run's time.
+    """
+    clock: float | None = None
+    while True:
+        if should_stop is not None and should_stop():
+            return outcome.PAUSED, REASON_CANCELLED
+        if settings.max_wall_s is not None and clock is not None and time.perf_counter() - clock > settings.max_wall_s:
+            return outcome.PAUSED, f"time limit: {settings.max_wall_s:g} s of wall time exceeded"
+        code = chunk()
+        if clock is None:
+            clock = time.perf_counter()
+        if code != outcome.PAUSED:
+            return code, ""
+
+
 def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
-             vehicle: Vehicle | None = None) -> SimResult:
-    """Simulate one design on one road from rest; never raises for a design that fails."""
+             vehicle: Vehicle | None = None, should_stop: Callable[[], bool] | None = None) -> SimResult:
+    """Simulate one design on one road from rest; never raises for a design that fails.
+
+    should_stop, if given, is asked between chunks of integration (every few ms of work): when
+    it returns True the run ends as failed with reason "cancelled". A run whose integration takes
+    longer than settings.max_wall_s (counted from the end of its first chunk, so that numba's
+    compilation in a fresh process does not count) ends as failed with a reason starting
+    "time limit". Neither changes a result that finishes.
+    """
     start = time.perf_counter()
     vehicle = vehicle or default_vehicle()
     try:
         setup = prepare(design, road, settings, vehicle)
-    except (GeometryError, EquilibriumError) as exc:
+    except (GeometryError, EquilibriumError, ReferenceEquilibriumError) as exc:
         return _failed(str(exc), math.nan, math.nan, start)
     p = setup.p
     chain = float(p[P.L_CHAIN])
     kind, rp = road.packed()
-    n_steps, dt = settings.steps()
+    ext = np.zeros(D.N_EXT)
+    led = np.zeros(D.N_LED)
+    qg = gravity_forces(p)
     if settings.method == "fast":
-        # outputs (series rows) every stride steps of dt, at the reference's times
-        n_out = max(1, math.ceil(settings.duration / (dt * settings.series_stride) - 1e-9))
-        y0 = np.zeros(minimal.N_STATE)
-        y0[:minimal.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
-        code, failed_at, y_end, tmin, tmax, series, states = run_fast(
-            y0, p, kind, rp, settings.tyre_longitudinal, settings.duration / n_out, n_out,
-            settings.fast_tolerance, settings.fast_max_step, settings.max_airborne_time, 1,
-            settings.series)
-        x1_end = y_end[minimal.ZX1]
+        # series rows every series_stride x dt, by dense output (the steps do not land on them)
+        n_out = max(1, math.ceil(settings.duration / (settings.dt * settings.series_stride) - 1e-9))
+        n_rows = n_out + 1 if settings.series else 0
+        series = np.zeros((n_rows, outcome.N_SERIES))
+        states = np.zeros((n_rows, 2 * minimal.N_DOF))
+        st = np.zeros(FAST_N_ST)
+        y = np.zeros(minimal.N_STATE)
+        y[:minimal.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
+
+        def chunk() -> int:
+            return int(run_fast(y, p, kind, rp, settings.tyre_longitudinal, settings.duration,
+                                settings.duration / n_out, settings.fast_tolerance, settings.fast_max_step,
+                                settings.max_airborne_time, settings.series, st, ext, led, series, states,
+                                FAST_CHUNK_STEPS))
+
+        code, stopped = _run_chunks(chunk, settings, should_stop)
+        reached = float(st[S_T])
     else:
+        n_steps, dt = settings.steps()
+        n_rows = (n_steps // settings.series_stride + 2) if settings.series else 0
+        series = np.zeros((n_rows, outcome.N_SERIES))
+        states = np.zeros((n_rows, 2 * N_COORDS))
+        st = np.zeros(reference.N_ST)
+        y = np.zeros(reference.N_STATE)
+        y[:N_COORDS] = setup.q0
+        hist = np.zeros((4, reference.N_STATE))
+        lam = np.zeros(N_CONSTRAINTS)
+        sigma = np.zeros(1)
+        aux = np.zeros(N_AUX)
+        M = mass_matrix(p)
         max_air_steps = math.ceil(settings.max_airborne_time / dt)
-        y0 = np.zeros(reference.N_STATE)
-        y0[:N_COORDS] = setup.q0
-        code, failed_step, y_end, tmin, tmax, series, states = reference.run_reference(
-            y0, p, kind, rp, mass_matrix(p), gravity_forces(p), settings.tyre_longitudinal, dt, n_steps,
-            settings.trapezoidal_steps, settings.under_relaxation, settings.corrector_tol,
-            settings.corrector_max_iter, settings.lambda_tol, settings.lambda_max_iter,
-            settings.max_constraint_residual, max_air_steps, settings.series_stride, settings.series)
-        x1_end = y_end[X1]
-        failed_at = failed_step * dt
+
+        def chunk() -> int:
+            return int(reference.run_reference(
+                y, p, kind, rp, M, qg, settings.tyre_longitudinal, dt, n_steps, settings.trapezoidal_steps,
+                settings.under_relaxation, settings.corrector_tol, settings.corrector_max_iter, settings.lambda_tol,
+                settings.lambda_max_iter, settings.max_constraint_residual, max_air_steps, settings.series_stride,
+                settings.series, st, hist, lam, sigma, aux, ext, led, series, states, REFERENCE_CHUNK_STEPS))
+
+        code, stopped = _run_chunks(chunk, settings, should_stop)
+        reached = float(st[reference.S_STEP]) * dt
+    if stopped:
+        at = f" at t = {reached:.4f} s" if stopped != REASON_CANCELLED else ""
+        return _failed(stopped + at, setup.squat_ratio, chain, start)
     if code != outcome.OK:
-        return _failed(f"{_REASONS[code]} at t = {failed_at:.4f} s", setup.squat_ratio, chain, start)
-    distance = float(x1_end - setup.q0[X1])
-    slack_m = slack(tmin, tmax)
+        return _failed(f"{_REASONS[code]} at t = {reached:.4f} s", setup.squat_ratio, chain, start)
+    if settings.method == "fast":
+        x1_end = float(y[minimal.ZX1])
+        kinetic = float(minimal.kinetic_energy(y, p, kind, rp))
+        x1, y1, theta, phi, fs = (float(c) for c in y[:minimal.ZBETA])
+        q_end = assemble(p, road, x1, y1, theta, phi, fs, 0.0, 0.0)  # the pose, but for alpha and beta
+        rows = int(st[S_ROW])
+    else:
+        x1_end = float(y[X1])
+        qd = y[N_COORDS:2 * N_COORDS]
+        kinetic = float(0.5 * qd @ M @ qd)
+        q_end = y[:N_COORDS]
+        rows = int(st[reference.S_ROW])
+    distance = x1_end - float(setup.q0[X1])
+    slack_m = slack(ext[D.E_TAUT_MIN], ext[D.E_TAUT_MAX])
     fit = fitness(distance, setup.squat_ratio, slack_m, eps1=p[P.EPS1], eps2=p[P.EPS2],
                   sr_optimum=p[P.SR_OPTIMUM], floor=p[P.FLOOR])
+    values = _diagnostics(ext, led, kinetic, potential_energy(q_end, p, qg) - potential_energy(setup.q0, p, qg))
     out = None
     if settings.series:
         if settings.method == "fast":
-            qs = np.array([pose_from_minimal(s, p, road) for s in states])
+            qs = np.array([pose_from_minimal(s, p, road) for s in states[:rows]])
         else:
-            qs = states[:, :N_COORDS]
-        out = _series(series, qs, setup, p, settings.method)
+            qs = states[:rows, :N_COORDS]
+        out = _series(series[:rows], qs, setup, p, settings.method)
     return SimResult(STATUS_OK, "", distance, setup.squat_ratio, slack_m, fit, chain,
-                     time.perf_counter() - start, out)
+                     time.perf_counter() - start, out, **values)
+
+
+def _diagnostics(ext: np.ndarray, led: np.ndarray, kinetic: float, potential: float) -> dict[str, Any]:
+    """The result's diagnostics (api.DIAGNOSTICS) from the loop's records and the end state's energies."""
+    slip = float(led[D.L_SLIP])
+    values = {
+        "chain_tension_max_n": ext[D.E_TENSION_MAX], "chain_tension_min_n": ext[D.E_TENSION_MIN],
+        "chain_compression_s": ext[D.E_CHAIN_COMPRESSION],
+        "fz_rear_max_n": ext[D.E_FZ_REAR_MAX], "fz_rear_min_n": ext[D.E_FZ_REAR_MIN],
+        "fz_front_max_n": ext[D.E_FZ_FRONT_MAX], "fz_front_min_n": ext[D.E_FZ_FRONT_MIN],
+        "slip_max": ext[D.E_SLIP_MAX],
+        "airborne_rear_s": ext[D.E_AIRBORNE_REAR], "airborne_front_s": ext[D.E_AIRBORNE_FRONT],
+        "tyre_compression_rear_max_m": ext[D.E_COMPRESSION_REAR],
+        "tyre_compression_front_max_m": ext[D.E_COMPRESSION_FRONT],
+        "drive_work_j": led[D.L_DRIVE], "kinetic_energy_j": kinetic, "potential_energy_j": potential,
+        "damper_dissipation_j": led[D.L_DAMPERS], "tyre_slip_work_j": slip,
+        "tyre_carcass_energy_j": led[D.L_CARCASS], "tyre_dissipation_j": led[D.L_TYRE_DISSIPATION],
+        "tyre_lever_work_j": led[D.L_LEVER],
+        "ledger_residual_j": led[D.L_DRIVE] + led[D.L_LEVER] - (kinetic + potential + led[D.L_DAMPERS] + slip),
+        "tyre_dissipation_min_w": led[D.L_DISSIPATION_MIN],
+    }
+    assert tuple(values) == DIAGNOSTICS
+    return {k: float(v) for k, v in values.items()}
 
 
 def _series(series: np.ndarray, qs: np.ndarray, setup: Setup, p: np.ndarray,
@@ -141,10 +251,11 @@ def _series(series: np.ndarray, qs: np.ndarray, setup: Setup, p: np.ndarray,
 
 
 def evaluate(designs: np.ndarray, road: Road, settings: SimSettings = SimSettings(),
-             vehicle: Vehicle | None = None) -> BatchResult:
+             vehicle: Vehicle | None = None, should_stop: Callable[[], bool] | None = None) -> BatchResult:
     """Simulate a batch of design rows (a2 [rad], L2 [m], R_WS [m]), results in input order.
 
     Series are never kept in a batch. A row that is not a valid design is a failed result.
+    should_stop is passed to each simulate (once it says stop, the remaining rows are cancelled).
     """
     rows = np.asarray(designs, dtype=float).reshape(-1, 3)
     settings = settings.with_(series=False)
@@ -156,8 +267,5 @@ def evaluate(designs: np.ndarray, road: Road, settings: SimSettings = SimSetting
         except DesignError as exc:
             results.append(_failed(f"invalid design: {exc}", math.nan, math.nan, time.perf_counter()))
             continue
-        results.append(simulate(design, road, settings, vehicle))
+        results.append(simulate(design, road, settings, vehicle, should_stop))
     return BatchResult.from_results(rows, results)
-
-
-

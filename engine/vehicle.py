@@ -32,13 +32,15 @@ PARAMETERS: tuple[tuple[str, Rule], ...] = (
     ("L7", _POSITIVE), ("L_SA", _POSITIVE), ("theta0", _ANY), ("phi0", _ANY), ("rt0", _POSITIVE),
     ("ft0", _POSITIVE), ("L8", _POSITIVE), ("k_rs", _POSITIVE), ("c_rs", _NON_NEGATIVE), ("s_rs", _POSITIVE),
     ("k_fs", _POSITIVE), ("c_fs", _NON_NEGATIVE), ("s_fs", _POSITIVE), ("k_rt", _POSITIVE),
-    ("c_rt", _NON_NEGATIVE), ("k_ft", _POSITIVE), ("c_ft", _NON_NEGATIVE), ("m_chassis", _POSITIVE),
+    ("c_rt", _NON_NEGATIVE), ("rt_bottoming", _POSITIVE), ("k_rt_bottoming", _NON_NEGATIVE), ("k_ft", _POSITIVE),
+    ("c_ft", _NON_NEGATIVE), ("m_chassis", _POSITIVE),
     ("I_chassis", _POSITIVE), ("m_swingarm", _POSITIVE), ("I_swingarm", _POSITIVE), ("m_sprocket", _POSITIVE),
     ("I_sprocket", _POSITIVE), ("m_rear_wheel", _POSITIVE), ("I_rear_wheel", _POSITIVE), ("m_fork", _POSITIVE),
     ("I_fork", _POSITIVE), ("m_front_wheel", _POSITIVE), ("swingarm_cog_fraction", _FRACTION),
     ("fork_cog_fraction", _FRACTION), ("chassis_cog_x", _ANY), ("chassis_cog_y", _ANY), ("pCx1", _POSITIVE),
     ("pDx1", _POSITIVE), ("pDx2", _ANY), ("pEx1", _ANY), ("pEx2", _ANY), ("pEx3", _ANY), ("pEx4", _ANY),
-    ("pKx1", _POSITIVE), ("pKx2", _ANY), ("pKx3", _ANY), ("Fz0", _POSITIVE), ("K_vlow0", _NON_NEGATIVE),
+    ("pKx1", _POSITIVE), ("pKx2", _ANY), ("pKx3", _ANY), ("Fz0", _POSITIVE), ("Fz_min", _NON_NEGATIVE),
+    ("Fz_max", _POSITIVE), ("fx_lever_loaded", _FRACTION), ("K_vlow0", _NON_NEGATIVE),
     ("sigma_k0", _POSITIVE), ("sigma_min", _POSITIVE), ("eps_F", _POSITIVE), ("V_low", _POSITIVE),
     ("torque", _ANY), ("sprocket_ratio", _POSITIVE), ("gravity", _POSITIVE), ("eps1", _NON_NEGATIVE),
     ("eps2", _NON_NEGATIVE), ("sr_optimum", _ANY), ("floor", _FRACTION), ("squat_K", _POSITIVE),
@@ -141,6 +143,10 @@ def load_vehicle_dict(data: Any) -> Vehicle:
     v = dict(values)
     if v["sigma_min"] > v["sigma_k0"]:
         raise VehicleError("vehicle parameter 'sigma_min': must not exceed sigma_k0")
+    if not v["Fz_min"] < v["Fz0"] < v["Fz_max"]:
+        raise VehicleError("vehicle parameter 'Fz_max': the load range Fz_min < Fz0 < Fz_max is required")
+    if v["rt_bottoming"] >= v["rt0"]:
+        raise VehicleError("vehicle parameter 'rt_bottoming': must be less than the unloaded radius rt0")
     return Vehicle(
         name=str(data.get("name", "")),
         values=values,

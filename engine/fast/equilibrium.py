@@ -6,7 +6,8 @@ tyre force, the generalized forces on the free coordinates vanish. The free coor
 y1, theta, phi and fs; the rear contact point stays at x = 0 (x = 0 at the rear tyre's initial
 contact point: docs/engine.md#reading-notes-reference-choices), which ties x1 to phi:
 x1 = -L_SA cos(phi). The forces come from the compiled minimal-coordinate model
-(engine.fast.minimal), by Newton's method.
+(engine.fast.minimal), by Newton's method. This is the fast path's start; the reference method
+solves its own model's equilibrium (engine.solver.equilibrium).
 """
 
 from __future__ import annotations
@@ -16,7 +17,6 @@ import math
 import numpy as np
 
 from finaldrive.engine.fast.minimal import (
-    N_AUX,
     N_DOF,
     N_STATE,
     ZFS,
@@ -29,13 +29,12 @@ from finaldrive.engine.fast.minimal import (
     fast_rhs,
 )
 from finaldrive.engine.model import params as P
-from finaldrive.engine.model.coordinates import FS, FT, GAMMA, PHI, RT, THETA, X1, X14, X15, Y1
+from finaldrive.engine.model.coordinates import FT, GAMMA, RT
+from finaldrive.engine.model.elements import N_AUX
 from finaldrive.engine.model.jit import jit
-from finaldrive.engine.model.kinematics import assemble, design_pose
+from finaldrive.engine.model.kinematics import assemble, first_guess
 from finaldrive.engine.model.road import Road
 
-#: The first guess presses both tyres this far into the road [m] so both springs act.
-_GUESS_PRELOAD = 0.005
 #: Newton stops when the update is below this [m, rad].
 _XTOL = 1.0e-12
 _MAX_NEWTON = 30
@@ -94,23 +93,13 @@ def _newton(free, p0, kind, rp, xtol, max_iter, fd):
     return free, False
 
 
-def _first_guess(p: np.ndarray, road: Road) -> np.ndarray:
-    """The design pose pitched onto the road about the rear contact point, tyres preloaded."""
-    q0 = design_pose(p)
-    wheelbase = q0[X15] - q0[X14]
-    h_rear, h_front = float(road.height_at(0.0)), float(road.height_at(wheelbase))
-    pitch = math.atan2(h_front - h_rear, wheelbase)
-    y1 = q0[X1] * math.sin(pitch) + q0[Y1] * math.cos(pitch) + h_rear - _GUESS_PRELOAD
-    return np.array([y1, q0[THETA] + pitch, q0[PHI] + pitch, q0[FS]])
-
-
 def static_equilibrium(p: np.ndarray, road: Road) -> np.ndarray:
     """The equilibrium pose q (sprocket reference points opposite the tangent points)."""
     p0 = p.copy()
     p0[P.TORQUE] = 0.0
     kind, rp = road.packed()
     try:
-        free, ok = _newton(_first_guess(p, road), p0, kind, rp, _XTOL, _MAX_NEWTON, _FD_STEP)
+        free, ok = _newton(first_guess(p, road), p0, kind, rp, _XTOL, _MAX_NEWTON, _FD_STEP)
     except np.linalg.LinAlgError:
         raise EquilibriumError("static equilibrium not found: singular stiffness") from None
     if not ok:

@@ -7,8 +7,8 @@ with D = r_6 - r_2, gamma the upper run's tangent angle and L_taut = sqrt(|D|^2 
 
 Lagrange's equations with the bodies' kinetic energy (Table 2: mass at the centre of mass,
 inertia about it) give M(z) z'' = F(z, z', u) - h(z, z'), where h collects the velocity
-products (J' z' terms). Applied forces are those of engine.model.forces (eqs. 34-52), by
-virtual work. The tyre state u obeys eq. (42) with the relaxation length held through a step.
+products (J' z' terms). Applied forces are the elements of engine.model.elements (eqs. 34-52),
+projected by virtual work. The tyre state u obeys eq. (42) with the relaxation length held through a step.
 """
 
 from __future__ import annotations
@@ -18,27 +18,29 @@ import math
 import numpy as np
 
 from finaldrive.engine.model import params as P
-from finaldrive.engine.model.forces import radial_tyre_force
+from finaldrive.engine.model.elements import (
+    AUX_ALPHA_DOT,
+    AUX_DUDT,
+    AUX_P_DAMP,
+    AUX_RE,
+    AUX_TAUT,
+    AUX_TAUT_RATE,
+    AUX_TENSION,
+    N_AUX,
+    drive_torque,
+    front_tyre,
+    rear_tyre,
+    spring_damper,
+    sprocket_chain_tension,
+)
 from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.linalg import cholesky_in_place, cholesky_solve
 from finaldrive.engine.model.road_height import road_height
-from finaldrive.engine.model.tyre import (
-    deformation_rate,
-    effective_radius,
-    magic_formula,
-    magic_formula_slope,
-    transient_slip,
-)
 
 N_DOF = 6
 ZX1, ZY1, ZTHETA, ZPHI, ZFS, ZBETA = range(N_DOF)
 N_STATE = 2 * N_DOF + 1
 ZU = 2 * N_DOF
-
-# Outputs of fast_rhs besides y' (the aux vector).
-(A_FX, A_FZ_REAR, A_FZ_FRONT, A_KAPPA, A_RE, A_TENSION, A_TAUT, A_TAUT_RATE, A_ALPHA_DOT,
- A_FX_U, A_RT) = range(11)
-N_AUX = 11
 
 
 # Slots of the per-design constants (chassis-frame vectors), see design_constants.
@@ -156,9 +158,11 @@ def _add_body(M, h, F, J, a, m, g):
 def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, want_jac, out, aux, L, b, c_row, ws):
     """y' for y = (z, z', u); returns a failure code (0 = ok).
 
-    Also fills, for the linearly implicit step: L, the Cholesky factor of M(z); b, the
-    generalized force of a unit F_x; c_row = d(u')/dz'; aux[A_FX_U] = dF_x/du when want_jac.
-    geo: design_constants(p). ws: a (6, 6) workspace.
+    The force elements are engine.model.elements' (aux receives their outputs); this function
+    projects them onto z by virtual work and adds the bodies' gravity and inertia. Also fills,
+    for the linearly implicit step: L, the Cholesky factor of M(z); b, the generalized force of
+    a unit F_x (its lever arm included); c_row = d(u')/dz' when want_jac (dF_x/du is
+    aux[AUX_SLOPE] / sigma). geo: design_constants(p). ws: a (6, 6) workspace.
     """
     z = y[:N_DOF]
     zd = y[N_DOF:ZU]
@@ -170,6 +174,7 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, want_jac, out, aux, L, b,
     F = ws[5]
     h[:] = 0.0
     F[:] = 0.0
+    aux[AUX_P_DAMP] = 0.0
     M = L
     M[:, :] = 0.0
     g = p[P.GRAVITY]
@@ -196,8 +201,10 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, want_jac, out, aux, L, b,
         for j in range(N_DOF):
             M[i, j] += p[P.I_SPROCKET] * jalpha[i] * jalpha[j]
         h[i] += p[P.I_SPROCKET] * jalpha[i] * alpha_c
-        F[i] -= p[P.TORQUE] * jalpha[i]        # drive torque on the sprocket (alpha decreasing) ...
-    F[ZTHETA] += p[P.TORQUE]                   # ... and its reaction on the chassis
+    torque = drive_torque(wt, alpha_dot, p, aux)
+    for i in range(N_DOF):
+        F[i] -= torque * jalpha[i]             # drive torque on the sprocket (alpha decreasing) ...
+    F[ZTHETA] += torque                        # ... and its reaction on the chassis
     # rear wheel (body IV): centre of mass at point 6, turning with beta
     _rigid_point(w6x, w6y, ZPHI, wp, J, a)
     _add_body(M, h, F, J, a, p[P.M_REAR_WHEEL], g)
@@ -208,36 +215,24 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, want_jac, out, aux, L, b,
     rt = y6 - hr                                                       # (20), (32)
     drt_phi = w6x + dhr * w6y
     rt_dot = zd[ZY1] - dhr * zd[ZX1] + drt_phi * wp
-    fz_rear = radial_tyre_force(rt, rt_dot, p[P.RT0], p[P.K_RT], p[P.C_RT])   # (36)
+    vx = zd[ZX1] - w6y * wp                                            # (39)
+    fz_rear, fx, lever = rear_tyre(rt, rt_dot, vx, -zd[ZBETA], u, sigma, p, longitudinal, aux)  # (36), (38)-(52)
     F[ZY1] += fz_rear
     F[ZX1] -= fz_rear * dhr
     F[ZPHI] += fz_rear * drt_phi
-    vx = zd[ZX1] - w6y * wp                                            # (39)
-    re = effective_radius(rt, p)                                       # (38)
-    vsx = vx + re * zd[ZBETA]                                          # (40)
-    kappa = transient_slip(u, sigma, vsx, vx, fz_rear, p)              # (43)
-    fx = 0.0
-    if longitudinal:
-        if want_jac:
-            fx, slope = magic_formula_slope(fz_rear, kappa, p)         # (45)
-            aux[A_FX_U] = slope / sigma
-        else:
-            fx = magic_formula(fz_rear, kappa, p)                      # (45)
-    elif want_jac:
-        aux[A_FX_U] = 0.0
     b[:] = 0.0
     b[ZX1] = 1.0
     b[ZPHI] = -w6y
-    b[ZBETA] = rt
+    b[ZBETA] = lever
     F[ZX1] += fx
     F[ZPHI] -= fx * w6y
-    F[ZBETA] += fx * rt
+    F[ZBETA] += fx * lever
     if want_jac:
         sgn = 1.0 if vx > 0.0 else (-1.0 if vx < 0.0 else 0.0)
         c_row[:] = 0.0
         c_row[ZX1] = -(1.0 + sgn * u / sigma)
         c_row[ZPHI] = c_row[ZX1] * (-w6y)
-        c_row[ZBETA] = -re
+        c_row[ZBETA] = -aux[AUX_RE]                                   # dV_sx/dbeta' = R_e (38)
     # rear suspension (35) between points 3 (chassis) and 7 (swingarm)
     w3x, w3y = ct * geo[G_P3_X] - st * geo[G_P3_Y], st * geo[G_P3_X] + ct * geo[G_P3_Y]
     w7x, w7y = p[P.L7] * cp, p[P.L7] * sp
@@ -245,11 +240,11 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, want_jac, out, aux, L, b,
     rs = math.sqrt(ex * ex + ey * ey)                                  # (13)
     drs_th = (-ex * w3y + ey * w3x) / rs
     drs_ph = (ex * w7y - ey * w7x) / rs
-    f_rs = -p[P.K_RS] * (rs - p[P.S_RS]) - p[P.C_RS] * (drs_th * wt + drs_ph * wp)  # (35)
+    f_rs = spring_damper(rs, drs_th * wt + drs_ph * wp, p[P.K_RS], p[P.C_RS], p[P.S_RS], aux)  # (35)
     F[ZTHETA] += f_rs * drs_th
     F[ZPHI] += f_rs * drs_ph
     # front suspension (34): fs is a minimal coordinate
-    F[ZFS] += -p[P.K_FS] * (z[ZFS] - p[P.S_FS]) - p[P.C_FS] * zd[ZFS]
+    F[ZFS] += spring_damper(z[ZFS], zd[ZFS], p[P.K_FS], p[P.C_FS], p[P.S_FS], aux)
     # lower fork (body V) and front wheel (body VI, a point mass at 13)
     w4x, w4y = ct * geo[G_P4_X] - st * geo[G_P4_Y], st * geo[G_P4_X] + ct * geo[G_P4_Y]
     ux, uy = ct * geo[G_AXIS_X] - st * geo[G_AXIS_Y], st * geo[G_AXIS_X] + ct * geo[G_AXIS_Y]
@@ -264,7 +259,7 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, want_jac, out, aux, L, b,
     ft_dot = 0.0
     for i in range(N_DOF):
         ft_dot += (J[1, i] - dhf * J[0, i]) * zd[i]
-    fz_front = radial_tyre_force(ft, ft_dot, p[P.FT0], p[P.K_FT], p[P.C_FT])  # (37)
+    fz_front = front_tyre(ft, ft_dot, p, aux)                          # (37)
     for i in range(N_DOF):
         F[i] += fz_front * (J[1, i] - dhf * J[0, i])
     # M z'' = F - h
@@ -274,22 +269,34 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, want_jac, out, aux, L, b,
         F[i] -= h[i]
     cholesky_solve(M, F, zdd)
     out[:N_DOF] = zd
-    out[ZU] = deformation_rate(u, sigma, vsx, vx)                      # (42)
+    out[ZU] = aux[AUX_DUDT]                                            # (42)
     alpha_dd = alpha_c
     for i in range(N_DOF):
         alpha_dd += jalpha[i] * zdd[i]
-    aux[A_FX] = fx
-    aux[A_FZ_REAR] = fz_rear
-    aux[A_FZ_FRONT] = fz_front
-    aux[A_KAPPA] = kappa
-    aux[A_RE] = re
-    # chain tension from the engine sprocket's moment balance: T_c R_ES = T + I alpha''
-    aux[A_TENSION] = (p[P.TORQUE] + p[P.I_SPROCKET] * alpha_dd) / p[P.R_ES]
-    aux[A_TAUT] = taut
-    aux[A_TAUT_RATE] = taut_rate
-    aux[A_ALPHA_DOT] = alpha_dot
-    aux[A_RT] = rt
+    aux[AUX_TENSION] = sprocket_chain_tension(alpha_dd, p)
+    aux[AUX_TAUT] = taut
+    aux[AUX_TAUT_RATE] = taut_rate
+    aux[AUX_ALPHA_DOT] = alpha_dot
     for i in range(N_STATE):
         if not math.isfinite(out[i]):
             return 1
     return 0
+
+
+@jit
+def kinetic_energy(y, p, kind, rp):
+    """1/2 z'^T M(z) z' [J] at the state y, with the mass matrix of fast_rhs."""
+    out = np.zeros(N_STATE)
+    aux = np.zeros(N_AUX)
+    L = np.zeros((N_DOF, N_DOF))
+    b = np.zeros(N_DOF)
+    c = np.zeros(N_DOF)
+    ws = np.zeros((6, N_DOF))
+    fast_rhs(y, p, design_constants(p), kind, rp, p[P.SIGMA_K0], False, False, out, aux, L, b, c, ws)
+    e = 0.0
+    for j in range(N_DOF):  # M = L L^T: z'^T M z' = |L^T z'|^2
+        s = 0.0
+        for i in range(j, N_DOF):
+            s += L[i, j] * y[N_DOF + i]
+        e += s * s
+    return 0.5 * e

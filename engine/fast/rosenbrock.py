@@ -19,38 +19,49 @@ import math
 
 import numpy as np
 
-from finaldrive.engine.fast.minimal import (
-    A_ALPHA_DOT,
-    A_FX,
-    A_FX_U,
-    A_FZ_FRONT,
-    A_FZ_REAR,
-    A_KAPPA,
-    A_RE,
-    A_TAUT,
-    A_TAUT_RATE,
-    A_TENSION,
+from finaldrive.engine.fast.minimal import N_DOF, N_STATE, ZBETA, ZTHETA, ZU, ZX1, design_constants, fast_rhs
+from finaldrive.engine.model.diagnostics import (
+    E_TAUT_MAX,
+    E_TAUT_MIN,
+    N_POWERS,
+    integrate_powers,
+    powers,
+    retune_sigma,
+    start_records,
+    track_interval,
+    track_state,
+)
+from finaldrive.engine.model.elements import (
+    AUX_ALPHA_DOT,
+    AUX_DUDT,
+    AUX_FX,
+    AUX_FZ_FRONT,
+    AUX_FZ_REAR,
+    AUX_KAPPA,
+    AUX_RE,
+    AUX_SLOPE,
+    AUX_TAUT,
+    AUX_TAUT_RATE,
+    AUX_TENSION,
+    AUX_VX,
     N_AUX,
-    N_DOF,
-    N_STATE,
-    ZBETA,
-    ZPHI,
-    ZTHETA,
-    ZU,
-    ZX1,
-    design_constants,
-    fast_rhs,
 )
 from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.linalg import cholesky_solve
-from finaldrive.engine.model.tyre import magic_formula, relaxation_length
-from finaldrive.engine.outcome import FRONT_AIRBORNE, N_SERIES, NONFINITE, OK, REAR_AIRBORNE
+from finaldrive.engine.model.tyre import relaxation_length
+from finaldrive.engine.outcome import FRONT_AIRBORNE, NONFINITE, OK, PAUSED, REAR_AIRBORNE
 
 GAMMA = 1.0 + 1.0 / math.sqrt(2.0)
 #: Step-size control limits.
 MAX_GROWTH = 2.0
 MIN_SHRINK = 0.2
 MIN_STEP = 1.0e-7
+#: First step tried [s] (the control adapts it at once).
+FIRST_STEP = 1.0e-3
+
+# Slots of the loop's saved state (st): everything a paused run needs to continue exactly.
+S_T, S_H, S_SIGMA, S_PREV_TAUT, S_PREV_RATE, S_AIR_REAR, S_AIR_FRONT, S_ROW, S_STARTED = range(9)
+N_ST = 9
 
 
 @jit
@@ -74,22 +85,22 @@ def _record(row, t, y, aux, sigma, out):
     out[row, 0] = t
     out[row, 1] = y[ZX1]
     out[row, 2] = y[ZTHETA]
-    out[row, 3] = aux[A_TENSION]
-    out[row, 4] = aux[A_FZ_REAR]
-    out[row, 5] = aux[A_FZ_FRONT]
-    out[row, 6] = aux[A_KAPPA]
-    out[row, 7] = aux[A_FX]
-    out[row, 8] = aux[A_RE]
+    out[row, 3] = aux[AUX_TENSION]
+    out[row, 4] = aux[AUX_FZ_REAR]
+    out[row, 5] = aux[AUX_FZ_FRONT]
+    out[row, 6] = aux[AUX_KAPPA]
+    out[row, 7] = aux[AUX_FX]
+    out[row, 8] = aux[AUX_RE]
     out[row, 9] = -y[N_DOF + ZBETA]
-    out[row, 10] = -aux[A_ALPHA_DOT]
-    out[row, 11] = aux[A_TAUT]
+    out[row, 10] = -aux[AUX_ALPHA_DOT]
+    out[row, 11] = aux[AUX_TAUT]
     out[row, 12] = y[ZU]
     out[row, 13] = sigma
     out[row, 14] = 0.0  # no constraint residual in minimal coordinates
 
 
 @jit
-def _error_norm(e, y, scale):
+def _error_norm(e, scale):
     """Weighted RMS of the local error estimate e (per-component absolute scales)."""
     acc = 0.0
     for i in range(N_STATE):
@@ -99,16 +110,32 @@ def _error_norm(e, y, scale):
 
 
 @jit
-def run_fast(y0, p, kind, rp, longitudinal, dt_out, n_out, tol, h_max, max_air_time, stride, keep_series):
-    """Integrate n_out intervals of dt_out from y0 = (z, z', u) at rest, with step-size control.
+def _hermite(y0, f0, y1, f1, h, s, out):
+    """Cubic Hermite interpolation inside a step at the fraction s (dense output, 3rd order)."""
+    h00 = (1.0 + 2.0 * s) * (1.0 - s) * (1.0 - s)
+    h10 = s * (1.0 - s) * (1.0 - s)
+    h01 = s * s * (3.0 - 2.0 * s)
+    h11 = s * s * (s - 1.0)
+    for i in range(N_STATE):
+        out[i] = h00 * y0[i] + h10 * h * f0[i] + h01 * y1[i] + h11 * h * f1[i]
 
-    The step lands on every output time t_k = k dt_out (the series, slack sampling and
-    airborne checks use those times and every accepted step). The local error estimate is
+
+@jit
+def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_time, keep_series,
+             st, ext, led, series, states, max_steps):
+    """Integrate y = (z, z', u) from rest to t_end with step-size control; returns a code.
+
+    Resumable: every quantity the loop carries between steps is in y and the arrays st (N_ST),
+    ext, led (engine.model.diagnostics), series and states; after max_steps accepted steps the
+    loop returns PAUSED and, called again with the same arrays, continues exactly where it stopped
+    (the result is bit-identical to an uninterrupted run). Steps never land on output times: the
+    series rows, every dt_out, come from cubic Hermite interpolation inside the steps (dense
+    output), so the series changes nothing of the run. The local error estimate is
     y_{n+1} - (y_n + h k1), ROS2's embedded first-order solution, in a weighted RMS norm with
     absolute scales tol * (1 m, 1 m, 1 rad, 1 rad, 1 m, 1 rad; x 10 /s for rates; 1 for u).
-    Returns (code, t reached, y, taut_min, taut_max, series, states (z, z')): the shape of
-    run_reference except that the second item is a time. The extremes of L_taut include
-    those inside steps (from its rate at both ends).
+    Extremes and the energy ledger are tracked at every accepted step (the extremes of L_taut
+    also inside steps, from its rate at both ends). Codes: OK, PAUSED, NONFINITE, REAR_AIRBORNE,
+    FRONT_AIRBORNE; st[S_T] is the time reached.
     """
     geo = design_constants(p)
     L = np.zeros((N_DOF, N_DOF))
@@ -123,94 +150,121 @@ def run_fast(y0, p, kind, rp, longitudinal, dt_out, n_out, tol, h_max, max_air_t
     k2 = np.zeros(N_STATE)
     y2 = np.zeros(N_STATE)
     ynew = np.zeros(N_STATE)
+    y_old = np.zeros(N_STATE)
+    f_old = np.zeros(N_STATE)
     err = np.zeros(N_STATE)
-    prev_taut = 0.0
-    prev_rate = 0.0
+    pw0 = np.zeros(N_POWERS)
+    pw1 = np.zeros(N_POWERS)
+    # scratch for the dense output's evaluations (the step's own buffers stay untouched)
+    yi = np.zeros(N_STATE)
+    fi = np.zeros(N_STATE)
+    auxi = np.zeros(N_AUX)
+    Li = np.zeros((N_DOF, N_DOF))
+    wsi = np.zeros((6, N_DOF))
+    bi = np.zeros(N_DOF)
+    ci = np.zeros(N_DOF)
     scale = np.full(N_STATE, tol)
     for i in range(N_DOF, ZU):
         scale[i] = 10.0 * tol
-    y = y0.copy()
-    n_rows = (n_out // stride + 2) if keep_series else 0
-    series = np.zeros((n_rows, N_SERIES))
-    states = np.zeros((n_rows, 2 * N_DOF))
-    sigma = relaxation_length(0.0, 0.0, 1.0, p)
-    taut_min = math.inf
-    taut_max = -math.inf
-    air_rear = 0.0
-    air_front = 0.0
-    row = 0
-    t = 0.0
-    h = min(h_max, dt_out)
-    k_out = 0
-    h_done = 0.0
-    code = fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, True, f1, aux, L, b, c_row, ws)
-    while True:
-        if code != OK:
-            return NONFINITE, t, y, taut_min, taut_max, series[:row], states[:row]
-        taut, rate = aux[A_TAUT], aux[A_TAUT_RATE]
-        taut_min = min(taut_min, taut)
-        taut_max = max(taut_max, taut)
-        if t > 0.0 and (prev_rate > 0.0) != (rate > 0.0):
-            # an extreme of L_taut inside the last step: derivative linear in time
-            extreme = prev_taut + 0.5 * prev_rate * h_done * prev_rate / (prev_rate - rate)
-            taut_min = min(taut_min, extreme)
-            taut_max = max(taut_max, extreme)
-        prev_taut, prev_rate = taut, rate
-        on_grid = abs(t - k_out * dt_out) <= 1e-9 * dt_out
-        if on_grid:
-            if keep_series and (k_out % stride == 0 or k_out == n_out):
-                _record(row, k_out * dt_out, y, aux, sigma, series)
-                states[row] = y[:2 * N_DOF]
-                row += 1
-            if k_out == n_out:
-                break
-            k_out += 1
-        # eq. (41) closed with this state's values; f1 moved to the new sigma*
-        new_sigma = relaxation_length(aux[A_FX], aux[A_KAPPA], aux[A_FZ_REAR], p)
+    n_rows = series.shape[0] if keep_series else 0
+    if st[S_STARTED] == 0.0:
+        st[:] = 0.0
+        st[S_SIGMA] = relaxation_length(0.0, 0.0, 1.0, p)
+        st[S_H] = min(h_max, FIRST_STEP)
+        start_records(ext, led)
+        if fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, True, f1, aux, L, b, c_row, ws) != OK:
+            return NONFINITE
+        track_state(ext, aux, p)
+        st[S_PREV_TAUT], st[S_PREV_RATE] = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
+        if n_rows > 0:
+            _record(0, 0.0, y, aux, st[S_SIGMA], series)
+            states[0] = y[:2 * N_DOF]
+            st[S_ROW] = 1.0
+        st[S_STARTED] = 1.0
+    elif fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, True, f1, aux, L, b, c_row, ws) != OK:
+        return NONFINITE  # not reached: the same evaluation succeeded before the pause
+    t, h, sigma = st[S_T], st[S_H], st[S_SIGMA]
+    row = int(st[S_ROW])
+    steps = 0
+    while t < t_end:
+        if steps >= max_steps:
+            st[S_T], st[S_H], st[S_SIGMA], st[S_ROW] = t, h, sigma, row
+            return PAUSED
+        # eq. (41) closed with this state's values; f1 and the tyre's outputs moved to the new sigma*
+        new_sigma = relaxation_length(aux[AUX_FX], aux[AUX_KAPPA], aux[AUX_FZ_REAR], p)
         cholesky_solve(L, b, v)                     # M^-1 b
-        vx = y[N_DOF + ZX1] + b[ZPHI] * y[N_DOF + ZPHI]
         if new_sigma != sigma:
-            u = y[ZU]
-            kappa_new = aux[A_KAPPA] + u * (1.0 / new_sigma - 1.0 / sigma)
-            dfx = (magic_formula(aux[A_FZ_REAR], kappa_new, p) - aux[A_FX]) if longitudinal else 0.0
+            dfx = retune_sigma(aux, y[ZU], sigma, new_sigma, p, longitudinal)
             for i in range(N_DOF):
                 f1[N_DOF + i] += v[i] * dfx
-            f1[ZU] -= abs(vx) * u * (1.0 / new_sigma - 1.0 / sigma)
+            f1[ZU] = aux[AUX_DUDT]
             sigma = new_sigma
-        a_uu = -abs(vx) / sigma
+        a_uu = -abs(aux[AUX_VX]) / sigma
+        fx_u = aux[AUX_SLOPE] / sigma if longitudinal else 0.0
         for i in range(N_DOF):
-            v[i] *= aux[A_FX_U]                           # dz''/du = M^-1 b dF_x/du
-        fz_rear, fz_front = aux[A_FZ_REAR], aux[A_FZ_FRONT]
-        t_next = k_out * dt_out
+            v[i] *= fx_u                                  # dz''/du = M^-1 b dF_x/du
+        powers(aux, p, pw0)
+        fz_rear, fz_front, tension = aux[AUX_FZ_REAR], aux[AUX_FZ_FRONT], aux[AUX_TENSION]
         while True:
-            h = min(h, h_max, t_next - t)
+            h = min(h, h_max, t_end - t)
             gh = GAMMA * h
             _w_solve(f1, gh, v, c_row, a_uu, k1)
             for i in range(N_STATE):
                 y2[i] = y[i] + h * k1[i]
-            code = fast_rhs(y2, p, geo, kind, rp, sigma, longitudinal, False, f2, aux, L, b, c_row, ws)
-            if code != OK:
-                return NONFINITE, t, y, taut_min, taut_max, series[:row], states[:row]
+            if fast_rhs(y2, p, geo, kind, rp, sigma, longitudinal, False, f2, aux, L, b, c_row, ws) != OK:
+                st[S_T] = t
+                return NONFINITE
             for i in range(N_STATE):
                 f2[i] -= 2.0 * k1[i]
             _w_solve(f2, gh, v, c_row, a_uu, k2)
             for i in range(N_STATE):
                 ynew[i] = y[i] + h * (1.5 * k1[i] + 0.5 * k2[i])
                 err[i] = 0.5 * h * (k1[i] + k2[i])
-            e = _error_norm(err, y, scale)
+            e = _error_norm(err, scale)
             factor = 0.9 / math.sqrt(max(e, 1e-10))
             if e <= 1.0 or h <= MIN_STEP:
-                t = t_next if t_next - (t + h) <= 1e-9 * dt_out else t + h
-                y[:] = ynew
-                h_done = h
-                h *= min(MAX_GROWTH, factor)
                 break
             h *= max(MIN_SHRINK, factor)
-        air_rear = air_rear + h_done if fz_rear <= 0.0 else 0.0
-        air_front = air_front + h_done if fz_front <= 0.0 else 0.0
-        if air_rear > max_air_time:
-            return REAR_AIRBORNE, t, y, taut_min, taut_max, series[:row], states[:row]
-        if air_front > max_air_time:
-            return FRONT_AIRBORNE, t, y, taut_min, taut_max, series[:row], states[:row]
-        code = fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, True, f1, aux, L, b, c_row, ws)
-    return OK, t, y, taut_min, taut_max, series[:row], states[:row]
+        h_done = h
+        t_old = t
+        t = t_end if t_end - (t + h) <= 1e-12 * t_end else t + h
+        h *= min(MAX_GROWTH, factor)
+        steps += 1
+        y_old[:] = y
+        f_old[:] = f1
+        y[:] = ynew
+        if fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, True, f1, aux, L, b, c_row, ws) != OK:
+            st[S_T] = t
+            return NONFINITE
+        # records at the new state and over the step
+        track_state(ext, aux, p)
+        track_interval(ext, fz_rear, fz_front, tension, h_done)
+        powers(aux, p, pw1)
+        integrate_powers(led, pw0, pw1, h_done)
+        taut, rate = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
+        prev_taut, prev_rate = st[S_PREV_TAUT], st[S_PREV_RATE]
+        if (prev_rate > 0.0) != (rate > 0.0):
+            # an extreme of L_taut inside the step: derivative linear in time
+            extreme = prev_taut + 0.5 * prev_rate * h_done * prev_rate / (prev_rate - rate)
+            ext[E_TAUT_MIN] = min(ext[E_TAUT_MIN], extreme)
+            ext[E_TAUT_MAX] = max(ext[E_TAUT_MAX], extreme)
+        st[S_PREV_TAUT], st[S_PREV_RATE] = taut, rate
+        # dense output: the series rows inside (t_old, t]
+        while row < n_rows and (row * dt_out <= t + 1e-9 * dt_out or (row == n_rows - 1 and t >= t_end)):
+            t_row = min(row * dt_out, t_end)
+            if t - t_row <= 1e-9 * dt_out:
+                _record(row, t_row, y, aux, sigma, series)
+                states[row] = y[:2 * N_DOF]
+            else:
+                _hermite(y_old, f_old, y, f1, h_done, (t_row - t_old) / h_done, yi)
+                fast_rhs(yi, p, geo, kind, rp, sigma, longitudinal, False, fi, auxi, Li, bi, ci, wsi)
+                _record(row, t_row, yi, auxi, sigma, series)
+                states[row] = yi[:2 * N_DOF]
+            row += 1
+        st[S_AIR_REAR] = st[S_AIR_REAR] + h_done if fz_rear <= 0.0 else 0.0
+        st[S_AIR_FRONT] = st[S_AIR_FRONT] + h_done if fz_front <= 0.0 else 0.0
+        if st[S_AIR_REAR] > max_air_time or st[S_AIR_FRONT] > max_air_time:
+            st[S_T], st[S_H], st[S_SIGMA], st[S_ROW] = t, h, sigma, row
+            return REAR_AIRBORNE if st[S_AIR_REAR] > max_air_time else FRONT_AIRBORNE
+    st[S_T], st[S_H], st[S_SIGMA], st[S_ROW] = t, h, sigma, row
+    return OK

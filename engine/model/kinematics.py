@@ -57,6 +57,9 @@ from finaldrive.engine.model.coordinates import (
 )
 from finaldrive.engine.model.road import Road
 
+#: The first guess of an equilibrium presses both tyres this far into the road [m] so both springs act.
+GUESS_PRELOAD = 0.005
+
 
 class GeometryError(ValueError):
     """A design whose final drive cannot be assembled (e.g. sprockets overlapping)."""
@@ -176,3 +179,14 @@ def design_squat_ratio(p: np.ndarray) -> float:
     """Squat ratio at the design pose (theta = 0, phi = phi0, unloaded tyres)."""
     q = design_pose(p)
     return squat_ratio_at(q, p, q[X6], q[Y6] - p[P.RT0])
+
+
+def first_guess(p: np.ndarray, road: Road) -> np.ndarray:
+    """A start for the static equilibrium, (y1, theta, phi, fs): the design pose pitched onto the
+    road about the rear contact point, both tyres preloaded."""
+    q0 = design_pose(p)
+    wheelbase = q0[X15] - q0[X14]
+    h_rear, h_front = float(road.height_at(0.0)), float(road.height_at(wheelbase))
+    pitch = math.atan2(h_front - h_rear, wheelbase)
+    y1 = q0[X1] * math.sin(pitch) + q0[Y1] * math.cos(pitch) + h_rear - GUESS_PRELOAD
+    return np.array([y1, q0[THETA] + pitch, q0[PHI] + pitch, q0[FS]])

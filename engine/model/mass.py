@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from finaldrive.engine.model import params as P
-from finaldrive.engine.model.coordinates import N_COORDS, X1, X2, X5, X6, X8, X9, X12, X13, Y13
+from finaldrive.engine.model.coordinates import FS, FT, N_COORDS, RS, RT, X1, X2, X5, X6, X8, X9, X12, X13, Y13
+from finaldrive.engine.model.tyre import radial_energy
 
 _ROT = np.array([[0.0, -1.0], [1.0, 0.0]])
 
@@ -89,3 +90,16 @@ def centre_of_mass(q: np.ndarray, p: np.ndarray) -> tuple[float, float, float]:
         sy += b.mass * g[1]
     return total, sx / total, sy / total
 
+
+
+def potential_energy(q: np.ndarray, p: np.ndarray, qg: np.ndarray | None = None) -> float:
+    """Potential energy at pose q [J]: gravity (V = -Q_g . q, Q_g constant: pass gravity_forces(p)
+    to save its cost) and the springs of the suspensions (34)-(35) and tyres (36)-(37), the rear
+    bump stop included. The sprocket angles alpha, beta do not enter it (both centres of mass sit
+    on their axes)."""
+    if qg is None:
+        qg = gravity_forces(p)
+    springs = 0.5 * p[P.K_RS] * (q[RS] - p[P.S_RS]) ** 2 + 0.5 * p[P.K_FS] * (q[FS] - p[P.S_FS]) ** 2
+    springs += radial_energy(q[RT], p[P.RT0], p[P.K_RT], p[P.RT_BOTTOMING], p[P.K_RT_BOTTOMING])
+    springs += radial_energy(q[FT], p[P.FT0], p[P.K_FT], math.inf, 0.0)
+    return float(-qg @ q + springs)

@@ -29,55 +29,60 @@ C_FS = 17
 S_FS = 18
 K_RT = 19
 C_RT = 20
-K_FT = 21
-C_FT = 22
-M_CHASSIS = 23
-I_CHASSIS = 24
-M_SWINGARM = 25
-I_SWINGARM = 26
-M_SPROCKET = 27
-I_SPROCKET = 28
-M_REAR_WHEEL = 29
-I_REAR_WHEEL = 30
-M_FORK = 31
-I_FORK = 32
-M_FRONT_WHEEL = 33
-SWINGARM_COG_FRACTION = 34
-FORK_COG_FRACTION = 35
-CHASSIS_COG_X = 36
-CHASSIS_COG_Y = 37
-PCX1 = 38
-PDX1 = 39
-PDX2 = 40
-PEX1 = 41
-PEX2 = 42
-PEX3 = 43
-PEX4 = 44
-PKX1 = 45
-PKX2 = 46
-PKX3 = 47
-FZ0 = 48
-K_VLOW0 = 49
-SIGMA_K0 = 50
-SIGMA_MIN = 51
-EPS_F = 52
-V_LOW = 53
-TORQUE = 54
-SPROCKET_RATIO = 55
-GRAVITY = 56
-EPS1 = 57
-EPS2 = 58
-SR_OPTIMUM = 59
-FLOOR = 60
-SQUAT_K = 61
-A2 = 62  # design: angle a2 of r_1->2 in the chassis frame [rad]
-L2 = 63  # design: pivot to engine sprocket axis [m]
-R_WS = 64  # design: wheel sprocket pitch radius [m]
-R_ES = 65  # design: engine sprocket pitch radius R_WS / sprocket_ratio [m]
-L_CHAIN = 66  # chain length L of eq. (69), set at t = 0 [m]
-AL_ALPHA = 67  # augmented Lagrangian penalty alpha, eqs. (57)-(58)
-AL_XI = 68  # Baumgarte xi, eq. (57)
-AL_OMEGA = 69  # Baumgarte omega, eq. (57)
+RT_BOTTOMING = 21
+K_RT_BOTTOMING = 22
+K_FT = 23
+C_FT = 24
+M_CHASSIS = 25
+I_CHASSIS = 26
+M_SWINGARM = 27
+I_SWINGARM = 28
+M_SPROCKET = 29
+I_SPROCKET = 30
+M_REAR_WHEEL = 31
+I_REAR_WHEEL = 32
+M_FORK = 33
+I_FORK = 34
+M_FRONT_WHEEL = 35
+SWINGARM_COG_FRACTION = 36
+FORK_COG_FRACTION = 37
+CHASSIS_COG_X = 38
+CHASSIS_COG_Y = 39
+PCX1 = 40
+PDX1 = 41
+PDX2 = 42
+PEX1 = 43
+PEX2 = 44
+PEX3 = 45
+PEX4 = 46
+PKX1 = 47
+PKX2 = 48
+PKX3 = 49
+FZ0 = 50
+FZ_MIN = 51
+FZ_MAX = 52
+FX_LEVER_LOADED = 53
+K_VLOW0 = 54
+SIGMA_K0 = 55
+SIGMA_MIN = 56
+EPS_F = 57
+V_LOW = 58
+TORQUE = 59
+SPROCKET_RATIO = 60
+GRAVITY = 61
+EPS1 = 62
+EPS2 = 63
+SR_OPTIMUM = 64
+FLOOR = 65
+SQUAT_K = 66
+A2 = 67  # design: angle a2 of r_1->2 in the chassis frame [rad]
+L2 = 68  # design: pivot to engine sprocket axis [m]
+R_WS = 69  # design: wheel sprocket pitch radius [m]
+R_ES = 70  # design: engine sprocket pitch radius R_WS / sprocket_ratio [m]
+L_CHAIN = 71  # chain length L of eq. (69), set at t = 0 [m]
+AL_ALPHA = 72  # augmented Lagrangian penalty alpha, eqs. (57)-(58)
+AL_XI = 73  # Baumgarte xi, eq. (57)
+AL_OMEGA = 74  # Baumgarte omega, eq. (57)
 
 VEHICLE_KEYS: tuple[str, ...] = (
     'L3',
@@ -101,6 +106,8 @@ VEHICLE_KEYS: tuple[str, ...] = (
     's_fs',
     'k_rt',
     'c_rt',
+    'rt_bottoming',
+    'k_rt_bottoming',
     'k_ft',
     'c_ft',
     'm_chassis',
@@ -129,6 +136,9 @@ VEHICLE_KEYS: tuple[str, ...] = (
     'pKx2',
     'pKx3',
     'Fz0',
+    'Fz_min',
+    'Fz_max',
+    'fx_lever_loaded',
     'K_vlow0',
     'sigma_k0',
     'sigma_min',
@@ -143,5 +153,5 @@ VEHICLE_KEYS: tuple[str, ...] = (
     'floor',
     'squat_K',
 )
-N_VEHICLE = 62
-N_PARAMS = 70
+N_VEHICLE = 67
+N_PARAMS = 75

@@ -7,10 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from finaldrive.engine import Design, Road, RoadError, SimSettings
+from finaldrive.engine import Design, Road, RoadError, SimSettings, simulate
+from finaldrive.engine.model import params as P
 from finaldrive.engine.model.road_height import road_height
 from finaldrive.engine.model.tyre import (
     deformation_rate,
+    load_increment,
     magic_formula,
     relaxation_length,
     slip_stiffness,
@@ -85,3 +87,43 @@ def test_profile_needs_increasing_x():
     with pytest.raises(RoadError, match="increasing"):
         Road.from_points([0, 2, 1], [0, 0, 0])
     assert math.isfinite(Road.from_points([0, 1], [0, 0]).height_at(0.5))
+
+
+def test_load_dependence_is_held_beyond_the_load_range(p):
+    """Beyond Fz_max, eqs. (47)-(52) see the load held at the bound (MF 6.1's FZMAX): slip stiffness
+    and force stay those of the bound, and the slope test above holds there too."""
+    fz_max = p[P.FZ_MAX]
+    for fz in (1.5 * fz_max, 4.0 * fz_max):
+        assert slip_stiffness(fz, p) == slip_stiffness(fz_max, p)
+        for kappa in (-0.5, 0.05, 0.3):
+            assert magic_formula(fz, kappa, p) == magic_formula(fz_max, kappa, p)
+    assert slip_stiffness(0.999 * fz_max, p) < slip_stiffness(fz_max, p)   # the fit is still used below it
+    # inside the range the fit is used as printed: eq. (50) at 3000 N
+    dfz = (3000.0 - 1600.0) / 1600.0
+    assert slip_stiffness(3000.0, p) == pytest.approx(3000.0 * (25.939 - 4.2327 * dfz) * math.exp(0.33686 * dfz))
+
+
+@pytest.mark.slow
+def test_slip_stiffness_and_peak_force_stay_positive_for_any_load_a_simulation_reaches(vehicle, p):
+    """The largest rear loads of the roughest runs (Table 14's geometry 2 on sine:0.04:2, where the
+    rear tyre bottoms, and 20 random designs there and on bump:0.04:0.2): K_xk > 0, a positive
+    peak force D_x and E_x < 1 (so F_x has the sign of kappa') at every load up to 1.5 times it."""
+    rng = np.random.default_rng(12)
+    designs = [Design.from_deg(270, 0.15, 0.05)] + [
+        Design(rng.uniform(0, 2 * np.pi), rng.uniform(0, 0.2), rng.uniform(0.05, 0.15)) for _ in range(20)]
+    settings = SimSettings(max_airborne_time=3.5)  # hopping designs run to the end too
+    runs = [simulate(d, Road.parse(spec), settings, vehicle)
+            for d in designs for spec in ("sine:0.04:2", "bump:0.04:0.2")]
+    assert all(r.ok for r in runs), [r.reason for r in runs if not r.ok]
+    reached = max(r.fz_rear_max_n for r in runs)
+    print(f"largest rear load reached: {reached:.0f} N ({reached / 1600:.1f} F_z0)")
+    assert reached > p[P.FZ_MAX]   # the range is reached: the bound matters
+    for fz in np.linspace(1.0, 1.5 * reached, 400):
+        dfz = load_increment(fz, p)
+        mux = p[P.PDX1] + p[P.PDX2] * dfz
+        for sgn in (-1.0, 1.0):
+            ex = (p[P.PEX1] + p[P.PEX2] * dfz + p[P.PEX3] * dfz * dfz) * (1.0 - p[P.PEX4] * sgn)
+            assert ex < 1.0
+        assert slip_stiffness(fz, p) > 0.0 and mux > 0.0
+        assert magic_formula(fz, 0.1, p) > 0.0 > magic_formula(fz, -0.1, p)
+        assert magic_formula(fz, 3.0, p) > 0.0 > magic_formula(fz, -3.0, p)   # far past the peak too

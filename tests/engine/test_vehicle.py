@@ -14,7 +14,7 @@ from finaldrive.engine.vehicle import PARAMETERS
 def test_every_default_value_has_a_unit_and_a_source():
     d = default_vehicle().to_dict()
     entries = [e for group in d["parameters"].values() for e in group.values()]
-    assert len(entries) == 68
+    assert len(entries) == 73
     assert all(e["source"] and e["unit"] for e in entries)
 
 
@@ -32,6 +32,9 @@ def _with(change):
     (lambda p: p["relaxation"]["sigma_min"].update(value=1.0), "sigma_min"),
     (lambda p: p["geometry"].update(L99={"value": 1.0}), "L99"),
     (lambda p: p["suspension"]["c_rs"].update(value=float("nan")), "c_rs"),
+    (lambda p: p["tyre"]["Fz_max"].update(value=1000.0), "Fz_max"),            # below Fz0
+    (lambda p: p["tyre"]["fx_lever_loaded"].update(value=1.5), "fx_lever_loaded"),
+    (lambda p: p["suspension"]["rt_bottoming"].update(value=0.3), "rt_bottoming"),  # the whole radius
 ])
 def test_bad_values_name_the_key(change, key):
     with pytest.raises(VehicleError, match=key):

@@ -1,0 +1,105 @@
+"""The force elements of the motorcycle, described once and used by both solvers.
+
+Each element is a compiled function of the element's own variables (a length and its rate, the
+tyre's deflection, slip speed and state, ...): it returns the force or torque and writes what the
+run reports (forces, slip, powers) into the shared ``aux`` vector. Each solver only projects the
+result onto its coordinates: the reference onto the 39 natural coordinates (engine.model.forces),
+the fast path onto its 6 minimal coordinates (engine.fast.minimal), by virtual work.
+
+- rear tyre: radial spring-damper with the bump stop (36), longitudinal force (38)-(52) with its
+  lever arm on the wheel (engine.model.tyre);
+- front tyre: radial spring-damper (37);
+- suspensions: linear spring-dampers (34)-(35);
+- drive: a constant torque between chassis and engine sprocket (the reference choice);
+- chain: the tension of the upper run from the engine sprocket's moment balance.
+
+Gravity and inertia of the bodies (Table 2) are in engine.model.mass (natural coordinates) and
+engine.fast.minimal (the same centres of mass and inertias as kinetic energy in minimal coordinates).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from finaldrive.engine.model import params as P
+from finaldrive.engine.model.jit import jit
+from finaldrive.engine.model.tyre import (
+    deformation_rate,
+    effective_radius,
+    lever_arm,
+    magic_formula_slope,
+    radial_damping_power,
+    radial_force,
+    transient_slip,
+)
+
+# Slots of the auxiliary vector both solvers fill at every right-hand side evaluation.
+(AUX_FX, AUX_FZ_REAR, AUX_FZ_FRONT, AUX_KAPPA, AUX_VX, AUX_VSX, AUX_RE, AUX_LEVER, AUX_OMEGA, AUX_DUDT,
+ AUX_SLOPE, AUX_RT, AUX_FT, AUX_P_DAMP, AUX_P_DRIVE, AUX_TENSION, AUX_TAUT, AUX_TAUT_RATE, AUX_ALPHA_DOT,
+ AUX_RESID) = range(20)
+N_AUX = 20
+
+
+@jit
+def rear_tyre(rt: float, rt_dot: float, vx: float, omega: float, u: float, sigma: float, p: np.ndarray,
+              longitudinal: bool, aux: np.ndarray) -> tuple[float, float, float]:
+    """The rear tyre at its contact point: (F_z, F_x, lever arm of F_x on the wheel).
+
+    rt: loaded radius (20); vx: forward speed of the axle (39); omega = -beta' the wheel's spin;
+    u: the tyre's deformation state (42) with sigma* held through the step (41). The vertical force
+    acts along the radius, F_x horizontally at the contact point, turning the wheel with the lever
+    arm. Fills aux (F_x, F_z, kappa', V_x, V_sx, R_e, lever, omega, u', dF_x/dkappa', rt) and adds
+    the radial damper's power to aux[AUX_P_DAMP].
+    """
+    fz = radial_force(rt, rt_dot, p[P.RT0], p[P.K_RT], p[P.C_RT], p[P.RT_BOTTOMING], p[P.K_RT_BOTTOMING])  # (36)
+    re = effective_radius(rt, p)                                              # (38)
+    vsx = vx - re * omega                                                     # (40)
+    kappa = transient_slip(u, sigma, vsx, vx, fz, p)                          # (43)
+    fx, slope = magic_formula_slope(fz, kappa, p) if longitudinal else (0.0, 0.0)   # (45)
+    lever = lever_arm(rt, re, p)
+    aux[AUX_FX] = fx
+    aux[AUX_FZ_REAR] = fz
+    aux[AUX_KAPPA] = kappa
+    aux[AUX_VX] = vx
+    aux[AUX_VSX] = vsx
+    aux[AUX_RE] = re
+    aux[AUX_LEVER] = lever
+    aux[AUX_OMEGA] = omega
+    aux[AUX_DUDT] = deformation_rate(u, sigma, vsx, vx)                       # (42)
+    aux[AUX_SLOPE] = slope
+    aux[AUX_RT] = rt
+    aux[AUX_P_DAMP] += radial_damping_power(rt, rt_dot, p[P.RT0], p[P.C_RT])
+    return fz, fx, lever
+
+
+@jit
+def front_tyre(ft: float, ft_dot: float, p: np.ndarray, aux: np.ndarray) -> float:
+    """The front tyre's vertical force, eq. (37) (no bump stop: the paper's front tyre); fills aux."""
+    fz = radial_force(ft, ft_dot, p[P.FT0], p[P.K_FT], p[P.C_FT], np.inf, 0.0)
+    aux[AUX_FZ_FRONT] = fz
+    aux[AUX_FT] = ft
+    aux[AUX_P_DAMP] += radial_damping_power(ft, ft_dot, p[P.FT0], p[P.C_FT])
+    return fz
+
+
+@jit
+def spring_damper(length: float, rate: float, k: float, c: float, free_length: float, aux: np.ndarray) -> float:
+    """Linear suspension spring-damper, eqs. (34)-(35): the force along its length (positive
+    pushes the ends apart); adds the damper's power c l'^2 to aux[AUX_P_DAMP]."""
+    aux[AUX_P_DAMP] += c * rate * rate
+    return -k * (length - free_length) - c * rate
+
+
+@jit
+def drive_torque(theta_dot: float, alpha_dot: float, p: np.ndarray, aux: np.ndarray) -> float:
+    """The engine's torque T on the sprocket (turning it forward, alpha decreasing), its reaction on
+    the chassis; the drive's power T (theta' - alpha') into aux[AUX_P_DRIVE]."""
+    t = p[P.TORQUE]
+    aux[AUX_P_DRIVE] = t * (theta_dot - alpha_dot)
+    return t
+
+
+@jit
+def sprocket_chain_tension(alpha_dd: float, p: np.ndarray) -> float:
+    """Tension of the upper run from the engine sprocket's moment balance: T_c R_ES = T + I alpha''."""
+    return (p[P.TORQUE] + p[P.I_SPROCKET] * alpha_dd) / p[P.R_ES]
