@@ -18,8 +18,8 @@ ENGINE_VERSION = "0.2.0"
 
 #: Public name -> module that defines it.
 _EXPORTS: dict[str, str] = {
-    **dict.fromkeys(("DIAGNOSTICS", "STATUS_FAILED", "STATUS_OK", "BatchResult", "Design", "DesignError", "Method",
-                     "SimResult", "SimSettings"), "finaldrive.engine.api"),
+    **dict.fromkeys(("DIAGNOSTIC_MEANINGS", "DIAGNOSTICS", "STATUS_FAILED", "STATUS_OK", "BatchResult", "Design",
+                     "DesignError", "Method", "SimResult", "SimSettings"), "finaldrive.engine.api"),
     **dict.fromkeys(("evaluate", "simulate"), "finaldrive.engine.simulation"),
     **dict.fromkeys(("Road", "RoadError"), "finaldrive.engine.model.road"),
     **dict.fromkeys(("coordinate_index", "point_positions"), "finaldrive.engine.model.coordinates"),
@@ -60,6 +60,7 @@ def __dir__() -> list[str]:
 
 if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
     from finaldrive.engine.api import (
+        DIAGNOSTIC_MEANINGS as DIAGNOSTIC_MEANINGS,
         DIAGNOSTICS as DIAGNOSTICS,
         STATUS_FAILED as STATUS_FAILED,
         STATUS_OK as STATUS_OK,

@@ -22,14 +22,34 @@ STATUS_FAILED = "failed"
 #: compressions, and the energy ledger [J] (drive work = kinetic + potential energy + damper
 #: dissipation + tyre slip work - lever-arm work + residual; slip work = carcass energy + tyre
 #: dissipation), with the smallest tyre dissipation rate seen [W] (>= 0: the tyre creates no energy).
-DIAGNOSTICS: tuple[str, ...] = (
-    "chain_tension_max_n", "chain_tension_min_n", "chain_compression_s",
-    "fz_rear_max_n", "fz_rear_min_n", "fz_front_max_n", "fz_front_min_n", "slip_max",
-    "airborne_rear_s", "airborne_front_s", "tyre_compression_rear_max_m", "tyre_compression_front_max_m",
-    "drive_work_j", "kinetic_energy_j", "potential_energy_j", "damper_dissipation_j", "tyre_slip_work_j",
-    "tyre_carcass_energy_j", "tyre_dissipation_j", "tyre_lever_work_j", "ledger_residual_j",
-    "tyre_dissipation_min_w",
-)
+#: What a run reports besides its fitness: extremes tracked at every accepted step, and its energy
+#: ledger (docs/engine.md, "Extremes and the energy ledger"); name -> meaning, the unit in the name.
+DIAGNOSTIC_MEANINGS: dict[str, str] = {
+    "chain_tension_max_n": "largest tension of the chain's upper run [N]",
+    "chain_tension_min_n": "smallest (most negative: pushing) tension of the chain's upper run [N]",
+    "chain_compression_s": "time the chain's upper run spends in compression (tension < 0) [s]",
+    "fz_rear_max_n": "largest vertical load of the rear tyre [N]",
+    "fz_rear_min_n": "smallest vertical load of the rear tyre (0 when airborne) [N]",
+    "fz_front_max_n": "largest vertical load of the front tyre [N]",
+    "fz_front_min_n": "smallest vertical load of the front tyre (0 when airborne) [N]",
+    "slip_max": "largest |kappa'|, the rear tyre's transient longitudinal slip [-]",
+    "airborne_rear_s": "time the rear wheel spends off the road [s]",
+    "airborne_front_s": "time the front wheel spends off the road [s]",
+    "tyre_compression_rear_max_m": "largest radial compression of the rear tyre [m]",
+    "tyre_compression_front_max_m": "largest radial compression of the front tyre [m]",
+    "drive_work_j": "work of the drive torque [J]",
+    "kinetic_energy_j": "kinetic energy at the end [J]",
+    "potential_energy_j": "change of the potential energy (gravity, springs, bump stop) [J]",
+    "damper_dissipation_j": "energy the suspension and tyre dampers dissipated [J]",
+    "tyre_slip_work_j": "work the longitudinal tyre force took by slip: carcass energy + dissipation [J]",
+    "tyre_carcass_energy_j": "energy stored in the tyre carcass's deflection at the end [J]",
+    "tyre_dissipation_j": "energy the tyre dissipated by slip (>= 0) [J]",
+    "tyre_lever_work_j": "work the tyre force created through a lever arm other than R_e (0 by default) [J]",
+    "ledger_residual_j": "drive + lever work - (kinetic + potential + dampers + slip): the ledger's error [J]",
+    "tyre_dissipation_min_w": "smallest slip dissipation power at any step (>= 0: no energy created) [W]",
+}
+DIAGNOSTICS: tuple[str, ...] = tuple(DIAGNOSTIC_MEANINGS)
+
 
 Method = Literal["fast", "reference"]
 

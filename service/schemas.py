@@ -8,9 +8,17 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_validator
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints, create_model, model_validator
 
-from finaldrive.engine import DE_LIMITS, Bounds as StudyBounds, DESettings, SimSettings, SpaceError, StudyKind
+from finaldrive.engine import (
+    DE_LIMITS,
+    DIAGNOSTIC_MEANINGS,
+    Bounds as StudyBounds,
+    DESettings,
+    SimSettings,
+    SpaceError,
+    StudyKind,
+)
 
 JobKind = StudyKind
 JobStateName = Literal["queued", "running", "succeeded", "failed", "cancelled", "interrupted"]
@@ -127,7 +135,7 @@ class JobSpec(BaseModel):
         return self.model_copy(update=fill)
 
 
-class EvaluationOut(BaseModel):
+class _EvaluationCore(BaseModel):
     id: int
     road_index: int
     road: str
@@ -146,6 +154,13 @@ class EvaluationOut(BaseModel):
     reason: str
     wall_s: float
     cached: bool = Field(description="reused from an earlier identical simulation")
+
+
+#: An evaluation: the design, its outcome, and the run's diagnostics (finaldrive.engine.DIAGNOSTICS).
+EvaluationOut = create_model(  # type: ignore[call-overload]  # pydantic's stubs miss the (type, Field) form
+    "EvaluationOut", __base__=_EvaluationCore,
+    **{name: (float | None, Field(None, description=meaning)) for name, meaning in DIAGNOSTIC_MEANINGS.items()},
+)
 
 
 class EvaluationPage(BaseModel):

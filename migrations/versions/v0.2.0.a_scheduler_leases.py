@@ -1,8 +1,8 @@
 """scheduler leases, scheduler heartbeats, cost estimates, transient failures
 
 Jobs and recordings get an owner and a lease (judged on the database's clock); schedulers report
-their heartbeats; a recording's .rrd file is stored with it (any scheduler may produce it); a job stores its estimated cost; an evaluation that failed for a reason that may
-not recur (a time limit, a lost worker) is marked transient and never reused from the result cache.
+their heartbeats; a recording's .rrd file is stored with it (any scheduler may produce it); a job stores its estimated cost; an evaluation carries the run's extremes and energy ledger; an evaluation that failed for a reason
+that may not recur (a time limit, a lost worker) is marked transient and never reused from the result cache.
 
 Revision ID: v0.2.0.a
 Revises: v0.1.0.a
@@ -15,6 +15,16 @@ from collections.abc import Sequence
 
 import sqlalchemy as sa
 from alembic import op
+
+#: The run's extremes and energy ledger as of this revision (finaldrive.engine.DIAGNOSTICS), frozen
+#: here so that the migration does not change when the engine's list does.
+DIAGNOSTICS = (
+    "chain_tension_max_n", "chain_tension_min_n", "chain_compression_s", "fz_rear_max_n", "fz_rear_min_n",
+    "fz_front_max_n", "fz_front_min_n", "slip_max", "airborne_rear_s", "airborne_front_s",
+    "tyre_compression_rear_max_m", "tyre_compression_front_max_m", "drive_work_j", "kinetic_energy_j",
+    "potential_energy_j", "damper_dissipation_j", "tyre_slip_work_j", "tyre_carcass_energy_j", "tyre_dissipation_j",
+    "tyre_lever_work_j", "ledger_residual_j", "tyre_dissipation_min_w",
+)
 
 
 revision: str = 'v0.2.0.a'
@@ -37,6 +47,8 @@ def upgrade() -> None:
     )
     with op.batch_alter_table('evaluations', schema=None) as batch_op:
         batch_op.add_column(sa.Column('transient', sa.Boolean(), nullable=False, server_default=sa.false()))
+        for name in DIAGNOSTICS:
+            batch_op.add_column(sa.Column(name, sa.Float(), nullable=True))
 
     with op.batch_alter_table('jobs', schema=None) as batch_op:
         batch_op.add_column(sa.Column('cost_cpu_s', sa.Float(), nullable=True))
@@ -68,6 +80,8 @@ def downgrade() -> None:
         batch_op.drop_column('cost_cpu_s')
 
     with op.batch_alter_table('evaluations', schema=None) as batch_op:
+        for name in reversed(DIAGNOSTICS):
+            batch_op.drop_column(name)
         batch_op.drop_column('transient')
 
     op.drop_table('schedulers')

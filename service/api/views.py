@@ -8,6 +8,7 @@ from datetime import UTC, datetime
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from finaldrive.engine import DIAGNOSTICS
 from finaldrive.service.db.models import Evaluation, Generation, Job, JobRoad, JobState
 from finaldrive.service.db.repository import roads_of, utcnow
 from finaldrive.service.schemas import EvaluationOut, JobOut, JobSpec, RoadProgress, RobustBest
@@ -23,7 +24,7 @@ def evaluation_out(e: Evaluation, road_name: str) -> EvaluationOut:
         a2=e.a2, a2_deg=math.degrees(e.a2), l2=e.l2, rws=e.rws, distance_m=e.distance_m,
         squat_ratio=e.squat_ratio, slack_m=e.slack_m, fitness_m=e.fitness_m,
         chain_length_m=e.chain_length_m, status=e.status,
-        reason=e.reason, wall_s=e.wall_s, cached=e.cached,
+        reason=e.reason, wall_s=e.wall_s, cached=e.cached, **{name: getattr(e, name) for name in DIAGNOSTICS},
     )
 
 

@@ -80,7 +80,8 @@ def run_demo(args: argparse.Namespace) -> int:
             except RuntimeError as exc:
                 print(f"finaldrive: error: {exc}", file=sys.stderr)
                 return EXIT_FAILED
-            executors = ", ".join(f"{s['executor']} ({s['capacity']} tasks)" for s in health["schedulers"] if s["alive"])
+            executors = ", ".join(f"{s['executor']} ({s['capacity']} tasks)"
+                                  for s in health["schedulers"] if s["alive"])
             print(f"service up: engine {health['engine_version']}, scheduler: {executors}", file=sys.stderr)
             return _run_job(args, client)
     finally:

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from finaldrive.engine import DIAGNOSTICS
 from finaldrive.service.cli.common import (
     ROAD_HELP,
     UsageError,
@@ -114,7 +115,7 @@ def _write_series(path: Path, series: dict[str, np.ndarray]) -> None:
 # --- evaluate -------------------------------------------------------------------------------
 
 EVALUATE_COLUMNS = ("a2_deg", "l2", "rws", "status", "distance_m", "squat_ratio", "slack_mm",
-                    "fitness_m", "chain_length_m", "wall_s", "reason")
+                    "fitness_m", "chain_length_m", "wall_s", "reason", *DIAGNOSTICS)
 
 
 def batch_rows(batch: Any) -> list[dict[str, Any]]:
@@ -126,7 +127,7 @@ def batch_rows(batch: Any) -> list[dict[str, Any]]:
             "distance_m": clean(batch.distance_m[i]), "squat_ratio": clean(batch.squat_ratio[i]),
             "slack_mm": clean(batch.slack_m[i] * 1000.0), "fitness_m": clean(batch.fitness_m[i]),
             "chain_length_m": clean(batch.chain_length_m[i]), "wall_s": float(batch.wall_s[i]),
-            "reason": batch.reason[i],
+            "reason": batch.reason[i], **{name: clean(getattr(batch, name)[i]) for name in DIAGNOSTICS},
         })
     return out
 

@@ -26,6 +26,8 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
+from finaldrive.engine import DIAGNOSTICS
+
 
 class JobState(enum.StrEnum):
     """Life cycle of a job; the last four are terminal except ``interrupted``."""
@@ -97,7 +99,8 @@ class JobRoad(Base):
 
 
 class Evaluation(Base):
-    """One simulation result of a job: a design on a road (SI units, a2 in rad).
+    """One simulation result of a job: a design on a road (SI units, a2 in rad), with the run's
+    diagnostics (finaldrive.engine.DIAGNOSTICS, one column each, added below the class).
 
     ``step`` is the DE generation (0 = initial population; always 0 for sweeps) and
     ``candidate`` the row within the sweep grid or the generation.
@@ -133,6 +136,10 @@ class Evaluation(Base):
         Index("ix_evaluations_job_road_id", "job_id", "road_index", "id"),
         Index("ix_evaluations_cache_key", "cache_key"),
     )
+
+
+for _name in DIAGNOSTICS:  # the run's extremes and energy ledger, one column each (unit in the name)
+    setattr(Evaluation, _name, mapped_column(_name, Float, nullable=True))
 
 
 class Generation(Base):

@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 from sqlalchemy import Table, func, insert, select
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.orm import Session
 
+from finaldrive.engine import DIAGNOSTICS
 from finaldrive.service.db.leases import db_now, owns
 from finaldrive.service.db.models import EvalStatus, Evaluation, Generation, Job, JobRoad
 
@@ -49,9 +50,10 @@ class EvalRow:
     cached: bool
     cache_key: str
     transient: bool = False
+    diagnostics: dict[str, float | None] = field(default_factory=dict)  # finaldrive.engine.DIAGNOSTICS
 
 
-_ROW_FIELDS = tuple(f.name for f in fields(EvalRow))
+_ROW_FIELDS = tuple(f.name for f in fields(EvalRow) if f.name != "diagnostics")
 
 
 def stored_fitness(session: Session, job_id: int, road_index: int, step: int,
@@ -111,8 +113,8 @@ def store_evaluations(session: Session, scheduler_id: str, job_id: int, rows: Se
     if not rows:
         return 0
     now = db_now(session)
-    values = [{**{name: getattr(row, name) for name in _ROW_FIELDS}, "job_id": job_id, "created_at": now}
-              for row in rows]
+    values = [{**{name: getattr(row, name) for name in _ROW_FIELDS}, **dict.fromkeys(DIAGNOSTICS),
+               **row.diagnostics, "job_id": job_id, "created_at": now} for row in rows]
     dialect = session.get_bind().dialect.name
     statement: Any
     table = Evaluation.__table__  # Core, not the ORM: a bulk insert of plain rows

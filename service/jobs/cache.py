@@ -15,9 +15,10 @@ import numpy as np
 
 from finaldrive.engine import Road, SimSettings, Vehicle, default_vehicle
 
-#: SimSettings fields that only choose what is returned, not the result. (series_stride is
-#: not one: the fast path's steps land on its output times, series_stride x dt.)
-_OUTPUT_ONLY = frozenset({"series"})
+#: SimSettings fields that change what is returned or when a run is given up, never a result that
+#: finishes: the series and its stride (interpolated; the steps do not land on it) and the
+#: wall-time limit (a run stopped by it is a transient failure, never reused).
+_OUTPUT_ONLY = frozenset({"series", "series_stride", "max_wall_s"})
 DESIGN_DECIMALS = 12
 
 

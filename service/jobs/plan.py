@@ -32,8 +32,11 @@ class JobPlan:
         return self.study.total()
 
 
-def build_plan(spec: JobSpec) -> JobPlan:
-    """Resolve a normalised spec; raises :class:`PlanError` naming the offending field."""
+def build_plan(spec: JobSpec, *, max_simulation_s: float | None = None) -> JobPlan:
+    """Resolve a normalised spec; raises :class:`PlanError` naming the offending field.
+
+    ``max_simulation_s``: the wall-time limit of each simulation (a service setting, not the job's).
+    """
     try:
         bounds = None if spec.bounds is None else Bounds(**spec.bounds.model_dump())
         de = None if spec.de is None else DESettings(**spec.de.model_dump())
@@ -42,7 +45,8 @@ def build_plan(spec: JobSpec) -> JobPlan:
     study = plan_study(spec.kind, spec.roads, grid=spec.grid, bounds=bounds, de=de, objective=spec.aggregate,
                        seed=spec.seed)
     try:
-        settings = SimSettings(duration=spec.settings.duration, dt=spec.settings.dt, method=spec.settings.method)
+        settings = SimSettings(duration=spec.settings.duration, dt=spec.settings.dt, method=spec.settings.method,
+                               max_wall_s=max_simulation_s)
     except ValueError as exc:
         raise PlanError(("settings",), str(exc)) from None
     vehicle = None

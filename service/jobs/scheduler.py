@@ -37,6 +37,7 @@ import numpy as np
 from sqlalchemy.exc import SQLAlchemyError
 
 from finaldrive.engine import (
+    DIAGNOSTICS,
     ENGINE_VERSION,
     PAPER_SWEEP_STEP,
     STATUS_OK,
@@ -88,6 +89,7 @@ class SchedulerConfig:
     flush_s: float = 0.25          # results are written at most this long after they arrive
     max_backlog_rows: int = 50_000  # results waiting for the store before dispatching pauses
     batch_size: int | None = None  # designs per task (None: adaptive)
+    max_simulation_s: float | None = 60.0  # wall-time limit of one simulation (reason "time limit ...")
     recordings: bool = True        # also produce queued recordings
 
 
@@ -236,7 +238,7 @@ class Scheduler:
             return  # retried at the next heartbeat: the job stays claimed by us
         spec, resumed, sweep_done, de_states = loaded
         try:
-            plan = build_plan(JobSpec.model_validate(spec))
+            plan = build_plan(JobSpec.model_validate(spec), max_simulation_s=self.config.max_simulation_s)
         except (PlanError, ValueError) as exc:
             message = f"invalid job: {exc}"
             self._db(lambda s: finish_job(s, self.id, job_id, JobState.failed, error=message), f"fail job {job_id}")
@@ -407,6 +409,7 @@ def _row_from_result(batch: BatchResult, fitness: np.ndarray, j: int, slot: tupl
         chain_length_m=_finite(batch.chain_length_m[j]),
         status=EvalStatus.ok.value if ok else EvalStatus.failed.value, reason=reason,
         wall_s=0.0 if cached else float(batch.wall_s[j]), cached=cached, cache_key=key, transient=transient,
+        diagnostics={name: _finite(getattr(batch, name)[j]) for name in DIAGNOSTICS},
     )
 
 
@@ -415,7 +418,7 @@ def _row_from_cache(hit: Evaluation, road: int, step: int, candidate: int, desig
         road_index=road, step=step, candidate=candidate, a2=float(design[0]), l2=float(design[1]),
         rws=float(design[2]), distance_m=hit.distance_m, squat_ratio=hit.squat_ratio, slack_m=hit.slack_m,
         fitness_m=hit.fitness_m, chain_length_m=hit.chain_length_m, status=hit.status, reason=hit.reason,
-        wall_s=0.0, cached=True, cache_key=key,
+        wall_s=0.0, cached=True, cache_key=key, diagnostics={name: getattr(hit, name) for name in DIAGNOSTICS},
     )
 
 
@@ -443,7 +446,8 @@ def run_scheduler(settings: Settings, stop: threading.Event, *, scheduler_id: st
     executor = make_executor(settings.executor, num_workers=settings.num_workers, address=settings.ray_address,
                              niceness=settings.niceness)
     config = SchedulerConfig(lease_s=settings.lease_seconds, heartbeat_s=settings.heartbeat_seconds,
-                             max_jobs=settings.max_jobs, batch_size=settings.batch_size)
+                             max_jobs=settings.max_jobs, batch_size=settings.batch_size,
+                             max_simulation_s=settings.max_simulation_seconds)
     if handle_signals:
         for signum in (signal.SIGTERM, signal.SIGINT):
             signal.signal(signum, lambda *_: stop.set())

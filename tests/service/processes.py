@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -12,6 +13,14 @@ from pathlib import Path
 
 import httpx
 import psutil
+
+
+def console_script(name: str) -> str:
+    """The installed console script ``name``: beside this interpreter (a venv not activated), else on PATH."""
+    beside = Path(sys.executable).parent / name
+    found = str(beside) if beside.is_file() else shutil.which(name)
+    assert found, f"the {name} console script is not installed (pip install -e .)"
+    return found
 
 
 def free_port() -> int:

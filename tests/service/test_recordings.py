@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 import time
 from collections.abc import Iterator
@@ -17,6 +16,7 @@ from finaldrive.engine import Design, Road, SimSettings, simulate
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
 from finaldrive.service.recording import PARTS, PLOTS, frame_count, record, scalars_of, series_settings
+from tests.service.processes import console_script
 from tests.service.svc_helpers import ToyTask, running_scheduler, wait_done
 
 ROAD = Road.parse("sine:0.04:3")
@@ -26,8 +26,7 @@ DESIGNS = [("geometry 1", Design.from_deg(0.0, 0.0, 0.093)), ("geometry 2", Desi
 
 def verify(path: Path) -> None:
     """``rerun rrd verify`` exits 0 (analytics off first, so no banner or network)."""
-    exe = shutil.which("rerun")
-    assert exe is not None
+    exe = console_script("rerun")
     subprocess.run([exe, "analytics", "disable"], capture_output=True, check=False)
     done = subprocess.run([exe, "rrd", "verify", str(path)], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr

@@ -123,6 +123,7 @@ def test_roads_and_health(client: TestClient) -> None:
 
 def test_concurrent_jobs_share_the_executor_round_robin(client: TestClient, fake: ToyTask) -> None:
     fake.gate.clear()
+    fake.delay = 0.005  # a's designs outlast the scheduler's claim interval, so b joins while a runs
     a = client.post("/v1/jobs", json=SWEEP).json()["id"]
     b = client.post("/v1/jobs", json=SWEEP | {"seed": 1, "roads": ["bump:0.01:0.5", "flat"]}).json()["id"]
     fake.gate.set()

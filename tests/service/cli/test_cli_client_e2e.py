@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import csv
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -18,6 +17,7 @@ from finaldrive.service.cli import main
 from finaldrive.service.cli.demo_cmds import free_port, stop_server
 from finaldrive.service.cli.remote import EXIT_HTTP, EXIT_JOB_NOT_SUCCEEDED, EXIT_UNREACHABLE
 from finaldrive.service.recording import frame_count
+from tests.service.processes import console_script
 
 pytestmark = pytest.mark.slow  # starts servers or subprocesses
 
@@ -67,8 +67,7 @@ def test_submit_follow_results_record_plot(server: str, tmp_path: Path, monkeypa
     rrd = tmp_path / "best-vs-g2.rrd"
     assert main(["record", "--job", "1", "--compare", "270,0.15,0.15", "--duration", "0.4", "--out", str(rrd), *s]) == 0
     assert frame_count(rrd, "/world/g1/swingarm") == frame_count(rrd, "/world/g2/swingarm") == 21
-    exe = shutil.which("rerun")
-    assert exe is not None
+    exe = console_script("rerun")
     subprocess.run([exe, "analytics", "disable"], capture_output=True, check=False)
     assert subprocess.run([exe, "rrd", "verify", str(rrd)], capture_output=True, timeout=60).returncode == 0
 

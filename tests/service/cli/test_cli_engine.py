@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
 
 import pytest
 
 from finaldrive.service.cli import main
+from tests.service.processes import console_script
 
 
 def run(argv, capsys):
@@ -67,16 +67,14 @@ def test_bad_arguments_exit_2_with_one_line(argv, fragment, capsys):
 
 
 def test_console_script_is_installed():
-    exe = shutil.which("finaldrive")
-    assert exe, "the finaldrive console script is not on PATH (pip install -e .)"
+    exe = console_script("finaldrive")
     out = subprocess.run([exe, "geometry", "--a2-deg", "0", "--l2", "0",
                           "--rws", "0.093", "--json"], capture_output=True, text=True, check=True)
     assert json.loads(out.stdout)["squat_ratio"] > 1
 
 
 def test_a_closed_pipe_ends_quietly():
-    exe = shutil.which("finaldrive")
-    assert exe
+    exe = console_script("finaldrive")
     proc = subprocess.run(f"{exe} roads | head -1", shell=True, capture_output=True, text=True)
     assert proc.stdout.startswith("name")
     assert "Traceback" not in proc.stderr
