@@ -25,13 +25,13 @@ APPLICATION_ID = "finaldrive"
 TIMELINE = "sim_time"
 #: (series key, entity name, legend unit) of the Fig. 13 plots.
 PLOTS: tuple[tuple[str, str, str], ...] = (
-    ("distance", "distance", "m"),
-    ("chain_tension", "chain_tension", "N"),
+    ("distance_m", "distance_m", "m"),
+    ("chain_tension_n", "chain_tension_n", "N"),
     ("squat_ratio", "squat_ratio", "-"),
-    ("fz_rear", "fz_rear", "N"),
-    ("fz_front", "fz_front", "N"),
-    ("kappa", "slip", "-"),
-    ("fx", "fx", "N"),
+    ("fz_rear_n", "fz_rear_n", "N"),
+    ("fz_front_n", "fz_front_n", "N"),
+    ("kappa", "kappa", "-"),
+    ("fx_n", "fx_n", "N"),
 )
 PARTS = ("chassis", "swingarm", "damper", "fork", "rear_wheel", "front_wheel",
          "engine_sprocket", "wheel_sprocket", "chain")
@@ -102,7 +102,7 @@ def _log_run(rec: rr.RecordingStream, run: Run, key: str, index: int, road: Road
     rec.log(root, rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)  # into the view's y-down space
     rec.log(f"{root}/road", rr.LineStrips2D([road_strip(road, [run], offset)], radii=0.004, colors=(90, 90, 90),
                                             labels=[run.label], show_labels=True), static=True)
-    t = run.series["t"]
+    t = run.series["t_s"]
     times = rr.TimeColumn(TIMELINE, duration=t)
     for series_key, name, unit in PLOTS:
         path = f"/plots/{name}/{key}"

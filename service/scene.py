@@ -74,7 +74,7 @@ def tyre_forces(run: Run, k: int, offset: float = 0.0) -> tuple[np.ndarray, np.n
     """Arrow origins and vectors [m]: rear Fz, rear Fx, front Fz at the contact points."""
     s, q = run.series, run.series["q"][k]
     rear, front = _pt(q, 14, offset), _pt(q, 15, offset)
-    vectors = np.array([[0.0, s["fz_rear"][k]], [s["fx"][k], 0.0], [0.0, s["fz_front"][k]]])
+    vectors = np.array([[0.0, s["fz_rear_n"][k]], [s["fx_n"][k], 0.0], [0.0, s["fz_front_n"][k]]])
     return np.array([rear, rear, front]), vectors * FORCE_SCALE_M_PER_N
 
 

@@ -141,10 +141,9 @@ class _EvaluationCore(BaseModel):
     road: str
     step: int = Field(description="DE generation (0 = initial population); 0 for sweeps, -1 for a paper-study's sweep")
     candidate: int = Field(description="row in the sweep grid or the DE generation")
-    a2: float = Field(description="[rad]")
-    a2_deg: float
-    l2: float = Field(description="[m]")
-    rws: float = Field(description="[m]")
+    a2_deg: float = Field(description="sprocket angle a2 [deg]")
+    l2_m: float = Field(description="pivot-to-sprocket distance L2 [m]")
+    rws_m: float = Field(description="wheel sprocket radius R_WS [m]")
     distance_m: float | None
     squat_ratio: float | None
     slack_m: float | None
@@ -177,11 +176,10 @@ class RoadProgress(BaseModel):
 
 class RobustBest(BaseModel):
     aggregate: Literal["mean", "worst"]
-    score_m: float | None = Field(description="aggregate fitness of the best design")
-    a2: float
-    a2_deg: float
-    l2: float
-    rws: float
+    score_m: float | None = Field(description="aggregate fitness of the best design [m]")
+    a2_deg: float = Field(description="sprocket angle a2 [deg]")
+    l2_m: float = Field(description="pivot-to-sprocket distance L2 [m]")
+    rws_m: float = Field(description="wheel sprocket radius R_WS [m]")
     generation: int
 
 
@@ -226,7 +224,7 @@ class RoadOut(BaseModel):
 
 class StoreOut(BaseModel):
     writable: bool = Field(description="a write transaction could start within a second")
-    latency_ms: float = Field(description="how long the check took [ms]")
+    latency_s: float = Field(description="how long the check took [s]")
 
 
 class SchedulerOut(BaseModel):
@@ -272,9 +270,9 @@ class RecordingDesign(BaseModel):
 
     model_config = _STRICT
 
-    a2_deg: float = Field(ge=-720, le=720)
-    l2: float = Field(ge=0, le=0.5, description="[m]")
-    rws: float = Field(gt=0, le=0.5, description="[m]")
+    a2_deg: float = Field(ge=-720, le=720, description="sprocket angle a2 [deg]")
+    l2_m: float = Field(ge=0, le=0.5, description="pivot-to-sprocket distance L2 [m]")
+    rws_m: float = Field(gt=0, le=0.5, description="wheel sprocket radius R_WS [m]")
     label: str | None = Field(None, max_length=80)
 
 

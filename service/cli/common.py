@@ -180,21 +180,21 @@ def road_from_arg(text: str) -> Road:
 
 
 def read_designs_csv(path: str) -> np.ndarray:
-    """Rows (a2 [rad], L2 [m], R_WS [m]) from a CSV with header a2_deg,l2,rws."""
+    """Rows (a2 [rad], L2 [m], R_WS [m]) from a CSV with header a2_deg,l2_m,rws_m."""
     try:
         text = Path(path).read_text()
     except OSError as exc:
         raise UsageError(f"designs file {path!r}: {exc.strerror or exc}") from None
     reader = csv.DictReader(io.StringIO(text))
-    missing = {"a2_deg", "l2", "rws"} - set(reader.fieldnames or ())
+    missing = {"a2_deg", "l2_m", "rws_m"} - set(reader.fieldnames or ())
     if missing:
         raise UsageError(f"designs file {path!r}: missing column(s) {', '.join(sorted(missing))}")
     rows = []
     for n, row in enumerate(reader, start=2):
         try:
-            rows.append([math.radians(float(row["a2_deg"])), float(row["l2"]), float(row["rws"])])
+            rows.append([math.radians(float(row["a2_deg"])), float(row["l2_m"]), float(row["rws_m"])])
         except (TypeError, ValueError):
-            raise UsageError(f"designs file {path!r}, line {n}: a2_deg, l2 and rws must be numbers") from None
+            raise UsageError(f"designs file {path!r}, line {n}: a2_deg, l2_m and rws_m must be numbers") from None
     return np.array(rows, dtype=float).reshape(-1, 3)
 
 

@@ -126,18 +126,18 @@ def run_results(args: argparse.Namespace) -> int:
 
 
 def _print_best(best: dict[str, Any]) -> None:
-    print(f"{'road':<18} {'a2_deg':>8} {'l2 [m]':>8} {'rws [m]':>8} {'fitness [m]':>12} {'distance [m]':>13}")
+    print(f"{'road':<18} {'a2_deg':>8} {'l2_m':>8} {'rws_m':>8} {'fitness [m]':>12} {'distance [m]':>13}")
     for road in best["roads"]:
         b = road.get("best")
         if b is None:
             print(f"{road['name']:<18} {'(no successful evaluation)':>52}")
         else:
-            print(f"{road['name']:<18} {b['a2_deg']:>8.1f} {b['l2']:>8.4f} {b['rws']:>8.4f} "
+            print(f"{road['name']:<18} {b['a2_deg']:>8.1f} {b['l2_m']:>8.4f} {b['rws_m']:>8.4f} "
                   f"{b['fitness_m']:>12.3f} {b['distance_m']:>13.3f}")
     rb = best.get("robust_best")
     if rb:
         score = "-" if rb["score_m"] is None else f"{rb['score_m']:.3f}"
-        print(f"robust ({rb['aggregate']}): a2_deg {rb['a2_deg']:.1f}  l2 {rb['l2']:.4f}  rws {rb['rws']:.4f}  "
+        print(f"robust ({rb['aggregate']}): a2_deg {rb['a2_deg']:.1f}  l2_m {rb['l2_m']:.4f}  rws_m {rb['rws_m']:.4f}  "
               f"score {score} m")
 
 
@@ -175,7 +175,7 @@ def register(sub: Any) -> None:
                         "robust-de: one DE scored over all the roads")
     p.add_argument("--road", action="append", help=f"a road (repeatable): {ROAD_HELP}")
     p.add_argument("--roads", action="append", help="comma-separated roads, or a group (paper, sine, bump)")
-    p.add_argument("--grid", help='sweep: "table9" (the default) or e.g. "a2_deg=0:350:10,l2=0:0.2:0.02,rws=0.093"')
+    p.add_argument("--grid", help='sweep: "table9" (the default) or e.g. "a2_deg=0:350:10,l2_m=0:0.2:0.02,rws_m=0.093"')
     add_de_args(p)
     add_vehicle_arg(p)
     p.add_argument("--objective", choices=("mean", "worst"), default="mean",

@@ -30,7 +30,7 @@ def produce(spec: dict[str, Any], path: Path) -> None:
     from finaldrive.service.recording import record
 
     road = resolve_roads(spec["road"])[0].road
-    designs = [(d["label"], Design.from_deg(d["a2_deg"], d["l2"], d["rws"])) for d in spec["designs"]]
+    designs = [(d["label"], Design.from_deg(d["a2_deg"], d["l2_m"], d["rws_m"])) for d in spec["designs"]]
     base = SimSettings(method=spec["method"], dt=spec["dt"])
     vehicle = load_vehicle_dict(spec["vehicle"]) if spec.get("vehicle") else None
     record(path, designs, road, duration=spec["duration"], fps=spec["fps"], base=base, vehicle=vehicle,

@@ -301,8 +301,8 @@ class Scheduler:
             de = run.de
             job.writes.generations.append({
                 "run": run.index, "generation": run.generation, "state": de.state(),
-                "population": de.population.tolist(), "fitness": _nullable(de.fitness),
-                "best_f": _nullable([de.best_f])[0], "n_evals": de.n_evals,
+                "population": de.population.tolist(), "fitness_m": _nullable(de.fitness),
+                "best_fitness_m": _nullable([de.best_f])[0], "n_evals": de.n_evals,
             })
 
     def _finish_ready(self) -> None:
@@ -364,7 +364,7 @@ def _rows_from_result(part: Request, batch: BatchResult, fitness: np.ndarray, ke
     failed_for_now = [transient or (batch.status[j] != STATUS_OK and reasons[j].startswith(TIME_LIMIT))
                       for j in range(n)]
     columns = [
-        [part.road] * n, [part.step] * n, part.candidates.tolist(), *(_nullable(c) for c in part.designs.T),
+        [part.road] * n, [part.step] * n, part.candidates.tolist(), *_design_columns(part.designs),
         _nullable(batch.distance_m), _nullable(batch.squat_ratio), _nullable(batch.slack_m), _nullable(fitness),
         _nullable(batch.chain_length_m),
         [EvalStatus.ok.value if good else EvalStatus.failed.value for good in ok.tolist()], reasons,
@@ -377,7 +377,12 @@ def _rows_from_result(part: Request, batch: BatchResult, fitness: np.ndarray, ke
 def _row_from_cache(hit: Evaluation, road: int, step: int, candidate: int, design: np.ndarray, key: str) -> Row:
     values = {name: getattr(hit, name) for name in ROW_COLUMNS[6:]}
     values.update(wall_s=0.0, cached=True, cache_key=key, cache_hash=key_hash(key), transient=False)
-    return (road, step, candidate, *_nullable(design), *values.values())
+    return (road, step, candidate, *(c[0] for c in _design_columns(design[None, :])), *values.values())
+
+
+def _design_columns(designs: np.ndarray) -> list[list[float | None]]:
+    """The stored columns a2_deg, l2_m, rws_m of designs given as rows (a2 [rad], L2 [m], R_WS [m])."""
+    return [_nullable(np.degrees(designs[:, 0])), _nullable(designs[:, 1]), _nullable(designs[:, 2])]
 
 
 def _nullable(values: Sequence[float] | np.ndarray) -> list[float | None]:

@@ -60,7 +60,7 @@ def test_series_equal_the_engines(rrd: Path) -> None:
         assert series is not None
         for key, name, _ in PLOTS:
             t, values = scalars_of(rrd, f"/plots/{name}/g{i + 1}")
-            np.testing.assert_allclose(t, series["t"], atol=1e-9)
+            np.testing.assert_allclose(t, series["t_s"], atol=1e-9)
             np.testing.assert_allclose(values, series[key], rtol=1e-12, atol=1e-12)
 
 
@@ -89,14 +89,15 @@ def wait_recording(client: TestClient, rid: int, timeout: float = 60) -> dict:
 
 def test_api_records_a_jobs_best_beside_a_design(client: TestClient, tmp_path: Path) -> None:
     job = client.post("/v1/jobs", json={"kind": "sweep", "roads": ["sine:0.04:3"],
-                                        "grid": "a2_deg=0:90:90,l2=0.05,rws=0.09"}).json()
+                                        "grid": "a2_deg=0:90:90,l2_m=0.05,rws_m=0.09"}).json()
     wait_done(client, job["id"])
     r = client.post("/v1/recordings", json={"job_id": job["id"], "duration": 0.2, "fps": 25,
-                                            "designs": [{"a2_deg": 270, "l2": 0.15, "rws": 0.15}]})
+                                            "designs": [{"a2_deg": 270, "l2_m": 0.15, "rws_m": 0.15}]})
     assert r.status_code == 202 and r.headers["Location"] == f"/v1/recordings/{r.json()['id']}"
     body = wait_recording(client, r.json()["id"])
     assert body["status"] == "succeeded", body
-    assert [d["label"] for d in body["designs"]] == [f"job {job['id']} best", "a2=270 L2=0.15 Rws=0.15"]
+    labels = [f"job {job['id']} best", "a2 = 270 deg, L2 = 0.150 m, R_WS = 0.150 m"]
+    assert [d["label"] for d in body["designs"]] == labels
     assert body["road"] == "sine:0.04:3" and body["frames"] == 6 and "path" not in body
     download = client.get(body["file"])
     assert download.status_code == 200
@@ -110,13 +111,14 @@ def test_api_records_a_jobs_best_beside_a_design(client: TestClient, tmp_path: P
 def test_api_errors(client: TestClient) -> None:
     assert client.get("/v1/recordings/99").status_code == 404
     assert client.get("/v1/recordings/99/file").status_code == 404
-    no_road = client.post("/v1/recordings", json={"designs": [{"a2_deg": 0, "l2": 0, "rws": 0.09}]})
+    no_road = client.post("/v1/recordings", json={"designs": [{"a2_deg": 0, "l2_m": 0, "rws_m": 0.09}]})
     assert no_road.status_code == 422 and "road" in no_road.json()["detail"]
-    bad_road = client.post("/v1/recordings", json={"road": "moon", "designs": [{"a2_deg": 0, "l2": 0, "rws": 0.09}]})
+    bad_road = client.post("/v1/recordings",
+                           json={"road": "moon", "designs": [{"a2_deg": 0, "l2_m": 0, "rws_m": 0.09}]})
     assert bad_road.status_code == 422 and bad_road.json()["detail"].startswith("body.road: unknown road")
     assert client.post("/v1/recordings", json={"job_id": 42}).status_code == 404
     failing = client.post("/v1/recordings", json={"road": "flat", "duration": 0.2,
-                                                   "designs": [{"a2_deg": 190, "l2": 0.5, "rws": 0.5}]}).json()
+                                                   "designs": [{"a2_deg": 190, "l2_m": 0.5, "rws_m": 0.5}]}).json()
     body = wait_recording(client, failing["id"])  # sprockets too close for a chain: fails, the service goes on
     assert body["status"] == "failed" and "cannot carry a chain" in body["error"]
     assert client.get(f"/v1/recordings/{body['id']}/file").status_code == 409

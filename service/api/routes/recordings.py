@@ -9,6 +9,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Path, Response
 from sqlalchemy.orm import undefer
 
+from finaldrive.engine import design_label
 from finaldrive.service.api.deps import MAX_ID, ServicesDep
 from finaldrive.service.api.lookups import load_job
 from finaldrive.service.api.problems import ApiProblem, documented, validation_problem
@@ -32,12 +33,12 @@ def _job_best(job: JobOut, road: str | None) -> tuple[str, RecordingDesign]:
         raise validation_problem(("body", "road"), f"job {job.id} has no road {road!r} (its roads: {names})")
     rb = job.robust_best
     if rb is not None:
-        return chosen.spec, RecordingDesign(a2_deg=rb.a2_deg, l2=rb.l2, rws=rb.rws, label=f"job {job.id} best")
+        return chosen.spec, RecordingDesign(a2_deg=rb.a2_deg, l2_m=rb.l2_m, rws_m=rb.rws_m, label=f"job {job.id} best")
     if chosen.best is None:
         raise ApiProblem(409, f"job {job.id} has no successful evaluation on road {chosen.name!r} yet",
                          slug="no-best-design")
     b = chosen.best
-    return chosen.spec, RecordingDesign(a2_deg=b.a2_deg, l2=b.l2, rws=b.rws, label=f"job {job.id} best")
+    return chosen.spec, RecordingDesign(a2_deg=b.a2_deg, l2_m=b.l2_m, rws_m=b.rws_m, label=f"job {job.id} best")
 
 
 def _spec(request: RecordingRequest, services: Any) -> dict[str, Any]:
@@ -60,7 +61,7 @@ def _spec(request: RecordingRequest, services: Any) -> dict[str, Any]:
         raise validation_problem(("body", "road"), f"{road!r} names {len(items)} roads; give one")
     if abs(round(1.0 / (request.fps * dt)) * request.fps * dt - 1.0) > 1e-9:
         raise validation_problem(("body", "fps"), f"fps must divide 1/dt = {1 / dt:g} Hz")
-    labelled = [d.model_copy(update={"label": d.label or f"a2={d.a2_deg:g} L2={d.l2:g} Rws={d.rws:g}"})
+    labelled = [d.model_copy(update={"label": d.label or design_label(d.a2_deg, d.l2_m, d.rws_m)})
                 for d in designs]
     return {"road": road, "designs": [d.model_dump() for d in labelled], "duration": request.duration,
             "fps": request.fps, "method": method, "dt": dt, "vehicle": vehicle}

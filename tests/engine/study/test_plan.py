@@ -63,7 +63,7 @@ def test_defaults_are_the_papers_tables() -> None:
     ("de", ["flat", "mars"], {}, "roads.1"),
     ("de", ["flat"], {"grid": "table9"}, "grid"),
     ("sweep", ["flat"], {"de": DESettings()}, "de"),
-    ("sweep", ["flat"], {"grid": "l2=0:oops"}, "grid"),
+    ("sweep", ["flat"], {"grid": "l2_m=0:oops"}, "grid"),
     ("de", ["flat"], {"objective": "mean"}, "objective"),
 ])
 def test_plan_errors_name_the_field(kind: str, roads: list[str], parts: dict, field: str) -> None:
@@ -120,7 +120,7 @@ def test_a_resumed_de_continues_exactly() -> None:
 
 
 def test_a_resumed_sweep_hands_out_only_what_is_missing() -> None:
-    plan = plan_study("sweep", ["flat,sine:0.04:3"], grid="a2_deg=0:90:30,l2=0|0.1,rws=0.093")
+    plan = plan_study("sweep", ["flat,sine:0.04:3"], grid="a2_deg=0:90:30,l2_m=0|0.1,rws_m=0.093")
     assert plan.sweep_total() == 2 * 8
     run = plan.runs(sweep_done={(0, 0), (0, 1), (1, 7)})[0]
     requests = run.take()

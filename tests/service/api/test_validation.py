@@ -18,7 +18,7 @@ BAD_SPECS = [
     ({**DE, "bounds": {"l2_m": [0.2, 0.1]}}, "bounds", "lower bound 0.2 is above upper bound 0.1"),
     ({**DE, "de": {"np": 3}}, "de.np", "greater than or equal to 4"),
     ({**SWEEP, "settings": {"duration": -1}}, "settings.duration", "greater than 0"),
-    ({**SWEEP, "grid": "l2=0:oops"}, "grid", ""),
+    ({**SWEEP, "grid": "l2_m=0:oops"}, "grid", ""),
     ({**SWEEP, "vehicle": {"parameters": {}}}, "vehicle", "missing"),
     ({**SWEEP, "bounds": {}}, "body", "bounds: not allowed for a sweep"),
     ({**SWEEP, "kind": "grid-search"}, "kind", ""),

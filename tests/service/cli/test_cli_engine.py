@@ -22,7 +22,7 @@ def test_geometry_json(capsys):
     g = json.loads(out)
     assert code == 0
     assert g["squat_ratio"] == pytest.approx(1.092, abs=0.01)     # Table 14, geometry 1
-    assert g["res"] == pytest.approx(0.0465)
+    assert g["res_m"] == pytest.approx(0.0465)
     assert g["sprocket_centre_m"] == [0.0, 0.0]
     assert g["chain_length_m"] > g["taut_length_m"] > 0.5
 
@@ -33,21 +33,21 @@ def test_simulate_json_keys_and_series(tmp_path, capsys):
                         "--duration", "0.5", "--json", "--series", str(series)], capsys)
     r = json.loads(out)
     assert code == 0
-    for key in ("distance_m", "squat_ratio", "slack_mm", "fitness_m", "chain_length_m", "status", "reason", "wall_s"):
+    for key in ("distance_m", "squat_ratio", "slack_m", "fitness_m", "chain_length_m", "status", "reason", "wall_s"):
         assert key in r
     assert r["status"] == "ok" and r["distance_m"] > 0
     lines = series.read_text().splitlines()
-    assert lines[0].startswith("t,distance,pitch,chain_tension")
+    assert lines[0].startswith("t_s,distance_m,pitch_deg,chain_tension_n")
     assert len(lines) == 1 + 51  # header, t = 0 and every 10th of 500 steps
 
 
 def test_evaluate_keeps_input_order(tmp_path, capsys):
     designs = tmp_path / "d.csv"
-    designs.write_text("a2_deg,l2,rws\n0,0,0.093\n270,0.15,0.05\n195.3,0.037,0.088\n")
+    designs.write_text("a2_deg,l2_m,rws_m\n0,0,0.093\n270,0.15,0.05\n195.3,0.037,0.088\n")
     code, out, _ = run(["evaluate", "--designs", str(designs), "--road", "flat", "--duration", "0.3", "--json"], capsys)
     rows = json.loads(out)
     assert code == 0
-    got = [v for r in rows for v in (r["a2_deg"], r["l2"], r["rws"])]
+    got = [v for r in rows for v in (r["a2_deg"], r["l2_m"], r["rws_m"])]
     assert got == pytest.approx([0, 0, 0.093, 270, 0.15, 0.05, 195.3, 0.037, 0.088])
     assert all(r["status"] == "ok" for r in rows)
 
