@@ -65,7 +65,8 @@ def simulate_runs(designs: Sequence[tuple[str, Design]], road: Road, settings: S
         result = simulate(design, road, settings, vehicle)
         if not result.ok or result.series is None:
             raise RecordingError(f"{label}: the simulation failed: {result.reason}")
-        runs.append(Run(label, design, result.series))
+        outcome = {k: float(v) for k, v in result.summary().items() if isinstance(v, float)}
+        runs.append(Run(label, design, result.series, outcome))
     return runs
 
 
@@ -98,7 +99,7 @@ def _log_run(rec: rr.RecordingStream, run: Run, key: str, index: int, road: Road
     d = run.design
     offset = -index * ROW_OFFSET_M
     root = f"/world/{key}"
-    rec.send_property(key, rr.AnyValues(label=run.label, a2_deg=d.a2_deg, l2_m=d.l2, rws_m=d.rws))
+    rec.send_property(key, rr.AnyValues(label=run.label, a2_deg=d.a2_deg, l2_m=d.l2, rws_m=d.rws, **run.outcome))
     rec.log(root, rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)  # into the view's y-down space
     rec.log(f"{root}/road", rr.LineStrips2D([road_strip(road, [run], offset)], radii=0.004, colors=(90, 90, 90),
                                             labels=[run.label], show_labels=True), static=True)
@@ -154,6 +155,19 @@ def scene_at(path: str | Path, t: float) -> tuple[dict[str, list[np.ndarray]], l
             arrows.append((np.asarray(batch.column("Arrows2D:origins")[row].as_py()),
                            np.asarray(batch.column("Arrows2D:vectors")[row].as_py())))
     return strips, arrows
+
+
+def properties_of(path: str | Path, key: str) -> dict[str, object]:
+    """The recording property ``key`` (a run's label, design and outcome) of a finished .rrd."""
+    from rerun.chunk import RrdReader
+
+    for chunk in RrdReader(str(path)).stream().to_chunks():
+        if chunk.is_static and chunk.entity_path == f"/__properties/{key}":
+            batch = chunk.to_record_batch()
+            values = {name: batch.column(name)[0].as_py() for name in batch.schema.names
+                      if not name.startswith("rerun.")}
+            return {name: v[0] if isinstance(v, list) and len(v) == 1 else v for name, v in values.items()}
+    raise KeyError(f"{path}: no property {key!r}")
 
 
 def read_rows(path: str | Path) -> dict[str, list[object]]:

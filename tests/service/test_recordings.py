@@ -12,10 +12,18 @@ import pytest
 from fastapi.testclient import TestClient
 from rerun.chunk import RrdReader
 
-from finaldrive.engine import Design, Road, SimSettings, simulate
+from finaldrive.engine import DIAGNOSTICS, Design, Road, SimSettings, simulate
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
-from finaldrive.service.recording import PARTS, PLOTS, frame_count, record, scalars_of, series_settings
+from finaldrive.service.recording import (
+    PARTS,
+    PLOTS,
+    frame_count,
+    properties_of,
+    record,
+    scalars_of,
+    series_settings,
+)
 from tests.service.processes import console_script
 from tests.service.svc_helpers import ToyTask, running_scheduler, wait_done
 
@@ -52,6 +60,17 @@ def test_two_geometries_every_part_every_frame(rrd: Path) -> None:
     static = {c.entity_path for c in reader.stream().to_chunks() if c.is_static}
     assert {"/world/g1", "/world/g2", "/world/g1/road", "/world/g2/road"} <= static
     verify(rrd)
+
+
+def test_each_geometry_carries_its_outcome_and_exact_extremes(rrd: Path) -> None:
+    for i, (label, design) in enumerate(DESIGNS):
+        result = simulate(design, ROAD, series_settings(DURATION, FPS))
+        props = properties_of(rrd, f"g{i + 1}")
+        assert props["label"] == label and props["a2_deg"] == design.a2_deg and props["rws_m"] == design.rws
+        for name in ("distance_m", "fitness_m", "slack_m", *DIAGNOSTICS):
+            assert props[name] == pytest.approx(getattr(result, name), rel=1e-12, abs=1e-12), name
+        # the extremes are the integrator's, not the 50 fps series': at least as wide as what is drawn
+        assert props["chain_tension_max_n"] >= scalars_of(rrd, f"/plots/chain_tension_n/g{i + 1}")[1].max()
 
 
 def test_series_equal_the_engines(rrd: Path) -> None:
