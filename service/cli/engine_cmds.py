@@ -39,7 +39,7 @@ def run_geometry(args: argparse.Namespace) -> int:
     from finaldrive.engine import static_geometry
 
     vehicle = load_vehicle_arg(args.vehicle)
-    design = design_from_args(args)
+    design = design_from_args(args, vehicle)
     start = time.perf_counter()
     try:
         g = static_geometry(design, vehicle)
@@ -64,7 +64,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     from finaldrive.engine import simulate
 
     vehicle = load_vehicle_arg(args.vehicle)
-    design = design_from_args(args)
+    design = design_from_args(args, vehicle)
     road = road_from_arg(args.road)
     settings = settings_from_args(args, series=bool(args.series), series_stride=args.stride)
     series_path = writable(args.series, "--series") if args.series else None

@@ -42,7 +42,7 @@ def _job_best(job: JobOut, road: str | None) -> tuple[str, RecordingDesign]:
 
 def _spec(request: RecordingRequest, services: Any) -> dict[str, Any]:
     """The concrete spec stored and produced: road, designs with labels, timing, method."""
-    from finaldrive.engine import resolve_roads
+    from finaldrive.engine import Design, DesignError, default_vehicle, load_vehicle_dict, resolve_roads
 
     designs = list(request.designs)
     method, dt, vehicle, road = "fast", 1.0e-3, None, request.road
@@ -50,7 +50,14 @@ def _spec(request: RecordingRequest, services: Any) -> dict[str, Any]:
         job = load_job(services, request.job_id)
         road, best = _job_best(job, request.road)
         designs.insert(0, best)
-        method, dt, vehicle = job.spec.settings.method, job.spec.settings.dt, job.spec.vehicle
+        method, dt = job.spec.settings.method, job.spec.settings.dt
+        vehicle = None if job.spec.vehicle is None else job.spec.vehicle.model_dump()
+    limits = default_vehicle() if vehicle is None else load_vehicle_dict(vehicle)
+    for i, d in enumerate(request.designs):
+        try:
+            limits.check_design(Design.from_deg(d.a2_deg, d.l2, d.rws))
+        except DesignError as exc:
+            raise validation_problem(("body", "designs", i), str(exc)) from None
     assert road is not None
     try:
         items = resolve_roads(road)

@@ -58,6 +58,13 @@ def test_evaluate_keeps_input_order(tmp_path, capsys):
     (["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0", "--road", "flat"], "rws"),
     (["geometry", "--a2-deg", "abc", "--l2", "0", "--rws", "0.09"], "a2-deg"),
     (["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0.09", "--road", "flat", "--duration", "-1"], "duration"),
+    # the vehicle's design limits (issue 14): L2 <= l2_max, R_WS inside the rear tyre
+    (["geometry", "--a2-deg", "0", "--l2", "5", "--rws", "0.09"], "--l2: l2 = 5 m: must be <= l2_max = 0.2 m"),
+    (["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0.5", "--road", "flat"],
+     "--rws: rws = 0.5 m: must be <= 0.2 m, the rear tyre's radius rt0 = 0.3 m less rws_tyre_margin = 0.1 m"),
+    (["sweep", "--road", "flat", "--grid", "a2_deg=0,l2=0.3,rws=0.09"], "grid: design 0 has l2 = 0.3 m"),
+    (["optimize", "--road", "flat", "--bounds", "rws_m=0.05:0.25"], "bounds.rws_m: upper bound 0.25 m"),
+    (["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0.09", "--road", "sine:1e308:1e-308"], "within +-0.5 m"),
 ])
 def test_bad_arguments_exit_2_with_one_line(argv, fragment, capsys):
     code, _, err = run(argv, capsys)
