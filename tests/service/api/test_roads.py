@@ -179,3 +179,16 @@ def test_a_sine_written_to_csv_drives_as_the_sine_within_a_tenth_of_a_millimetre
     exact, sampled = simulate(design, road, settings), simulate(design, profile, settings)
     assert exact.status == sampled.status == "ok"
     assert abs(sampled.distance_m - exact.distance_m) < 1e-4
+
+
+def test_a_recording_on_a_measured_road(client: TestClient) -> None:
+    """The recording's spec carries the points: the producer needs no other table."""
+    from tests.service.test_recordings import wait_recording
+
+    spec = upload_csv(client, CSV).json()["spec"]
+    r = client.post("/v1/recordings", json={"road": spec, "duration": 0.1, "fps": 10,
+                                             "designs": [{"a2_deg": 195.3, "l2": 0.037, "rws": 0.088}]})
+    assert r.status_code == 202, r.text
+    assert wait_recording(client, r.json()["id"])["status"] == "succeeded"
+    bad = client.post("/v1/recordings", json={"road": "profile:999", "designs": [{"a2_deg": 0, "l2": 0, "rws": 0.09}]})
+    assert "body.road" in assert_problem(bad, 422)["detail"]
