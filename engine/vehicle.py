@@ -30,8 +30,8 @@ _FRACTION = (0.0, True, 1.0)
 _ANY = (None, True, None)
 
 #: Largest magnitude of any vehicle value (SI units): far above every parameter of a motorcycle
-#: (the largest, a stiffness switched off by Fz_max = 1e9 N, stays below), far below where the
-#: model's arithmetic overflows. Positive values are also at least POSITIVE_MIN.
+#: (docs/engine.md's Fz_max = 1e9 N, which switches the load range off, included), far below where
+#: the model's arithmetic overflows. Positive values are also at least POSITIVE_MIN.
 VEHICLE_VALUE_LIMIT = 1.0e10
 POSITIVE_MIN = 1.0e-9
 

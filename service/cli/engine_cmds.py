@@ -140,11 +140,16 @@ def write_rows_csv(rows: list[dict[str, Any]], stream: Any) -> None:
 
 
 def run_evaluate(args: argparse.Namespace) -> int:
-    from finaldrive.engine import evaluate
+    from finaldrive.engine import Design, DesignError, evaluate
 
     vehicle = load_vehicle_arg(args.vehicle)
     road = road_from_arg(args.road)
     designs = read_designs_csv(args.designs)
+    for line, (a2, l2, rws) in enumerate(designs.tolist(), start=2):
+        try:
+            vehicle.check_design(Design(a2, l2, rws))
+        except DesignError as exc:
+            raise UsageError(f"designs file {args.designs!r}, line {line}: {exc}") from None
     settings = settings_from_args(args)
     batch = evaluate(designs, road, settings, vehicle)
     rows = batch_rows(batch)

@@ -50,6 +50,9 @@ def test_evaluate_keeps_input_order(tmp_path, capsys):
     got = [v for r in rows for v in (r["a2_deg"], r["l2"], r["rws"])]
     assert got == pytest.approx([0, 0, 0.093, 270, 0.15, 0.05, 195.3, 0.037, 0.088])
     assert all(r["status"] == "ok" for r in rows)
+    designs.write_text("a2_deg,l2,rws\n0,0,0.093\n0,0.1,0.3\n")
+    code, _, err = run(["evaluate", "--designs", str(designs), "--road", "flat", "--json"], capsys)
+    assert code == 2 and "line 3: rws = 0.3 m: must be <= 0.2 m" in err
 
 
 @pytest.mark.parametrize("argv, fragment", [
