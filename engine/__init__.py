@@ -21,10 +21,10 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("DIAGNOSTIC_MEANINGS", "DIAGNOSTICS", "STATUS_FAILED", "STATUS_OK", "BatchResult", "Design",
                      "DesignError", "Method", "SimResult", "SimSettings"), "finaldrive.engine.api"),
     **dict.fromkeys(("evaluate", "simulate"), "finaldrive.engine.simulation"),
-    **dict.fromkeys(("Road", "RoadError"), "finaldrive.engine.model.road"),
+    **dict.fromkeys(("PROFILE_MAX_POINTS", "Road", "RoadError"), "finaldrive.engine.model.road"),
     **dict.fromkeys(("coordinate_index", "point_positions"), "finaldrive.engine.model.coordinates"),
-    **dict.fromkeys(("Vehicle", "VehicleError", "default_vehicle", "load_vehicle", "load_vehicle_dict"),
-                    "finaldrive.engine.vehicle"),
+    **dict.fromkeys(("VEHICLE_VALUE_LIMIT", "Vehicle", "VehicleError", "default_vehicle", "load_vehicle",
+                     "load_vehicle_dict"), "finaldrive.engine.vehicle"),
     "static_geometry": "finaldrive.engine.geometry",
     **dict.fromkeys(("FIELDS", "Field", "base_of", "design_label", "history_record", "human", "unit_of"),
                     "finaldrive.engine.fields"),
@@ -95,7 +95,11 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         coordinate_index as coordinate_index,
         point_positions as point_positions,
     )
-    from finaldrive.engine.model.road import Road as Road, RoadError as RoadError
+    from finaldrive.engine.model.road import (
+        PROFILE_MAX_POINTS as PROFILE_MAX_POINTS,
+        Road as Road,
+        RoadError as RoadError,
+    )
     from finaldrive.engine.optimize import DifferentialEvolution as DifferentialEvolution
     from finaldrive.engine.simulation import evaluate as evaluate, simulate as simulate
     from finaldrive.engine.study.plan import (
@@ -143,6 +147,7 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         table9_grid as table9_grid,
     )
     from finaldrive.engine.vehicle import (
+        VEHICLE_VALUE_LIMIT as VEHICLE_VALUE_LIMIT,
         Vehicle as Vehicle,
         VehicleError as VehicleError,
         default_vehicle as default_vehicle,

@@ -84,7 +84,9 @@ class Setup:
 
 def prepare(design: Design, road: Road, settings: SimSettings, vehicle: Vehicle) -> Setup:
     """Parameters, static equilibrium and the chain length L of eq. (69) at t = 0. Each method
-    finds the equilibrium of its own model (the reference in its 39 natural coordinates)."""
+    finds the equilibrium of its own model (the reference in its 39 natural coordinates).
+    Raises DesignError for a design beyond the vehicle's limits (Vehicle.check_design)."""
+    vehicle.check_design(design)
     p = pack_parameters(vehicle, design, settings)
     q0 = reference_equilibrium(p, road) if settings.method == "reference" else static_equilibrium(p, road)
     p[P.L_CHAIN] = chain_length(q0, p)
@@ -131,6 +133,8 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
     vehicle = vehicle or default_vehicle()
     try:
         setup = prepare(design, road, settings, vehicle)
+    except DesignError as exc:
+        return _failed(f"invalid design: {exc}", math.nan, math.nan, start)
     except (GeometryError, EquilibriumError, ReferenceEquilibriumError) as exc:
         return _failed(str(exc), math.nan, math.nan, start)
     p = setup.p

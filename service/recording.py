@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import rerun as rr
@@ -99,7 +100,8 @@ def _log_run(rec: rr.RecordingStream, run: Run, key: str, index: int, road: Road
     d = run.design
     offset = -index * ROW_OFFSET_M
     root = f"/world/{key}"
-    rec.send_property(key, rr.AnyValues(label=run.label, a2_deg=d.a2_deg, l2_m=d.l2, rws_m=d.rws, **run.outcome))
+    values: dict[str, Any] = {"label": run.label, "a2_deg": d.a2_deg, "l2_m": d.l2, "rws_m": d.rws, **run.outcome}
+    rec.send_property(key, rr.AnyValues(**values))
     rec.log(root, rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)  # into the view's y-down space
     rec.log(f"{root}/road", rr.LineStrips2D([road_strip(road, [run], offset)], radii=0.004, colors=(90, 90, 90),
                                             labels=[run.label], show_labels=True), static=True)

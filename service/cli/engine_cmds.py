@@ -39,7 +39,7 @@ def run_geometry(args: argparse.Namespace) -> int:
     from finaldrive.engine import static_geometry
 
     vehicle = load_vehicle_arg(args.vehicle)
-    design = design_from_args(args)
+    design = design_from_args(args, vehicle)
     start = time.perf_counter()
     try:
         g = static_geometry(design, vehicle)
@@ -65,7 +65,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     from finaldrive.engine import simulate
 
     vehicle = load_vehicle_arg(args.vehicle)
-    design = design_from_args(args)
+    design = design_from_args(args, vehicle)
     road = road_from_arg(args.road)
     settings = settings_from_args(args, series=bool(args.series), series_stride=args.stride)
     series_path = writable(args.series, "--series") if args.series else None
@@ -141,11 +141,16 @@ def write_rows_csv(rows: list[dict[str, Any]], stream: Any) -> None:
 
 
 def run_evaluate(args: argparse.Namespace) -> int:
-    from finaldrive.engine import evaluate
+    from finaldrive.engine import Design, DesignError, evaluate
 
     vehicle = load_vehicle_arg(args.vehicle)
     road = road_from_arg(args.road)
     designs = read_designs_csv(args.designs)
+    for line, (a2, l2, rws) in enumerate(designs.tolist(), start=2):
+        try:
+            vehicle.check_design(Design(a2, l2, rws))
+        except DesignError as exc:
+            raise UsageError(f"designs file {args.designs!r}, line {line}: {exc}") from None
     settings = settings_from_args(args)
     batch = evaluate(designs, road, settings, vehicle)
     rows = batch_rows(batch)

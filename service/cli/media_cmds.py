@@ -23,13 +23,15 @@ def parse_design(text: str) -> tuple[float, float, float]:
 
 
 def _designs(texts: list[str]) -> list[tuple[str, Any]]:
-    from finaldrive.engine import Design, DesignError, design_label
+    from finaldrive.engine import Design, DesignError, default_vehicle, design_label
 
     out = []
     for text in texts:
         a2, l2, rws = parse_design(text)
         try:
-            out.append((design_label(a2, l2, rws), Design.from_deg(a2, l2, rws)))
+            design = Design.from_deg(a2, l2, rws)
+            default_vehicle().check_design(design)
+            out.append((design_label(a2, l2, rws), design))
         except DesignError as exc:
             raise UsageError(f"design {text!r}: {exc}") from None
     return out

@@ -73,7 +73,8 @@ def _plan(kind: str, args: argparse.Namespace, **parts: Any) -> Any:
     from finaldrive.service.cli.common import read_profile
 
     try:
-        return plan_study(kind, _roads(args), profiles=lambda name: read_profile(Path(name)), **parts)
+        return plan_study(kind, _roads(args), profiles=lambda name: read_profile(Path(name)),
+                          vehicle=load_vehicle_arg(args.vehicle), **parts)
     except PlanError as exc:
         raise UsageError(str(exc)) from None
 

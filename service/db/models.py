@@ -168,6 +168,28 @@ class Generation(Base):
     __table_args__ = (UniqueConstraint("job_id", "run", "generation", name="uq_generations_step"),)
 
 
+class RoadProfile(Base):
+    """A measured road uploaded to the service (POST /v1/roads), named ``profile:ID`` in job specs.
+
+    Stored once per content (``content_hash``, the sha256 of its points, also its part of the
+    result-cache key); the points are loaded only when asked for.
+    """
+
+    __tablename__ = "road_profiles"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(64))
+    content_hash: Mapped[str] = mapped_column(String(64), unique=True)
+    n_points: Mapped[int] = mapped_column(Integer)
+    x_min_m: Mapped[float] = mapped_column(Float)
+    x_max_m: Mapped[float] = mapped_column(Float)
+    y_min_m: Mapped[float] = mapped_column(Float)
+    y_max_m: Mapped[float] = mapped_column(Float)
+    xs: Mapped[list[float]] = mapped_column(JSON, deferred=True)
+    ys: Mapped[list[float]] = mapped_column(JSON, deferred=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
 class Recording(Base):
     """A requested animation file of designs (produced by a scheduler, under a lease like a job)."""
 

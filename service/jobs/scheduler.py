@@ -44,6 +44,7 @@ from finaldrive.engine import (
     DERun,
     PlanError,
     Request,
+    Road,
     Run,
     fitness_values,
 )
@@ -51,6 +52,7 @@ from finaldrive.service.config import Settings
 from finaldrive.service.db.engine import Database
 from finaldrive.service.db.leases import beat, claim_jobs, finish_job, register_scheduler, stop_scheduler
 from finaldrive.service.db.models import EvalStatus, Evaluation, Job, JobState
+from finaldrive.service.db.repository import profile_roads
 from finaldrive.service.db.results import (
     FITNESS,
     ROW_COLUMNS,
@@ -65,6 +67,7 @@ from finaldrive.service.jobs.cache import context_prefix, design_keys
 from finaldrive.service.jobs.plan import JobPlan, build_plan
 from finaldrive.service.jobs.recordings import RecordingProducer
 from finaldrive.service.jobs.writer import Guard, Writer, Writes
+from finaldrive.service.profiles import profile_ids, resolver
 from finaldrive.service.schemas import JobSpec
 from finaldrive.workers import Executor
 from finaldrive.workers.dispatch import Dispatcher, Task, Work
@@ -198,9 +201,10 @@ class Scheduler:
         loaded = self._db(lambda s: _load(s, job_id), f"open job {job_id}", write=False)
         if loaded is None:
             return  # retried at the next heartbeat: the job stays claimed by us
-        spec, resumed, sweep_done, de_states = loaded
+        spec, profiles, resumed, sweep_done, de_states = loaded
         try:
-            plan = build_plan(JobSpec.model_validate(spec), max_simulation_s=self.config.max_simulation_s)
+            plan = build_plan(JobSpec.model_validate(spec), profiles=resolver(profiles),
+                              max_simulation_s=self.config.max_simulation_s)
         except (PlanError, ValueError) as exc:
             message = f"invalid job: {exc}"
             self._db(lambda s: finish_job(s, self.id, job_id, JobState.failed, error=message), f"fail job {job_id}")
@@ -325,16 +329,20 @@ class Scheduler:
             self._drop(job_id)
 
 
-def _load(session: Any, job_id: int) -> tuple[dict[str, Any], bool, set[tuple[int, int]], dict[int, Any]]:
-    """A claimed job's spec and, when it has stored results, what it needs to resume."""
+def _load(session: Any, job_id: int
+          ) -> tuple[dict[str, Any], dict[int, Road], bool, set[tuple[int, int]], dict[int, Any]]:
+    """A claimed job's spec, the stored road profiles it names and, when it has stored results, what
+    it needs to resume."""
     job = session.get(Job, job_id)
     assert job is not None
+    ids = sorted(profile_ids(job.spec.get("roads", [])))
+    profiles = profile_roads(session, ids) if ids else {}
     resumed = job.n_done + job.n_failed > 0
     if not resumed:
-        return dict(job.spec), False, set(), {}
+        return dict(job.spec), profiles, False, set(), {}
     sweep_step = PAPER_SWEEP_STEP if job.kind == "paper-study" else 0
     de_states = {i: (g.state, g.generation) for i, g in last_generations(session, job_id).items()}
-    return dict(job.spec), True, stored_slots(session, job_id, sweep_step), de_states
+    return dict(job.spec), profiles, True, stored_slots(session, job_id, sweep_step), de_states
 
 
 def _lookup(session: Any, job: ActiveJob, requests: list[Request]

@@ -136,10 +136,13 @@ def test_api_errors(client: TestClient) -> None:
                            json={"road": "moon", "designs": [{"a2_deg": 0, "l2_m": 0, "rws_m": 0.09}]})
     assert bad_road.status_code == 422 and bad_road.json()["detail"].startswith("body.road: unknown road")
     assert client.post("/v1/recordings", json={"job_id": 42}).status_code == 404
-    failing = client.post("/v1/recordings", json={"road": "flat", "duration": 0.2,
-                                                   "designs": [{"a2_deg": 190, "l2_m": 0.5, "rws_m": 0.5}]}).json()
-    body = wait_recording(client, failing["id"])  # sprockets too close for a chain: fails, the service goes on
-    assert body["status"] == "failed" and "cannot carry a chain" in body["error"]
+    too_big = client.post("/v1/recordings",
+                          json={"road": "flat", "designs": [{"a2_deg": 190, "l2_m": 0.5, "rws_m": 0.5}]})
+    assert too_big.status_code == 422 and "l2_max" in too_big.json()["detail"]  # refused, never a failed recording
+    failing = client.post("/v1/recordings", json={"road": "bump:0.5:0.01:0", "duration": 0.2,
+                                                   "designs": [{"a2_deg": 190, "l2_m": 0.05, "rws_m": 0.09}]}).json()
+    body = wait_recording(client, failing["id"])  # a kerb under the tyre: no equilibrium; the service goes on
+    assert body["status"] == "failed" and "static equilibrium not found" in body["error"]
     assert client.get(f"/v1/recordings/{body['id']}/file").status_code == 409
 
 

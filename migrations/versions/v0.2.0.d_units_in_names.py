@@ -6,8 +6,8 @@ become ``a2_deg`` (converted from radians), ``l2_m`` and ``rws_m``; fitness colu
 and stored recording requests' designs take the same names. DE populations (``generations``)
 stay the optimiser's own state, in radians, as the optimiser sees them.
 
-Revision ID: v0.2.0.c
-Revises: v0.2.0.b
+Revision ID: v0.2.0.d
+Revises: v0.2.0.c
 Create Date: 2026-11-26 05:00:00.000000
 """
 
@@ -21,8 +21,8 @@ from typing import Any
 import sqlalchemy as sa
 from alembic import op
 
-revision: str = 'v0.2.0.c'
-down_revision: str | None = 'v0.2.0.b'
+revision: str = 'v0.2.0.d'
+down_revision: str | None = 'v0.2.0.c'
 branch_labels: str | Sequence[str] | None = None
 depends_on: str | Sequence[str] | None = None
 
