@@ -26,6 +26,8 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("Vehicle", "VehicleError", "default_vehicle", "load_vehicle", "load_vehicle_dict"),
                     "finaldrive.engine.vehicle"),
     "static_geometry": "finaldrive.engine.geometry",
+    **dict.fromkeys(("MAX_TRAVEL_POINTS", "TRAVEL_POINTS", "TravelError", "drive_squat", "travel_kinematics"),
+                    "finaldrive.engine.travel"),
     **dict.fromkeys(("Cost", "estimate_cost"), "finaldrive.engine.cost"),
     **dict.fromkeys(("StaticLoads", "calibration_design", "solve_chassis_cog", "solve_torque", "static_loads"),
                     "finaldrive.engine.calibrate"),
@@ -129,6 +131,13 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         parse_grid as parse_grid,
         product_grid as product_grid,
         table9_grid as table9_grid,
+    )
+    from finaldrive.engine.travel import (
+        MAX_TRAVEL_POINTS as MAX_TRAVEL_POINTS,
+        TRAVEL_POINTS as TRAVEL_POINTS,
+        TravelError as TravelError,
+        drive_squat as drive_squat,
+        travel_kinematics as travel_kinematics,
     )
     from finaldrive.engine.vehicle import (
         Vehicle as Vehicle,

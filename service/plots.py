@@ -204,3 +204,27 @@ def scene_png(path: str | Path, strips: Mapping[str, Sequence[np.ndarray]],
     ax.set_title(title, fontsize=10)
     fig.tight_layout()
     _save(fig, path)
+
+
+def travel_png(path: str | Path, travel: Mapping[str, Any], *, title: str) -> None:
+    """Squat ratio, anti-squat and chain growth over the rear wheel travel (engine travel_kinematics),
+    the design pose and the static sag marked."""
+    curve = travel["curve"]
+    x = [1000.0 * c["travel_m"] for c in curve]
+    panels = (("squat_ratio", "squat ratio SR [-]", 1.0), ("anti_squat_pct", "anti-squat [%]", 1.0),
+              ("chain_growth_m", "chain growth [mm]", 1000.0))
+    fig = Figure(figsize=(8, 8.5))
+    axes = fig.subplots(3, 1, sharex=True)
+    for ax, (key, label, scale) in zip(axes, panels, strict=True):
+        ax.plot(x, [scale * c[key] for c in curve], color="tab:blue", lw=1.6)
+        for mark, colour, name in (("design_pose", "tab:red", "design pose"),
+                                   ("static_sag", "tab:green", "static sag")):
+            m = travel[mark]
+            ax.plot([1000.0 * m["travel_m"]], [scale * m[key]], "o", color=colour, label=name)
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=9)
+    axes[-1].set_xlabel("rear wheel travel from full extension [mm]")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    _save(fig, path)

@@ -313,3 +313,50 @@ class RecordingOut(BaseModel):
     error: str | None
     file: str | None = Field(description="download path, once succeeded")
     created_at: datetime
+
+
+class TravelPointOut(BaseModel):
+    """One pose of the rear suspension (chassis at theta0, unloaded tyres on flat ground)."""
+
+    travel_m: float = Field(description="rear axle height above full extension, chassis frame [m]")
+    swingarm_angle_deg: float = Field(description="swingarm angle phi - theta in the chassis frame [deg]")
+    squat_ratio: float = Field(description="the paper's squat ratio K / tan(tau) at this pose [-]")
+    anti_squat_pct: float = Field(description="100 tan(tau) / tan(sigma) (textbook anti-squat) [%]")
+    taut_length_m: float = Field(description="the chain's straight upper run, eq. (68) [m]")
+    chain_growth_m: float = Field(description="taut run minus its length at full extension [m]")
+    centre_distance_m: float = Field(description="engine sprocket axis to rear axle [m]")
+    chain_angle_deg: float = Field(description="upper run's angle to the chassis x axis, rear to front [deg]")
+    chain_above_pivot_m: float = Field(description="distance of the upper run's line above the swingarm pivot [m]")
+
+
+class StaticSagOut(TravelPointOut):
+    sag_pct: float = Field(description="static sag as a share of the rear wheel travel [%]")
+
+
+class TravelOut(BaseModel):
+    """Kinematics from full extension to full compression of the rear suspension."""
+
+    rear_wheel_travel_m: float = Field(description="rear wheel travel (vehicle rear_wheel_travel) [m]")
+    extension_angle_deg: float = Field(description="swingarm angle at full extension (rear spring at s_rs) [deg]")
+    compression_angle_deg: float = Field(description="swingarm angle at full compression [deg]")
+    cog_height_m: float = Field(description="h of tan(sigma) = h / p [m]")
+    wheelbase_m: float = Field(description="p of tan(sigma) = h / p, at the design pose [m]")
+    anti_squat_definition: str
+    curve: list[TravelPointOut] = Field(description="evenly spaced in travel, full extension first")
+    design_pose: TravelPointOut = Field(description="the design pose (phi0), where the paper reads SR")
+    static_sag: StaticSagOut = Field(description="static equilibrium on flat ground")
+
+
+class GeometryOut(BaseModel):
+    """A design's static final-drive quantities (no simulation)."""
+
+    a2_deg: float = Field(description="engine sprocket angle a2 [deg]")
+    l2_m: float = Field(description="pivot to engine sprocket axis L2 [m]")
+    rws_m: float = Field(description="wheel sprocket pitch radius R_WS [m]")
+    res_m: float = Field(description="engine sprocket pitch radius R_ES = R_WS / ratio [m]")
+    squat_ratio: float = Field(description="squat ratio at the design pose [-]")
+    chain_length_m: float = Field(description="chain length L, eq. (69) [m]")
+    taut_length_m: float = Field(description="taut upper run at static equilibrium on flat ground, eq. (68) [m]")
+    engine_sprocket_x_m: float = Field(description="engine sprocket axis from the pivot, chassis x [m]")
+    engine_sprocket_y_m: float = Field(description="engine sprocket axis from the pivot, chassis y [m]")
+    travel: TravelOut | None = Field(None, description="over the rear travel (with travel=true)")
