@@ -32,6 +32,9 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("StaticLoads", "calibration_design", "solve_chassis_cog", "solve_torque", "static_loads"),
                     "finaldrive.engine.calibrate"),
     "DifferentialEvolution": "finaldrive.engine.optimize",
+    **dict.fromkeys(("DEFAULT_TOLERANCE_PCT", "MAX_TOLERANCE_PCT", "SENSITIVITY_STEPS", "angle_arc", "near_mask",
+                     "near_optimal", "sensitivities", "sensitivity_sentences", "spread"),
+                    "finaldrive.engine.study.sharpness"),
     **dict.fromkeys(("PRESETS", "GROUPS", "NamedRoad", "ProfileResolver", "paper_tables", "preset_group",
                      "resolve_roads"), "finaldrive.engine.study.presets"),
     **dict.fromkeys(("MAX_GRID_DESIGNS", "TABLE9_DEFAULT_RWS_M", "parse_grid", "product_grid", "table9_grid"),
@@ -118,6 +121,17 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         fitness_values as fitness_values,
         regret as regret,
         score as score,
+    )
+    from finaldrive.engine.study.sharpness import (
+        DEFAULT_TOLERANCE_PCT as DEFAULT_TOLERANCE_PCT,
+        MAX_TOLERANCE_PCT as MAX_TOLERANCE_PCT,
+        SENSITIVITY_STEPS as SENSITIVITY_STEPS,
+        angle_arc as angle_arc,
+        near_mask as near_mask,
+        near_optimal as near_optimal,
+        sensitivities as sensitivities,
+        sensitivity_sentences as sensitivity_sentences,
+        spread as spread,
     )
     from finaldrive.engine.study.space import (
         DE_LIMITS as DE_LIMITS,

@@ -214,6 +214,7 @@ class BestOut(BaseModel):
     job_id: int
     roads: list[RoadProgress]
     robust_best: RobustBest | None = None
+    sharpness: list[SharpnessOut] = Field([], description="per road, then (robust-de) by the aggregate score")
 
 
 class RoadOut(BaseModel):
@@ -360,3 +361,36 @@ class GeometryOut(BaseModel):
     engine_sprocket_x_m: float = Field(description="engine sprocket axis from the pivot, chassis x [m]")
     engine_sprocket_y_m: float = Field(description="engine sprocket axis from the pivot, chassis y [m]")
     travel: TravelOut | None = Field(None, description="over the rear travel (with travel=true)")
+
+
+class SensitivityOut(BaseModel):
+    """Finite differences through the engine at the best design (engine study.sharpness)."""
+
+    steps: dict[str, float] = Field(description="steps, units in the keys: a2_deg, l2_m, rws_m")
+    schemes: dict[str, Literal["central", "forward"]] = Field(description="difference scheme of each variable")
+    simulations: int
+    distance_m: float = Field(description="distance at the best design [m]")
+    fitness_m: float = Field(description="fitness at the best design [m]")
+    ddistance_da2_m_per_deg: float
+    dfitness_da2_m_per_deg: float
+    ddistance_dl2_m_per_mm: float
+    dfitness_dl2_m_per_mm: float
+    ddistance_drws_m_per_mm: float
+    dfitness_drws_m_per_mm: float
+
+
+class SharpnessOut(BaseModel):
+    """How sharp a best design is: the evaluated designs within a tolerance of the best fitness."""
+
+    road: str | None = Field(description="road name; null: by the robust-de aggregate score")
+    tolerance_pct: float = Field(description="tolerance, % of the best fitness")
+    tolerance_m: float | None = Field(None, description="tolerance [m]")
+    best_fitness_m: float | None = Field(None, description="best fitness (or aggregate score) [m]")
+    size: int = Field(description="designs in the near-optimal set")
+    evaluated: int = Field(description="successfully evaluated designs")
+    ranges: dict[str, list[float]] = Field({}, description="[min, max] over the near-optimal set, units in the keys "
+                                               "(a2_deg: the shortest arc, max may exceed 360)")
+    explored: dict[str, list[float]] = Field({}, description="[min, max] over every evaluated design")
+    verdicts: dict[str, Literal["decided", "loose", "undetermined", "fixed"]] = Field({})
+    sentences: list[str] = Field(description="which variables are decided, in words")
+    sensitivity: SensitivityOut | None = Field(None, description="with sensitivity=true, single roads")
