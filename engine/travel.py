@@ -61,7 +61,7 @@ def _travel_of(angle: float, extended: float, v: Vehicle) -> float:
     return float(v["L_SA"] * (math.sin(angle) - math.sin(extended)))
 
 
-def pose_quantities(p: np.ndarray, angle: float, tan_sigma: float) -> dict[str, float]:
+def _pose_quantities(p: np.ndarray, angle: float, tan_sigma: float) -> dict[str, float]:
     """Squat ratio, anti-squat, taut run and sprocket-pivot geometry with the swingarm at ``angle``
     (chassis frame) in the design pose (theta0, unloaded tyres on flat ground)."""
     q = design_pose(_with_angle(p, angle))
@@ -98,7 +98,7 @@ def travel_kinematics(design: Design, vehicle: Vehicle, points: int = TRAVEL_POI
     base = taut_length(design_pose(_with_angle(p, extended)))
 
     def point(angle: float) -> dict[str, float]:
-        out = {"travel_m": _travel_of(angle, extended, v), **pose_quantities(p, angle, tan_sigma)}
+        out = {"travel_m": _travel_of(angle, extended, v), **_pose_quantities(p, angle, tan_sigma)}
         out["chain_growth_m"] = out["taut_length_m"] - base
         return out
 

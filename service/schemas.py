@@ -394,3 +394,9 @@ class SharpnessOut(BaseModel):
     verdicts: dict[str, Literal["decided", "loose", "undetermined", "fixed"]] = Field({})
     sentences: list[str] = Field(description="which variables are decided, in words")
     sensitivity: SensitivityOut | None = Field(None, description="with sensitivity=true, single roads")
+    final_population: PopulationOut | None = Field(None, description="a DE's last stored population")
+
+
+class PopulationOut(BaseModel):
+    size: int = Field(description="successfully evaluated members")
+    ranges: dict[str, list[float]] = Field(description="[min, max] of a2_deg (shortest arc), l2_m, rws_m, fitness_m")

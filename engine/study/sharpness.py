@@ -92,9 +92,10 @@ def near_optimal(designs: np.ndarray, fitness: np.ndarray, distance: np.ndarray 
     for name in VARIABLES:
         verdicts[name], sentence = _verdict(name, near[name], explored[name], tol, int(mask.sum()), int(ok.sum()))
         sentences.append(sentence)
-    if (rows[mask, 1] <= CONCENTRIC_L2_M).any():
-        sentences.append(f"{int((rows[mask, 1] <= CONCENTRIC_L2_M).sum())} of them have L2 = 0 (engine sprocket "
-                         "on the pivot), where a2 has no effect")
+    concentric = int((rows[mask, 1] <= CONCENTRIC_L2_M).sum())
+    if concentric:
+        sentences.append(f"{concentric} of them {'has' if concentric == 1 else 'have'} L2 = 0 (engine sprocket on "
+                         "the pivot), where a2 has no effect")
     return {"tolerance_pct": tolerance_pct, "tolerance_m": tol, "best_fitness_m": best,
             "size": int(mask.sum()), "evaluated": int(ok.sum()), "ranges": near, "explored": explored,
             "verdicts": verdicts, "sentences": sentences}

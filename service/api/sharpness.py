@@ -8,11 +8,13 @@ from typing import Any
 import numpy as np
 from sqlalchemy.orm import Session
 
-from finaldrive.engine import Design, aggregate, default_vehicle, near_optimal, sensitivities
-from finaldrive.service.db.models import Job
+from finaldrive.engine import Design, PlanError, aggregate, default_vehicle, near_optimal, sensitivities, spread
+from finaldrive.service.api.problems import ApiProblem
+from finaldrive.service.db.models import Generation, Job
 from finaldrive.service.db.repository import list_evaluations, roads_of
+from finaldrive.service.db.results import last_generations
 from finaldrive.service.jobs.plan import build_plan
-from finaldrive.service.schemas import JobSpec, SharpnessOut
+from finaldrive.service.schemas import JobSpec, PopulationOut, SharpnessOut
 
 #: Evaluations a job's sharpness reads at most on each road.
 MAX_ROWS = 10**6
@@ -26,7 +28,11 @@ def job_sharpness(session: Session, job: Job, tolerance_pct: float, sensitivity:
     """Near-optimal set on each road (and by the aggregate score of a robust-de); with ``sensitivity``
     the finite differences at each road's best (7 simulations a road, the job's settings and vehicle)."""
     roads = [r for r, _ in roads_of(session, [job.id])[job.id]]
-    plan = build_plan(JobSpec.model_validate(job.spec)) if sensitivity else None
+    try:
+        plan = build_plan(JobSpec.model_validate(job.spec)) if sensitivity else None
+    except (PlanError, ValueError) as exc:
+        raise ApiProblem(409, f"job {job.id}: its spec cannot be simulated again ({exc})", slug="wrong-kind") from None
+    generations = last_generations(session, job.id) if job.kind != "sweep" else {}
     out: list[SharpnessOut] = []
     table: dict[tuple[float, float, float], dict[int, float]] = {}
     for r in roads:
@@ -40,7 +46,8 @@ def job_sharpness(session: Session, job: Job, tolerance_pct: float, sensitivity:
             near["sensitivity"] = sensitivities(Design(*(float(v) for v in best)),
                                                 plan.study.roads[r.road_index].road, plan.settings,
                                                 plan.vehicle or default_vehicle())
-        out.append(SharpnessOut(road=r.name, **near))
+        population = None if job.kind == "robust-de" else _population(generations.get(r.road_index))
+        out.append(SharpnessOut(road=r.name, final_population=population, **near))
         for e, f in zip(rows, fitness, strict=True):
             table.setdefault((e.a2, e.l2, e.rws), {})[r.road_index] = f
     if job.kind == "robust-de" and table:
@@ -50,7 +57,18 @@ def job_sharpness(session: Session, job: Job, tolerance_pct: float, sensitivity:
             for i, f in table[key].items():
                 scores[i, j] = f
         score = aggregate(scores, job.spec.get("aggregate") or "mean")
-        out.append(SharpnessOut(road=None, **near_optimal(np.array(keys, dtype=float), score,
-                                                           tolerance_pct=tolerance_pct)))
+        out.append(SharpnessOut(road=None, final_population=_population(generations.get(0)),
+                                **near_optimal(np.array(keys, dtype=float), score, tolerance_pct=tolerance_pct)))
     return out
+
+
+def _population(generation: Generation | None) -> PopulationOut | None:
+    """The spread of a DE's last stored population."""
+    if generation is None:
+        return None
+    fitness = np.array([_num(f) for f in generation.fitness])
+    ok = np.isfinite(fitness)
+    if not ok.any():
+        return None
+    return PopulationOut(size=int(ok.sum()), ranges=spread(np.array(generation.population, float)[ok], fitness[ok]))
 

@@ -29,7 +29,7 @@ from finaldrive.service.cli.remote import (
     follow,
     progress_line,
 )
-from finaldrive.service.cli.sharpness_view import near_lines, sensitivity_lines
+from finaldrive.service.cli.sharpness_view import near_lines, sensitivity_lines, spread_text
 
 
 def job_spec(args: argparse.Namespace) -> dict[str, Any]:
@@ -153,6 +153,9 @@ def _print_best(best: dict[str, Any]) -> None:
         print("\n".join(near_lines(sharp)))
         if sharp.get("sensitivity"):
             print("\n".join(sensitivity_lines(sharp["sensitivity"], sharp["tolerance_m"])))
+        pop = sharp.get("final_population")
+        if pop:
+            print(f"  final DE population ({pop['size']} designs): {spread_text(pop['ranges'])}")
 
 
 @client_command

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 
 def spread_text(s: dict[str, list[float]]) -> str:
     """Ranges of a2 [deg], L2 and R_WS [mm] and the fitness [m]."""
     lo, hi = s["a2_deg"]
-    a2 = f"a2 {lo:.0f} to {hi:.0f} deg" if hi < 360 else f"a2 {lo:.0f} through 0 to {hi - 360:.0f} deg"
+    if lo is None or math.isnan(lo):
+        a2 = "a2 any (L2 = 0)"
+    else:
+        a2 = f"a2 {lo:.0f} to {hi:.0f} deg" if hi < 360 else f"a2 {lo:.0f} through 0 to {hi - 360:.0f} deg"
     parts = [a2,
              f"L2 {1000 * s['l2_m'][0]:.1f} to {1000 * s['l2_m'][1]:.1f} mm",
              f"R_WS {1000 * s['rws_m'][0]:.1f} to {1000 * s['rws_m'][1]:.1f} mm"]

@@ -23,8 +23,9 @@ from finaldrive.service.schemas import GeometryOut
 router = APIRouter(prefix="/geometry", tags=["geometry"])
 
 A2 = Annotated[float, Query(ge=-360.0, le=720.0, description="engine sprocket angle a2 [deg]")]
-L2 = Annotated[float, Query(ge=0.0, le=1.0, description="pivot to engine sprocket axis L2 [m]")]
-RWS = Annotated[float, Query(gt=0.0, le=1.0, description="wheel sprocket pitch radius R_WS [m]")]
+L2 = Annotated[float, Query(ge=0.0, le=0.5, description="pivot to engine sprocket axis L2 [m]")]
+RWS = Annotated[float, Query(ge=0.01, le=0.25, description="wheel sprocket pitch radius R_WS [m] (a 9-tooth "
+                             "sprocket of a 520 chain is 23 mm; the paper's tyre is 300 mm)")]
 Points = Annotated[int, Query(ge=2, le=MAX_TRAVEL_POINTS, description="points of the travel curve")]
 
 
@@ -38,7 +39,7 @@ def _design(a2_deg: float, l2_m: float, rws_m: float) -> Design:
 def _travel(design: Design, points: int) -> dict[str, Any]:
     try:
         return travel_kinematics(design, default_vehicle(), points)
-    except ValueError as exc:
+    except (ValueError, ArithmeticError) as exc:
         raise ApiProblem(422, str(exc), slug="invalid-design") from None
 
 
@@ -50,7 +51,7 @@ def geometry(a2_deg: A2, l2_m: L2, rws_m: RWS, travel: Annotated[bool, Query(
     design = _design(a2_deg, l2_m, rws_m)
     try:
         g = static_geometry(design, default_vehicle())
-    except ValueError as exc:
+    except (ValueError, ArithmeticError) as exc:
         raise ApiProblem(422, str(exc), slug="invalid-design") from None
     x, y = g["sprocket_centre_m"]
     return GeometryOut(a2_deg=a2_deg, l2_m=l2_m, rws_m=rws_m, res_m=g["res"], squat_ratio=g["squat_ratio"],

@@ -22,7 +22,7 @@ def test_geometry_with_travel_is_the_engines(client: TestClient) -> None:
 def test_geometry_without_travel_and_bad_input(client: TestClient) -> None:
     body = client.get("/v1/geometry", params={"a2_deg": 195.3, "l2_m": 0.037, "rws_m": 0.088}).json()
     assert body["travel"] is None and body["res_m"] == pytest.approx(0.044)
-    assert client.get("/v1/geometry", params={"a2_deg": 0, "l2_m": 0, "rws_m": 0}).status_code == 422
+    assert client.get("/v1/geometry", params={"a2_deg": 0, "l2_m": 0, "rws_m": 0.001}).status_code == 422
     assert client.get("/v1/geometry", params={"a2_deg": 0, "l2_m": 0, "rws_m": 0.09, "points": 1}).status_code == 422
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 
+import pytest
 from fastapi.testclient import TestClient
 
 from tests.service.svc_helpers import DE, SWEEP, ToyTask, wait_done
@@ -153,3 +154,11 @@ def test_best_sensitivity_runs_the_engine_at_the_best(client: TestClient) -> Non
     sharp = client.get(f"/v1/jobs/{job['id']}/best", params={"sensitivity": "true"}).json()["sharpness"]
     s = sharp[0]["sensitivity"]
     assert s["simulations"] == 7 and s["schemes"]["a2_deg"] == "central" and s["steps"]["l2_m"] == 0.001
+
+
+def test_best_of_a_de_reports_its_final_population(client: TestClient) -> None:
+    job = wait_done(client, client.post("/v1/jobs", json=DE).json()["id"])
+    sharp = client.get(f"/v1/jobs/{job['id']}/best").json()["sharpness"][0]
+    assert sharp["final_population"]["size"] == 6 and sharp["evaluated"] == 6 * 5
+    lo, hi = sharp["final_population"]["ranges"]["fitness_m"]
+    assert hi == pytest.approx(sharp["best_fitness_m"]) and lo <= hi
