@@ -28,10 +28,15 @@ _EXPORTS: dict[str, str] = {
     "static_geometry": "finaldrive.engine.geometry",
     **dict.fromkeys(("FIELDS", "Field", "base_of", "design_label", "history_record", "human", "unit_of"),
                     "finaldrive.engine.fields"),
+    **dict.fromkeys(("MAX_TRAVEL_POINTS", "TRAVEL_POINTS", "TravelError", "drive_squat", "travel_kinematics"),
+                    "finaldrive.engine.travel"),
     **dict.fromkeys(("Cost", "estimate_cost"), "finaldrive.engine.cost"),
     **dict.fromkeys(("StaticLoads", "calibration_design", "solve_chassis_cog", "solve_torque", "static_loads"),
                     "finaldrive.engine.calibrate"),
     "DifferentialEvolution": "finaldrive.engine.optimize",
+    **dict.fromkeys(("DEFAULT_TOLERANCE_PCT", "MAX_TOLERANCE_PCT", "SENSITIVITY_STEPS", "angle_arc", "near_mask",
+                     "near_optimal", "sensitivities", "sensitivity_sentences", "spread"),
+                    "finaldrive.engine.study.sharpness"),
     **dict.fromkeys(("PRESETS", "GROUPS", "NamedRoad", "ProfileResolver", "paper_row", "paper_tables", "preset_group",
                      "resolve_roads"), "finaldrive.engine.study.presets"),
     **dict.fromkeys(("MAX_GRID_DESIGNS", "TABLE9_DEFAULT_RWS_M", "parse_grid", "product_grid", "table9_grid"),
@@ -133,6 +138,17 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         regret as regret,
         score as score,
     )
+    from finaldrive.engine.study.sharpness import (
+        DEFAULT_TOLERANCE_PCT as DEFAULT_TOLERANCE_PCT,
+        MAX_TOLERANCE_PCT as MAX_TOLERANCE_PCT,
+        SENSITIVITY_STEPS as SENSITIVITY_STEPS,
+        angle_arc as angle_arc,
+        near_mask as near_mask,
+        near_optimal as near_optimal,
+        sensitivities as sensitivities,
+        sensitivity_sentences as sensitivity_sentences,
+        spread as spread,
+    )
     from finaldrive.engine.study.space import (
         DE_LIMITS as DE_LIMITS,
         Bounds as Bounds,
@@ -145,6 +161,13 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         parse_grid as parse_grid,
         product_grid as product_grid,
         table9_grid as table9_grid,
+    )
+    from finaldrive.engine.travel import (
+        MAX_TRAVEL_POINTS as MAX_TRAVEL_POINTS,
+        TRAVEL_POINTS as TRAVEL_POINTS,
+        TravelError as TravelError,
+        drive_squat as drive_squat,
+        travel_kinematics as travel_kinematics,
     )
     from finaldrive.engine.vehicle import (
         VEHICLE_VALUE_LIMIT as VEHICLE_VALUE_LIMIT,

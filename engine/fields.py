@@ -86,7 +86,41 @@ _SERIES = [
     _f("sigma_m", "rear tyre's relaxation length sigma*", 5),
     _f("residual_m", "largest constraint residual (reference method only)", 9),
 ]
+_TRAVEL = [
+    _f("travel_m", "rear wheel travel: rear axle height above full extension, chassis frame (engine.travel)", 4),
+    _f("swingarm_angle_deg", "swingarm angle phi at the pose", 2),
+    _f("anti_squat_pct", "anti-squat, 100 tan(tau) / tan(sigma) (textbook form; docs/engine.md)", 1),
+    _f("chain_growth_m", "change of the taut upper run's length from full extension", 5),
+    _f("centre_distance_m", "distance between the sprocket centres", 4),
+    _f("chain_angle_deg", "direction of the chain's upper run (rear to front), chassis frame", 2),
+    _f("chain_above_pivot_m", "height of the upper run's line above the swingarm pivot", 4),
+    _f("engine_sprocket_x_m", "engine sprocket centre relative to the pivot, chassis x", 4),
+    _f("engine_sprocket_y_m", "engine sprocket centre relative to the pivot, chassis y", 4),
+    _f("extension_angle_deg", "swingarm angle at full extension (rear spring unloaded, eq. 13)", 2),
+    _f("compression_angle_deg", "swingarm angle at full compression (rear_wheel_travel)", 2),
+    _f("rear_wheel_travel_m", "rear wheel travel from full extension to full compression (vehicle file)", 4),
+    _f("travel_static_m", "rear travel at the static sag on flat ground", 4),
+    _f("sag_pct", "static sag as a share of the rear wheel travel", 1),
+    _f("cog_height_m", "centre of gravity height used by anti-squat (Table 3)", 4),
+    _f("wheelbase_m", "wheelbase of the model at the design pose", 4),
+    _f("travel_mean_m", "simulated: mean rear travel over the run", 4),
+    _f("travel_min_m", "simulated: smallest rear travel over the run", 4),
+    _f("travel_max_m", "simulated: largest rear travel over the run", 4),
+    _f("squat_mean_m", "simulated: mean rear travel minus its value at the start (positive: squat)", 4),
+    _f("pitch_mean_deg", "simulated: mean chassis pitch over the run", 3),
+    _f("pitch_min_deg", "simulated: smallest chassis pitch over the run", 3),
+    _f("pitch_max_deg", "simulated: largest chassis pitch over the run", 3),
+    _f("duration_s", "simulated time of the run", 2),
+]
 _STUDY = [
+    _f("tolerance_pct", "near-optimal set: fitness within this share of the best (default 0.1 %)", 3),
+    _f("tolerance_m", "near-optimal set: the tolerance in metres of fitness", 4),
+    _f("ddistance_da2_m_per_deg", "sensitivity of the distance to a2 at the best design (finite difference)", 6),
+    _f("dfitness_da2_m_per_deg", "sensitivity of the fitness to a2 at the best design", 6),
+    _f("ddistance_dl2_m_per_m", "sensitivity of the distance to L2 at the best design", 4),
+    _f("dfitness_dl2_m_per_m", "sensitivity of the fitness to L2 at the best design", 4),
+    _f("ddistance_drws_m_per_m", "sensitivity of the distance to R_WS at the best design", 4),
+    _f("dfitness_drws_m_per_m", "sensitivity of the fitness to R_WS at the best design", 4),
     _f("best_fitness_m", "DE: the best fitness found so far (robust DE: the best aggregate score)", 4),
     _f("mean_fitness_m", "DE: the mean fitness of the population's finite members", 4),
     _f("score_m", "robust DE: the aggregate (mean or worst) fitness over the roads", 4),
@@ -104,7 +138,7 @@ def _diagnostics() -> list[Field]:
 
 
 #: every physical output field (the service adds its own records' fields in docs/fields.md)
-FIELDS: dict[str, Field] = {f.name: f for f in [*_DESIGN, *_RESULT, *_diagnostics(), *_SERIES, *_STUDY]}
+FIELDS: dict[str, Field] = {f.name: f for f in [*_DESIGN, *_RESULT, *_diagnostics(), *_SERIES, *_TRAVEL, *_STUDY]}
 
 
 def human(name: str, value: object) -> str:

@@ -70,6 +70,10 @@ _LIMIT_RULES: dict[str, Rule] = {
     "l2_max": _POSITIVE,
     "rws_tyre_margin": _NON_NEGATIVE,
 }
+#: Kinematic limits: validated and carried, read by engine.travel only (not packed for the model).
+_KINEMATIC_RULES: dict[str, Rule] = {
+    "rear_wheel_travel": _POSITIVE,
+}
 
 
 class VehicleError(ValueError):
@@ -176,7 +180,7 @@ def load_vehicle_dict(data: Any) -> Vehicle:
             if key in found:
                 raise VehicleError(f"vehicle parameter {key!r}: given twice")
             found[key] = (group, entry["value"], str(entry.get("unit", "")), str(entry.get("source", "")))
-    rules = {**_RULES, **_TARGET_RULES, **_LIMIT_RULES}
+    rules = {**_RULES, **_TARGET_RULES, **_LIMIT_RULES, **_KINEMATIC_RULES}
     for key in rules:
         if key not in found:
             raise VehicleError(f"vehicle parameter {key!r}: missing")

@@ -98,8 +98,11 @@ class ServiceClient:
     def cancel(self, job_id: int) -> dict[str, Any]:
         return self.object("POST", f"/v1/jobs/{job_id}/cancel")
 
-    def best(self, job_id: int) -> dict[str, Any]:
-        return self.object("GET", f"/v1/jobs/{job_id}/best")
+    def best(self, job_id: int, tolerance_pct: float | None = None, sensitivity: bool = False) -> dict[str, Any]:
+        params = {"sensitivity": "true"} if sensitivity else {}
+        if tolerance_pct is not None:
+            params["tolerance_pct"] = repr(tolerance_pct)
+        return self.object("GET", f"/v1/jobs/{job_id}/best", params=params)
 
     def evaluations_csv(self, job_id: int, road: str | None = None, page: int = 10_000) -> Iterator[str]:
         """The job's evaluations as CSV text, page by page (the header only in the first)."""

@@ -68,11 +68,12 @@ def _mark_best(ax: Axes, best: tuple[float, float] | None, label: str = "best") 
 
 def sweep_map_png(path: str | Path, designs: np.ndarray, values: np.ndarray, *, title: str,
                   value_label: str = "distance [m]", best: tuple[float, float] | None = None,
-                  best_label: str = "best") -> None:
+                  best_label: str = "best", near: np.ndarray | None = None, near_label: str = "near-optimal") -> None:
     """A sweep's values over the engine sprocket position (polar a2, L2), as Figs. 9-11.
 
     Failed designs (NaN) are left blank. With several R_WS per (a2, L2) the highest value
-    is shown. ``best`` is (a2 [rad], L2 [m]).
+    is shown. ``best`` is (a2 [rad], L2 [m]). ``near`` (a bool a design) outlines the
+    near-optimal set: a red line around its cells on a grid, red rings on scattered designs.
     """
     designs = np.asarray(designs, dtype=float).reshape(-1, 3)
     values = np.asarray(values, dtype=float)
@@ -88,6 +89,10 @@ def sweep_map_png(path: str | Path, designs: np.ndarray, values: np.ndarray, *, 
     if len(a2s) > 1 and len(l2s) > 1 and np.isfinite(grid).sum() >= 0.5 * grid.size:
         mappable = ax.pcolormesh(_edges(a2s, periodic=True), _edges(l2s), np.ma.masked_invalid(grid),
                                  cmap="viridis", shading="flat")
+        if near is not None and near.any():
+            inside = np.zeros(grid.shape, dtype=bool)
+            inside[l2_idx[near], a2_idx[near]] = True
+            _outline(ax, inside, _edges(a2s, periodic=True), _edges(l2s), near_label)
     else:  # scattered designs (e.g. a DE population or a coarse grid)
         ok = np.isfinite(values)
         mappable = ax.scatter(
@@ -95,6 +100,9 @@ def sweep_map_png(path: str | Path, designs: np.ndarray, values: np.ndarray, *, 
         )
         if not ok.all():
             ax.scatter(designs[~ok, 0], designs[~ok, 1], marker="x", color="red", s=25, label="failed")
+        if near is not None and near.any():
+            ax.scatter(designs[near, 0], designs[near, 1], s=110, facecolors="none", edgecolors="red", lw=1.4,
+                       label=near_label)
     r_max = max(float(designs[:, 1].max()), 1e-3) * 1.05
     ax.set_ylim(0, r_max)
     _swingarm(ax, r_max)
@@ -106,6 +114,23 @@ def sweep_map_png(path: str | Path, designs: np.ndarray, values: np.ndarray, *, 
     fig.suptitle(title)
     fig.subplots_adjust(left=0.08, right=0.95, bottom=0.12, top=0.88)
     _save(fig, path)
+
+
+def _outline(ax: Axes, inside: np.ndarray, a_edges: np.ndarray, r_edges: np.ndarray, label: str) -> None:
+    """Red line around the cells ``inside`` (rows: L2, columns: a2, periodic) of a polar grid."""
+    n_r, n_a = inside.shape
+    style: dict[str, Any] = {"color": "red", "lw": 1.6}
+    for i, j in zip(*np.nonzero(inside), strict=True):
+        arc = np.linspace(a_edges[j], a_edges[j + 1], 8)
+        if i == 0 or not inside[i - 1, j]:
+            ax.plot(arc, np.full(arc.size, r_edges[i]), **style)
+        if i == n_r - 1 or not inside[i + 1, j]:
+            ax.plot(arc, np.full(arc.size, r_edges[i + 1]), **style)
+        if not inside[i, (j - 1) % n_a]:
+            ax.plot([a_edges[j]] * 2, r_edges[i:i + 2], **style)
+        if not inside[i, (j + 1) % n_a]:
+            ax.plot([a_edges[j + 1]] * 2, r_edges[i:i + 2], **style)
+    ax.plot([], [], label=label, **style)
 
 
 def _edges(centres: np.ndarray, periodic: bool = False) -> np.ndarray:
@@ -203,5 +228,29 @@ def scene_png(path: str | Path, strips: Mapping[str, Sequence[np.ndarray]],
     ax.set_xlabel("x [m]")
     ax.set_ylabel(f"y [m] (each geometry {ROW_OFFSET_M:g} m lower than the last)")
     ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def travel_png(path: str | Path, travel: Mapping[str, Any], *, title: str) -> None:
+    """Squat ratio, anti-squat and chain growth over the rear wheel travel (engine travel_kinematics),
+    the design pose and the static sag marked."""
+    curve = travel["curve"]
+    x = [1000.0 * c["travel_m"] for c in curve]
+    panels = (("squat_ratio", "squat ratio SR [-]", 1.0), ("anti_squat_pct", "anti-squat [%]", 1.0),
+              ("chain_growth_m", "chain growth [mm]", 1000.0))
+    fig = Figure(figsize=(8, 8.5))
+    axes = fig.subplots(3, 1, sharex=True)
+    for ax, (key, label, scale) in zip(axes, panels, strict=True):
+        ax.plot(x, [scale * c[key] for c in curve], color="tab:blue", lw=1.6)
+        for mark, colour, name in (("design_pose", "tab:red", "design pose"),
+                                   ("static_sag", "tab:green", "static sag")):
+            m = travel[mark]
+            ax.plot([1000.0 * m["travel_m"]], [scale * m[key]], "o", color=colour, label=name)
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=9)
+    axes[-1].set_xlabel("rear wheel travel from full extension [mm]")
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     _save(fig, path)

@@ -258,6 +258,7 @@ class BestOut(BaseModel):
     job_id: int
     roads: list[RoadProgress]
     robust_best: RobustBest | None = None
+    sharpness: list[SharpnessOut] = Field([], description="per road, then (robust-de) by the aggregate score")
 
 
 class RoadOut(BaseModel):
@@ -392,3 +393,89 @@ class RecordingOut(BaseModel):
     error: str | None
     file: str | None = Field(description="download path, once succeeded")
     created_at: datetime
+
+
+class TravelPointOut(BaseModel):
+    """One pose of the rear suspension (chassis at theta0, unloaded tyres on flat ground)."""
+
+    travel_m: float = Field(description="rear axle height above full extension, chassis frame [m]")
+    swingarm_angle_deg: float = Field(description="swingarm angle phi - theta in the chassis frame [deg]")
+    squat_ratio: float = Field(description="the paper's squat ratio K / tan(tau) at this pose [-]")
+    anti_squat_pct: float = Field(description="100 tan(tau) / tan(sigma) (textbook anti-squat) [%]")
+    taut_length_m: float = Field(description="the chain's straight upper run, eq. (68) [m]")
+    chain_growth_m: float = Field(description="taut run minus its length at full extension [m]")
+    centre_distance_m: float = Field(description="engine sprocket axis to rear axle [m]")
+    chain_angle_deg: float = Field(description="upper run's angle to the chassis x axis, rear to front [deg]")
+    chain_above_pivot_m: float = Field(description="distance of the upper run's line above the swingarm pivot [m]")
+
+
+class StaticSagOut(TravelPointOut):
+    sag_pct: float = Field(description="static sag as a share of the rear wheel travel [%]")
+
+
+class TravelOut(BaseModel):
+    """Kinematics from full extension to full compression of the rear suspension."""
+
+    rear_wheel_travel_m: float = Field(description="rear wheel travel (vehicle rear_wheel_travel) [m]")
+    extension_angle_deg: float = Field(description="swingarm angle at full extension (rear spring at s_rs) [deg]")
+    compression_angle_deg: float = Field(description="swingarm angle at full compression [deg]")
+    cog_height_m: float = Field(description="h of tan(sigma) = h / p [m]")
+    wheelbase_m: float = Field(description="p of tan(sigma) = h / p, at the design pose [m]")
+    anti_squat_definition: str
+    curve: list[TravelPointOut] = Field(description="evenly spaced in travel, full extension first")
+    design_pose: TravelPointOut = Field(description="the design pose (phi0), where the paper reads SR")
+    static_sag: StaticSagOut = Field(description="static equilibrium on flat ground")
+
+
+class GeometryOut(BaseModel):
+    """A design's static final-drive quantities (no simulation)."""
+
+    a2_deg: float = Field(description="engine sprocket angle a2 [deg]")
+    l2_m: float = Field(description="pivot to engine sprocket axis L2 [m]")
+    rws_m: float = Field(description="wheel sprocket pitch radius R_WS [m]")
+    res_m: float = Field(description="engine sprocket pitch radius R_ES = R_WS / ratio [m]")
+    squat_ratio: float = Field(description="squat ratio at the design pose [-]")
+    chain_length_m: float = Field(description="chain length L, eq. (69) [m]")
+    taut_length_m: float = Field(description="taut upper run at static equilibrium on flat ground, eq. (68) [m]")
+    engine_sprocket_x_m: float = Field(description="engine sprocket axis from the pivot, chassis x [m]")
+    engine_sprocket_y_m: float = Field(description="engine sprocket axis from the pivot, chassis y [m]")
+    travel_curve: TravelOut | None = Field(None, description="over the rear travel (with travel=true)")
+
+
+class SensitivityOut(BaseModel):
+    """Finite differences through the engine at the best design (engine study.sharpness)."""
+
+    steps: dict[str, float] = Field(description="steps, units in the keys: a2_deg, l2_m, rws_m")
+    schemes: dict[str, Literal["central", "forward"]] = Field(description="difference scheme of each variable")
+    simulations: int
+    distance_m: float = Field(description="distance at the best design [m]")
+    fitness_m: float = Field(description="fitness at the best design [m]")
+    ddistance_da2_m_per_deg: float
+    dfitness_da2_m_per_deg: float
+    ddistance_dl2_m_per_m: float
+    dfitness_dl2_m_per_m: float
+    ddistance_drws_m_per_m: float
+    dfitness_drws_m_per_m: float
+
+
+class SharpnessOut(BaseModel):
+    """How sharp a best design is: the evaluated designs within a tolerance of the best fitness."""
+
+    road: str | None = Field(description="road name; null: by the robust-de aggregate score")
+    tolerance_pct: float = Field(description="tolerance, % of the best fitness")
+    tolerance_m: float | None = Field(None, description="tolerance [m]")
+    best_fitness_m: float | None = Field(None, description="best fitness (or aggregate score) [m]")
+    count: int = Field(description="designs in the near-optimal set")
+    evaluated: int = Field(description="successfully evaluated designs")
+    ranges: dict[str, list[float]] = Field({}, description="[min, max] over the near-optimal set, units in the keys "
+                                               "(a2_deg: the shortest arc, max may exceed 360)")
+    explored: dict[str, list[float]] = Field({}, description="[min, max] over every evaluated design")
+    verdicts: dict[str, Literal["decided", "loose", "undetermined", "fixed"]] = Field({})
+    sentences: list[str] = Field(description="which variables are decided, in words")
+    sensitivity: SensitivityOut | None = Field(None, description="with sensitivity=true, single roads")
+    final_population: PopulationOut | None = Field(None, description="a DE's last stored population")
+
+
+class PopulationOut(BaseModel):
+    count: int = Field(description="successfully evaluated members")
+    ranges: dict[str, list[float]] = Field(description="[min, max] of a2_deg (shortest arc), l2_m, rws_m, fitness_m")

@@ -153,23 +153,26 @@ def design_pose(p: np.ndarray) -> np.ndarray:
     return assemble(p, flat, x1, y1, theta0, phi0, fs, q[GAMMA] + math.pi, q[GAMMA] - math.pi)
 
 
-def squat_ratio_at(q: np.ndarray, p: np.ndarray, contact_x: float, contact_y: float) -> float:
-    """SR = K / tan(tau) (the reading of Cossalter's squat ratio in docs/engine.md#reading-notes-squat-ratio).
-
-    X is the intersection of the chain's upper run (10-11) with the swingarm line (1-6);
-    tan(tau) is the slope of the line from the rear contact point to X.
-    """
+def squat_line(q: np.ndarray, contact_x: float, contact_y: float) -> tuple[float, float]:
+    """(run, rise) from the rear contact point to X, the intersection of the chain's upper run
+    (10-11) with the swingarm line (1-6); parallel lines put X at infinity along the swingarm."""
     ax, ay = q[X10], q[Y10]
     dx, dy = q[X11] - ax, q[Y11] - ay                 # chain line direction
     bx, by = q[X1], q[Y1]
     ex, ey = q[X6] - bx, q[Y6] - by                   # swingarm line direction
     det = dx * (-ey) - dy * (-ex)
     if abs(det) < 1e-12 * math.hypot(dx, dy) * math.hypot(ex, ey):
-        rise, run = ey, ex                            # parallel lines: X at infinity along the swingarm
-    else:
-        s = ((bx - ax) * (-ey) - (by - ay) * (-ex)) / det
-        xx, xy = ax + s * dx, ay + s * dy
-        rise, run = xy - contact_y, xx - contact_x
+        return float(ex), float(ey)
+    s = ((bx - ax) * (-ey) - (by - ay) * (-ex)) / det
+    return float(ax + s * dx - contact_x), float(ay + s * dy - contact_y)
+
+
+def squat_ratio_at(q: np.ndarray, p: np.ndarray, contact_x: float, contact_y: float) -> float:
+    """SR = K / tan(tau) (the reading of Cossalter's squat ratio in docs/engine.md#reading-notes-squat-ratio).
+
+    tan(tau) is the slope of the line from the rear contact point to X (:func:`squat_line`).
+    """
+    run, rise = squat_line(q, contact_x, contact_y)
     if rise == 0.0:
         return math.inf
     return float(p[P.SQUAT_K] * run / rise)

@@ -88,6 +88,11 @@ def add_de_args(p: argparse.ArgumentParser) -> None:
                         "a2_deg=0:360,l2_m=0:0.2,rws_m=0.05:0.15); a2 is periodic only over a full 360 deg")
 
 
+def add_tolerance_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--tolerance-pct", type=float, default=0.1, metavar="PCT",
+                   help="near-optimal set: evaluated designs within PCT %% of the best fitness (default 0.1)")
+
+
 def add_json_arg(p: argparse.ArgumentParser, what: str = "print one JSON object (for scripts)") -> None:
     p.add_argument("--json", action="store_true", help=what)
 

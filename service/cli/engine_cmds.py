@@ -32,25 +32,41 @@ from finaldrive.service.cli.common import (
     settings_from_args,
     writable,
 )
+from finaldrive.service.cli.travel_view import drive_lines, travel_lines
 
 # --- geometry -------------------------------------------------------------------------------
 
 def run_geometry(args: argparse.Namespace) -> int:
-    from finaldrive.engine import static_geometry
+    from finaldrive.engine import drive_squat, static_geometry, travel_kinematics
 
     vehicle = load_vehicle_arg(args.vehicle)
     design = design_from_args(args, vehicle)
+    road = road_from_arg(args.road) if args.road else None
+    settings = settings_from_args(args) if road is not None else None
+    png = writable(args.png, "--png") if args.png else None
     start = time.perf_counter()
     try:
         g = static_geometry(design, vehicle)
+        points = {"points": args.points} if args.points is not None else {}
+        travel = travel_kinematics(design, vehicle, **points) if args.travel or png else None
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     g["wall_s"] = time.perf_counter() - start
+    drive = drive_squat(design, road, settings, vehicle) if road is not None and settings is not None else None
+    if png is not None and travel is not None:
+        from finaldrive.service.plots import travel_png
+
+        travel_png(png, travel, title=design_label(design.a2_deg, design.l2, design.rws))
     if args.json:
-        print_json(g)
-    else:
-        for key, value in g.items():
-            print(f"{key:>22}: {human(key, value)}")
+        print_json({**g, **({"travel_curve": travel} if travel is not None else {}),
+                    **({"drive_squat": drive} if drive is not None else {})})
+        return 0
+    for key, value in g.items():
+        print(f"{key:>22}: {human(key, value)}")
+    if travel is not None:
+        print("\n".join(["", *travel_lines(travel)]))
+    if drive is not None:
+        print("\n".join(["", *drive_lines(drive)]))
     return 0
 
 
@@ -186,6 +202,13 @@ def register(sub: Any) -> None:
     add_design_args(p)
     add_vehicle_arg(p)
     add_json_arg(p)
+    p.add_argument("--travel", action="store_true", help="also SR, anti-squat %%, chain growth and the sprocket-pivot "
+                   "geometry from full extension to full compression of the rear suspension, static sag marked")
+    p.add_argument("--points", type=int, default=None, help="--travel: points of the curve (2-201; default 25)")
+    p.add_argument("--png", metavar="FILE.png", help="plot the travel curve to FILE (implies --travel)")
+    p.add_argument("--road", help="also simulate once on this road and report the rear travel and chassis pitch "
+                   "under drive beside the static prediction; " + ROAD_HELP)
+    add_settings_args(p)
     p.set_defaults(run=run_geometry)
 
     p = sub.add_parser("simulate", help="simulate one design on one road, in this process", **parser_options())

@@ -9,7 +9,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from finaldrive.service.cli import remote
-from finaldrive.service.cli.common import UsageError, add_de_args, de_from_args, parser_options, print_json, writable
+from finaldrive.service.cli.common import (
+    UsageError,
+    add_de_args,
+    add_tolerance_arg,
+    de_from_args,
+    parser_options,
+    print_json,
+    writable,
+)
 from finaldrive.service.cli.remote import (
     EXIT_JOB_NOT_SUCCEEDED,
     EXIT_OK,
@@ -21,6 +29,7 @@ from finaldrive.service.cli.remote import (
     follow,
     progress_line,
 )
+from finaldrive.service.cli.sharpness_view import near_lines, sensitivity_lines, spread_text
 
 if TYPE_CHECKING:
     from finaldrive.service.client import ServiceClient
@@ -164,12 +173,20 @@ def _print_best(best: dict[str, Any]) -> None:
         score = "-" if rb["score_m"] is None else f"{rb['score_m']:.3f}"
         print(f"robust ({rb['aggregate']}): a2_deg {rb['a2_deg']:.1f}  l2_m {rb['l2_m']:.4f}  rws_m {rb['rws_m']:.4f}  "
               f"score {score} m")
+    for sharp in best.get("sharpness", []):
+        print(f"\nsharpness on {sharp['road'] or 'all roads (aggregate score)'}:")
+        print("\n".join(near_lines(sharp)))
+        if sharp.get("sensitivity"):
+            print("\n".join(sensitivity_lines(sharp["sensitivity"], sharp["tolerance_m"])))
+        pop = sharp.get("final_population")
+        if pop:
+            print(f"  final DE population ({pop['count']} designs): {spread_text(pop['ranges'])}")
 
 
 @client_command
 def run_best(args: argparse.Namespace) -> int:
     with remote.connect(args) as client:
-        best = client.best(args.id)
+        best = client.best(args.id, args.tolerance_pct, args.sensitivity)
     if args.json:
         print_json(best)
     else:
@@ -237,8 +254,12 @@ def register(sub: Any) -> None:
     add_server_args(p)
     p.set_defaults(run=run_results)
 
-    p = sub.add_parser("best", help="a job's best design on each road", **parser_options())
+    p = sub.add_parser("best", help="a job's best design on each road, and which variables it decides",
+                       **parser_options())
     p.add_argument("id", type=int, help="job id")
+    add_tolerance_arg(p)
+    p.add_argument("--sensitivity", action="store_true",
+                   help="also the finite differences at each road's best (the server runs 7 simulations a road)")
     add_server_args(p)
     p.set_defaults(run=run_best)
 

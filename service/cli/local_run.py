@@ -111,3 +111,16 @@ class Tally:
         """The results of design ``x`` on each road (None where it was not evaluated)."""
         found = self.results.get(tuple(x), {})
         return [found.get(r) for r in range(self.n_roads)]
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every evaluated design (n, 3) with its fitness and distance on each road (roads x n; NaN:
+        failed or not evaluated there)."""
+        keys = list(self.results)
+        designs = np.array(keys, dtype=float).reshape(-1, 3)
+        fitness = np.full((self.n_roads, len(keys)), np.nan)
+        distance = np.full((self.n_roads, len(keys)), np.nan)
+        for j, key in enumerate(keys):
+            for r, row in self.results[key].items():
+                fitness[r, j] = math.nan if row["fitness_m"] is None else row["fitness_m"]
+                distance[r, j] = math.nan if row["distance_m"] is None else row["distance_m"]
+        return designs, fitness, distance

@@ -23,6 +23,7 @@ from finaldrive.service.cli.common import (
     add_de_args,
     add_json_arg,
     add_settings_args,
+    add_tolerance_arg,
     add_vehicle_arg,
     clean,
     de_from_args,
@@ -36,6 +37,7 @@ from finaldrive.service.cli.common import (
 from finaldrive.service.cli.engine_cmds import EVALUATE_COLUMNS, batch_rows
 from finaldrive.service.cli.local_run import Tally, default_executor, design_dict, open_executor, run_study
 from finaldrive.service.cli.progress import Progress
+from finaldrive.service.cli.sharpness_view import sharpness_lines
 
 
 def add_road_args(p: argparse.ArgumentParser) -> None:
@@ -87,22 +89,29 @@ def _paper(road: Any) -> dict[str, float] | None:
 
 def run_optimize(args: argparse.Namespace) -> int:
     bounds, de = de_from_args(args)
+    if args.repeat < 1:
+        raise UsageError("--repeat must be >= 1")
     several = args.roads is not None
-    plan = _plan("robust-de" if several else "de", args, bounds=bounds, de=de,
-                 objective=args.objective if several else None, seed=args.seed)
+    plans = [_plan("robust-de" if several else "de", args, bounds=bounds, de=de,
+                   objective=args.objective if several else None, seed=args.seed + k) for k in range(args.repeat)]
+    plan = plans[0]
     settings = settings_from_args(args)
     vehicle = load_vehicle_arg(args.vehicle)
-    tally = Tally(len(plan.roads), Progress(plan.total(), enabled=args.progress))
+    tally = Tally(len(plan.roads), Progress(sum(p.total() for p in plans), enabled=args.progress))
     start = time.monotonic()
     kind = args.executor or default_executor()
-    runs = plan.runs()
+    de_runs = []
     with open_executor(kind, args.workers) as executor:
         n_workers = executor.num_workers
         try:
-            run_study(runs, plan, settings, vehicle, executor, tally)
+            for one in plans:
+                runs = one.runs()
+                run_study(runs, one, settings, vehicle, executor, tally)
+                de_runs.append(runs[0].de)  # one DE: on one road, or robust over several
         finally:
             tally.progress.close()
-    de_run = runs[0].de  # one DE: on one road, or robust over several
+    best_k = max(range(len(de_runs)), key=lambda k: de_runs[k].best_f if np.isfinite(de_runs[k].best_f) else -math.inf)
+    de_run = de_runs[best_k]
     on_best = tally.on_roads(de_run.best_x) if np.isfinite(de_run.best_f) else [None] * len(plan.roads)
     best = None
     if np.isfinite(de_run.best_f):
@@ -118,19 +127,72 @@ def run_optimize(args: argparse.Namespace) -> int:
             regret = 100.0 * (seen["fitness_m"] - here["fitness_m"]) / seen["fitness_m"]
         per_road.append({"road": road.name, "spec": road.road.spec, "best_design": here, "best_seen": seen,
                          "regret_pct": regret, "paper": _paper(road)})
+    sharp = _sharpness(args, tally, plan, settings, vehicle, de_run.best_x if best is not None else None)
+    if best is not None:
+        sharp["final_population"] = _population(de_run)
+        if len(de_runs) > 1:
+            sharp["repeats"] = _repeats(de_runs, args.seed)
     out = {
         "command": "optimize", "roads": [r.name for r in plan.roads], "objective": args.objective if several else None,
         "best": best, "per_road": per_road, "evaluations": tally.progress.done, "failed": tally.progress.failed,
         "designs_evaluated": de_run.n_evals, "generations": de_run.generation, "stop_reason": de_run.stop_reason,
         "history": [{k: (clean(v) if isinstance(v, float) else v) for k, v in history_record(h).items()}
                     for h in de_run.history],
-        "seed": args.seed, "de": {"np": de.np, "iters": de.iters, "f": de.f, "cp": de.cp, "mp": de.mp,
-                                  "mr": de.mr_fraction, "patience": de.patience, "max_evals": de.max_evals},
+        "seed": args.seed + best_k, "repeat": args.repeat,
+        "de": {"np": de.np, "iters": de.iters, "f": de.f, "cp": de.cp, "mp": de.mp,
+               "mr": de.mr_fraction, "patience": de.patience, "max_evals": de.max_evals},
         "bounds": {"a2_deg": list(bounds.a2_deg), "l2_m": list(bounds.l2_m), "rws_m": list(bounds.rws_m)},
+        "sharpness": sharp,
         "executor": kind, "workers": n_workers, "duration_s": settings.duration, "wall_s": time.monotonic() - start,
     }
     _print_result(out, args.json)
     return 0 if best is not None else 1
+
+
+def _row(x: np.ndarray) -> dict[str, float]:
+    return {"a2_deg": math.degrees(float(x[0])), "l2_m": float(x[1]), "rws_m": float(x[2])}
+
+
+def _population(de: Any) -> dict[str, Any]:
+    """The spread of a DE's final population."""
+    from finaldrive.engine import spread
+
+    ok = np.isfinite(de.fitness)
+    return {"count": int(ok.sum()), "ranges": spread(de.population[ok], de.fitness[ok])}
+
+
+def _repeats(de_runs: list[Any], seed: int) -> dict[str, Any]:
+    """Each seed's optimum and how far apart they are."""
+    from finaldrive.engine import spread
+
+    found = [(seed + k, d) for k, d in enumerate(de_runs) if np.isfinite(d.best_f)]
+    optima = [{"seed": s, **_row(d.best_x), "fitness_m": float(d.best_f)} for s, d in found]
+    return {"optima": optima, "spread": spread(np.array([d.best_x for _, d in found]),
+                                               np.array([d.best_f for _, d in found]))}
+
+
+def _sharpness(args: argparse.Namespace, tally: Tally, plan: Any, settings: Any, vehicle: Any,
+               best_x: np.ndarray | None) -> dict[str, Any]:
+    """The near-optimal set of every evaluated design (by the study's score) and, on one road, the
+    sensitivities at the best design (engine study.sharpness)."""
+    from finaldrive.engine import Design, aggregate, near_optimal, sensitivities
+
+    designs, fitness, distance = tally.arrays()
+    several = len(plan.roads) > 1
+    score = fitness[0] if not several else aggregate(fitness, args.objective)
+    dist = distance[0] if not several else distance.mean(axis=0)
+    try:
+        near = near_optimal(designs, score, dist, args.tolerance_pct)
+    except ValueError as exc:
+        raise UsageError(f"--tolerance-pct: {exc}") from None
+    out: dict[str, Any] = {"near_optimal": near, "sensitivity": None}
+    if best_x is None:
+        return out
+    if several:
+        out["sensitivity_note"] = "computed on one road only (--road)"
+    else:
+        out["sensitivity"] = sensitivities(Design(*(float(v) for v in best_x)), plan.roads[0].road, settings, vehicle)
+    return out
 
 
 def _mean(values: list[Any], n: int) -> float | None:
@@ -200,6 +262,7 @@ def run_sweep(args: argparse.Namespace) -> int:
     out = {
         "command": "sweep", "roads": [r.name for r in plan.roads], "objective": args.objective if several else None,
         "grid": grid_label, "designs": len(designs), "best": best, "per_road": per_road,
+        "sharpness": _sharpness(args, tally, plan, settings, vehicle, designs[i] if i is not None else None),
         "evaluations": tally.progress.done, "failed": tally.progress.failed, "out": args.out, "executor": kind,
         "workers": n_workers, "duration_s": settings.duration, "wall_s": time.monotonic() - start,
     }
@@ -229,6 +292,7 @@ def _print_result(out: dict[str, Any], as_json: bool) -> None:
           f"executor {out['executor']}, {out['wall_s']:.1f} s")
     if out.get("out"):
         print(f"results: {out['out']}")
+    print("\n".join(sharpness_lines(out["sharpness"])))
 
 
 def _design_text(d: dict[str, Any] | None) -> str:
@@ -266,6 +330,9 @@ def register(sub: Any) -> None:
                        **parser_options())
     add_road_args(p)
     add_de_args(p)
+    p.add_argument("--repeat", type=int, default=1, metavar="K",
+                   help="run the DE K times (seeds SEED..SEED+K-1) and report how far apart their optima are")
+    add_tolerance_arg(p)
     add_run_args(p)
     p.set_defaults(run=run_optimize)
 
@@ -276,6 +343,7 @@ def register(sub: Any) -> None:
                    help="table9, or a grid spec such as a2_deg=0:358:2,l2_m=0:0.2:0.02,rws_m=0.093")
     p.add_argument("--rws", type=float, default=None, help="R_WS [m] of the grid (default 0.093, Table 9)")
     p.add_argument("--out", metavar="FILE.csv", help="write every result (road, design, outcome) as CSV")
+    add_tolerance_arg(p)
     add_run_args(p)
     p.set_defaults(run=run_sweep)
 

@@ -8,6 +8,8 @@ Definitions (stated in the report too):
 - the robust design: the Table 9 grid design with the best mean fitness over all roads
   (free: read from the stored sweep; a design that failed on any road is excluded), and
   its regret on each road against that road's own optimum (the best of DE and sweep);
+- the sharpness of each road's optimum: the near-optimal set, every successful evaluation of the
+  road (sweep and DE) within 0.1 % of the best fitness, with each variable's range over it;
 - conclusion checks: spread vs road height (Spearman rank correlation), optimum L2 vs the
   range, optimum direction vs the swingarm line (phi0), geometry 1 vs geometry 2.
 """
@@ -21,7 +23,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import spearmanr
 
-from finaldrive.engine import PRESETS, aggregate, regret
+from finaldrive.engine import DEFAULT_TOLERANCE_PCT, PRESETS, aggregate, near_optimal, regret
 from finaldrive.service.report.data import StudyData
 
 #: ``step`` of the sweep part of a paper-study (service.jobs.drivers.SWEEP_STEP).
@@ -148,6 +150,7 @@ def per_road(data: StudyData) -> list[dict[str, Any]]:
             "de_best": None if i_de is None else _design(e, i_de),
             "de_evals": int(de.sum()), "de_failed": int((de & ~e["ok"]).sum()),
             "sweep_best": None if i_sw is None else _design(e, i_sw),
+            "near_optimal": _near(e, on_road & e["ok"]),
             "sweep_evals": int(sweep.sum()), "sweep_failed": int((sweep & ~e["ok"]).sum()),
             "sweep_distance": None if d.size == 0 else {
                 "min_m": _r(d.min(), 4), "max_m": _r(d.max(), 4),
@@ -157,6 +160,17 @@ def per_road(data: StudyData) -> list[dict[str, Any]]:
             },
         })
     return out
+
+
+def _near(e: dict[str, np.ndarray], mask: np.ndarray) -> dict[str, Any]:
+    """The near-optimal set of the evaluations in ``mask`` (engine study.sharpness), rounded."""
+    designs = np.stack([e["a2"][mask], e["l2_m"][mask], e["rws_m"][mask]], axis=1)
+    near = near_optimal(designs, e["fitness_m"][mask], e["distance_m"][mask], DEFAULT_TOLERANCE_PCT)
+    for key in ("ranges", "explored"):
+        near[key] = {k: [_r(v, 5) for v in pair] for k, pair in near.get(key, {}).items()}
+    near["tolerance_m"] = _r(near.get("tolerance_m"), 5)
+    near["best_fitness_m"] = _r(near.get("best_fitness_m"), 5)
+    return near
 
 
 def robust(data: StudyData, roads: list[dict[str, Any]]) -> dict[str, Any] | None:

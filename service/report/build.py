@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from finaldrive.engine import DEFAULT_TOLERANCE_PCT, near_mask
 from finaldrive.service.machine import cpu_model
 from finaldrive.service.report import analysis as A
 from finaldrive.service.report.data import StudyData
@@ -82,10 +83,14 @@ def _figures(data: StudyData, report: dict[str, Any], series: dict[str, Any], fi
             distance = np.full(len(designs), np.nan)
             ok = m & e["ok"]
             distance[e["candidate"][ok]] = e["distance_m"][ok]
+            fitness = np.full(len(designs), np.nan)
+            fitness[e["candidate"][ok]] = e["fitness_m"][ok]
             best = int(np.nanargmax(distance)) if np.isfinite(distance).any() else None
             path = fig_dir / f"sweep-{i:02d}-{stem}.png"
             sweep_map_png(path, designs, distance, title=f"Sweep (Table 9): {name} ({road['spec']})",
-                          best=None if best is None else (float(designs[best, 0]), float(designs[best, 1])))
+                          best=None if best is None else (float(designs[best, 0]), float(designs[best, 1])),
+                          near=near_mask(fitness, DEFAULT_TOLERANCE_PCT)[0],
+                          near_label=f"fitness within {DEFAULT_TOLERANCE_PCT:g} % of the sweep's best")
             out[f"map:{i}"] = path
         history = A.de_history(data, i, np_size)
         if history:

@@ -56,6 +56,7 @@ def render(rep: dict[str, Any], figs: dict[str, str]) -> str:
         *_conclusions(rep),
         *_roads(rep["roads"], rep["fitness_vs_paper"]),
         *_sweep(rep["roads"], figs),
+        *_sharpness(rep["roads"]),
         *_table14(rep["table14"], figs),
         *_robust(rep["robust"]),
         *_de_figures(rep["roads"], figs),
@@ -223,6 +224,29 @@ def _sweep(roads: list[dict[str, Any]], figs: dict[str, str]) -> list[str]:
         if f"map:{r['index']}" in figs:
             out += [f"![sweep map {r['name']}]({figs['map:' + str(r['index'])]})", ""]
     return out
+
+
+def _sharpness(roads: list[dict[str, Any]]) -> list[str]:
+    header = ["road", "near-optimal", "a2 [deg]", "L2 [mm]", "R_WS [mm]", "not decided"]
+    rows = []
+    for r in roads:
+        n = r.get("near_optimal") or {}
+        g = n.get("ranges") or {}
+        if not g:
+            rows.append([f"`{r['name']}`", "–", "–", "–", "–", "–"])
+            continue
+        lo, hi = g["a2_deg"]
+        a2 = "any (L2 = 0)" if lo is None else f"{lo:.0f} – {hi % 360 if hi >= 360 else hi:.0f}"
+        rows.append([f"`{r['name']}`", f"{n['count']}/{n['evaluated']}", a2,
+                     f"{1000 * g['l2_m'][0]:.1f} – {1000 * g['l2_m'][1]:.1f}",
+                     f"{1000 * g['rws_m'][0]:.1f} – {1000 * g['rws_m'][1]:.1f}",
+                     ", ".join(k.split("_")[0] for k, v in n["verdicts"].items() if v == "undetermined") or "–"])
+    return ["## Sharpness of each optimum", "",
+            "Near-optimal set: the road's successful evaluations (sweep and DE) whose fitness is within 0.1 % of "
+            "the best, with each variable's range over it (a2: the shortest arc, through 0 where the second "
+            "value is smaller). Not decided: a variable whose range covers at least half of what the study "
+            "explored (engine/study/sharpness.py; docs/optimisation.md#sharpness-of-an-optimum).", "",
+            *_table(header, rows)]
 
 
 def _table14(t: dict[str, Any], figs: dict[str, str]) -> list[str]:

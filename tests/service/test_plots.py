@@ -28,6 +28,15 @@ def test_sweep_map_grid_and_scatter(tmp_path: Path) -> None:
     assert is_png((tmp_path / "grid.png").read_bytes()) and is_png((tmp_path / "few.png").read_bytes())
 
 
+def test_sweep_map_outlines_the_near_optimal_set(tmp_path: Path) -> None:
+    grid = parse_grid("a2_deg=0:350:10,l2_m=0:0.2:0.02,rws_m=0.093")
+    values = 20 + np.cos(grid[:, 0] - 3.3) * grid[:, 1]
+    near = values >= values.max() - 0.02
+    for name, rows in (("grid", slice(None)), ("few", slice(None, None, 7))):
+        plots.sweep_map_png(tmp_path / f"{name}.png", grid[rows], values[rows], title=name, near=near[rows])
+        assert is_png((tmp_path / f"{name}.png").read_bytes())
+
+
 def test_de_history_and_series(tmp_path: Path) -> None:
     history = [{"generation": g, "best_fitness_m": 20 + 0.1 * g, "mean_fitness_m": 19 + 0.2 * g} for g in range(1, 6)]
     population = np.column_stack([np.linspace(0, 6, 8), np.linspace(0, 0.2, 8), np.full(8, 0.09), np.arange(8.0)])

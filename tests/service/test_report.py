@@ -43,7 +43,7 @@ def test_report_is_complete_and_byte_identical_when_rerun(study: str, tmp_path: 
     assert {f"paper-study/sweep-{i:02d}-{name}.png" for i, name in enumerate(ROADS)} <= set(files)
     md = files["paper-study.md"].decode()
     for heading in ("## Run", "## Do the paper's conclusions hold here?", "## Per road", "## Sweep",
-                    "## Table 14", "## Robust design", "(1)", "(2)", "(3)"):
+                    "## Table 14", "## Robust design", "## Sharpness of each optimum", "(1)", "(2)", "(3)"):
         assert heading in md
     for name in ROADS:
         assert f"`{name}`" in md and f"![sweep map {name}](paper-study/sweep-" in md

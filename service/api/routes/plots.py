@@ -11,7 +11,7 @@ import numpy as np
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
-from finaldrive.engine import history_record
+from finaldrive.engine import DEFAULT_TOLERANCE_PCT, MAX_TOLERANCE_PCT, history_record, near_mask
 from finaldrive.service.api.deps import JobId, ServicesDep
 from finaldrive.service.api.lookups import find_road
 from finaldrive.service.api.problems import ApiProblem, documented
@@ -39,6 +39,8 @@ def plot(
     job_id: JobId, name: PlotName, services: ServicesDep,
     road: Annotated[str | None, Query(description="road name, spec or index (default: the first)")] = None,
     value: Annotated[Literal["fitness", "distance"], Query(description="sweep-map colour")] = "fitness",
+    tolerance_pct: Annotated[float, Query(gt=0, le=MAX_TOLERANCE_PCT, description="sweep-map: outline the designs "
+                                          "whose fitness is within this % of the best")] = DEFAULT_TOLERANCE_PCT,
 ) -> Response:
     from finaldrive.service import plots
 
@@ -54,6 +56,8 @@ def plot(
             designs = np.array([[math.radians(e.a2_deg), e.l2_m, e.rws_m] for e in rows]).reshape(-1, 3)
             column = "fitness_m" if value == "fitness" else "distance_m"
             values = np.array([math.nan if getattr(e, column) is None else getattr(e, column) for e in rows])
+            near = near_mask(np.array([math.nan if e.fitness_m is None else e.fitness_m for e in rows]),
+                             tolerance_pct)[0]
             generation = None
         else:
             if job.kind == "sweep":
@@ -67,7 +71,8 @@ def plot(
         b = int(np.nanargmax(values))
         title = f"job {job_id} ({job.kind}) on {chosen.name}: {value} over the engine sprocket position"
         body = _png(plots.sweep_map_png, designs, values, title=title, value_label=f"{value} [m]",
-                    best=(designs[b, 0], designs[b, 1]))
+                    best=(designs[b, 0], designs[b, 1]), near=near,
+                    near_label=f"fitness within {tolerance_pct:g} % of the best ({int(near.sum())} designs)")
     else:
         if generation is None:
             raise ApiProblem(409, f"job {job_id} has no stored DE generation yet", slug="no-results")

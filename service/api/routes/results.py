@@ -9,9 +9,11 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
+from finaldrive.engine import DEFAULT_TOLERANCE_PCT, MAX_TOLERANCE_PCT
 from finaldrive.service.api.deps import JobId, ServicesDep
 from finaldrive.service.api.lookups import find_road, load_job, parse_cursor
 from finaldrive.service.api.problems import ApiProblem, documented
+from finaldrive.service.api.sharpness import job_sharpness
 from finaldrive.service.api.views import evaluation_out
 from finaldrive.service.db.models import Job
 from finaldrive.service.db.repository import list_evaluations, roads_of
@@ -62,7 +64,18 @@ def _csv(items: list[EvaluationOut]) -> str:
 
 
 @router.get("/{job_id}/best", response_model=BestOut, responses=documented(404, 422),
-            summary="Best design per road (and by aggregate score for robust-de)")
-def best(job_id: JobId, services: ServicesDep) -> BestOut:
+            summary="Best design per road (and by aggregate score for robust-de), with how sharp each optimum is")
+def best(
+    job_id: JobId, services: ServicesDep,
+    tolerance_pct: Annotated[float, Query(gt=0, le=MAX_TOLERANCE_PCT, description="near-optimal set: evaluated "
+                                          "designs within this % of the best fitness")] = DEFAULT_TOLERANCE_PCT,
+    sensitivity: Annotated[bool, Query(description="also finite differences of distance and fitness at each "
+                                       "road's best (7 simulations a road, the job's settings)")] = False,
+) -> BestOut:
     job = load_job(services, job_id)
-    return BestOut(job_id=job.id, roads=job.roads, robust_best=job.robust_best)
+    with services.db.read() as session:
+        row = session.get(Job, job_id)
+        if row is None:
+            raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
+        sharp = job_sharpness(session, row, tolerance_pct, sensitivity)
+    return BestOut(job_id=job.id, roads=job.roads, robust_best=job.robust_best, sharpness=sharp)

@@ -18,6 +18,7 @@ from schemathesis.checks import (
     status_code_conformance,
 )
 
+from finaldrive.engine import Design, default_vehicle, static_geometry
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
 from tests.service.svc_helpers import ToyTask, running_scheduler
@@ -33,6 +34,8 @@ def app(tmp_path_factory: pytest.TempPathFactory) -> Iterator[FastAPI]:
     config = Settings(db_url=f"sqlite:///{db}", executor="serial", max_job_evaluations=500, events_poll_seconds=0.01,
                       api_token=SecretStr("fuzz-token"))
     application = create_app(config)
+    # /v1/geometry runs the engine in the request: load (or compile) the model before the 10 s read timeouts
+    static_geometry(Design.from_deg(0.0, 0.0, 0.093), default_vehicle())
     # runs the lifespan (schemathesis calls the started app); a scheduler keeps /v1/health at 200
     with TestClient(application), running_scheduler(config, ToyTask()):
         yield application

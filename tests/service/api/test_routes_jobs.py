@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 
+import pytest
 from fastapi.testclient import TestClient
 
 from tests.service.svc_helpers import DE, SWEEP, ToyTask, wait_done
@@ -131,3 +132,33 @@ def test_concurrent_jobs_share_the_executor_round_robin(client: TestClient, fake
     ids_a = [e["id"] for e in client.get(f"/v1/jobs/{a}/evaluations").json()["items"]]
     ids_b = [e["id"] for e in client.get(f"/v1/jobs/{b}/evaluations").json()["items"]]
     assert min(ids_b) < max(ids_a) and min(ids_a) < max(ids_b)  # interleaved, not one after the other
+
+
+def test_best_reports_the_near_optimal_set(client: TestClient) -> None:
+    """Toy fitness 20 - (a2 - 1)^2 - 10 (l2 - 0.1)^2 - ...: at a2 = 60 deg every L2 of the grid is
+    within 0.2 % (40 mm) of the best, no other a2 is."""
+    job = wait_done(client, client.post("/v1/jobs", json=SWEEP).json()["id"])
+    best = client.get(f"/v1/jobs/{job['id']}/best", params={"tolerance_pct": 0.2}).json()
+    flat = best["sharpness"][0]
+    assert flat["road"] == "flat" and flat["tolerance_pct"] == 0.2 and flat["evaluated"] == 12
+    assert flat["count"] == 3 and flat["ranges"]["l2_m"] == [0.05, 0.15]
+    assert round(flat["ranges"]["a2_deg"][0]) == round(flat["ranges"]["a2_deg"][1]) == 60
+    assert flat["verdicts"] == {"a2_deg": "decided", "l2_m": "undetermined", "rws_m": "fixed"}
+    assert flat["sensitivity"] is None
+    assert client.get(f"/v1/jobs/{job['id']}/best", params={"tolerance_pct": 0}).status_code == 422
+
+
+def test_best_sensitivity_runs_the_engine_at_the_best(client: TestClient) -> None:
+    spec = {**SWEEP, "roads": ["flat"], "settings": {"duration": 0.2}}
+    job = wait_done(client, client.post("/v1/jobs", json=spec).json()["id"])
+    sharp = client.get(f"/v1/jobs/{job['id']}/best", params={"sensitivity": "true"}).json()["sharpness"]
+    s = sharp[0]["sensitivity"]
+    assert s["simulations"] == 7 and s["schemes"]["a2_deg"] == "central" and s["steps"]["l2_m"] == 0.001
+
+
+def test_best_of_a_de_reports_its_final_population(client: TestClient) -> None:
+    job = wait_done(client, client.post("/v1/jobs", json=DE).json()["id"])
+    sharp = client.get(f"/v1/jobs/{job['id']}/best").json()["sharpness"][0]
+    assert sharp["final_population"]["count"] == 6 and sharp["evaluated"] == 6 * 5
+    lo, hi = sharp["final_population"]["ranges"]["fitness_m"]
+    assert hi == pytest.approx(sharp["best_fitness_m"]) and lo <= hi

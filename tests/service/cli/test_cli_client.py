@@ -143,3 +143,22 @@ def test_local_record_simulate_record_and_series_plot(tmp_path: Any, capsys: pyt
     png = tmp_path / "s.png"
     assert main(["plot", "--series", "0,0,0.093", "--road", "flat", "--duration", "0.2", "--out", str(png)]) == 0
     assert png.read_bytes().startswith(b"\x89PNG")
+
+
+def test_best_prints_which_variables_are_decided(monkeypatch: pytest.MonkeyPatch,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    seen: list[httpx.Request] = []
+    sharp = {"road": "flat", "tolerance_pct": 0.1, "tolerance_m": 0.0205, "best_fitness_m": 20.5, "count": 9,
+             "evaluated": 84, "ranges": {"a2_deg": [190.0, 360.0], "l2_m": [0.01, 0.012], "rws_m": [0.09, 0.1]},
+             "explored": {}, "verdicts": {"a2_deg": "undetermined"},
+             "sentences": ["a2 is not decided: any a2 from 190 to 360 deg is within 20.5 mm of the best fitness"]}
+
+    def handler(request: httpx.Request) -> httpx.Response:
+        seen.append(request)
+        return httpx.Response(200, json={"job_id": 7, "roads": job()["roads"], "sharpness": [sharp]})
+
+    use_transport(monkeypatch, handler)
+    assert main(["best", "7", "--tolerance-pct", "0.5"]) == 0
+    out = capsys.readouterr().out
+    assert "near-optimal set: 9 of 84 evaluated designs" in out and "a2 is not decided" in out
+    assert seen[0].url.params["tolerance_pct"] == "0.5"

@@ -88,3 +88,21 @@ def test_a_closed_pipe_ends_quietly():
     proc = subprocess.run(f"{exe} roads | head -1", shell=True, capture_output=True, text=True)
     assert proc.stdout.startswith("name")
     assert "Traceback" not in proc.stderr
+
+
+def test_geometry_travel_json_png_and_road(tmp_path, capsys):
+    png = tmp_path / "travel.png"
+    code, out, _ = run(["geometry", "--a2-deg", "0", "--l2", "0", "--rws", "0.093", "--travel", "--points", "5",
+                        "--png", str(png), "--road", "flat", "--duration", "0.2", "--json"], capsys)
+    g = json.loads(out)
+    assert code == 0 and png.read_bytes()[:4] == b"\x89PNG"
+    assert len(g["travel_curve"]["curve"]) == 5
+    assert g["travel_curve"]["design_pose"]["squat_ratio"] == pytest.approx(g["squat_ratio"], rel=1e-12)
+    assert g["drive_squat"]["status"] == "ok" and "squat_mean_m" in g["drive_squat"]
+
+
+def test_geometry_travel_text_marks_design_and_sag(capsys):
+    code, out, _ = run(["geometry", "--a2-deg", "0", "--l2", "0", "--rws", "0.093", "--travel", "--points", "3"],
+                       capsys)
+    assert code == 0
+    assert "<- design pose" in out and "<- static sag" in out and "anti-squat" in out

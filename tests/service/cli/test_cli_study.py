@@ -153,3 +153,36 @@ def _running(pid: str) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
     except FileNotFoundError:
         return False
+
+
+def test_optimize_repeat_reports_sharpness_population_and_seeds(capsys: pytest.CaptureFixture[str]) -> None:
+    r = run_json(["optimize", "--road", "flat", *TOY, "--executor", "serial", "--repeat", "2",
+                  "--tolerance-pct", "0.5"], capsys)
+    assert r["evaluations"] == 2 * 18 and r["repeat"] == 2
+    sharp = r["sharpness"]
+    near = sharp["near_optimal"]
+    assert near["tolerance_pct"] == 0.5 and near["evaluated"] == 2 * 18 and 1 <= near["count"] <= near["evaluated"]
+    assert set(near["verdicts"]) == {"a2_deg", "l2_m", "rws_m"} and len(near["sentences"]) >= 3
+    assert near["best_fitness_m"] == pytest.approx(r["best"]["fitness_m"])
+    assert sharp["sensitivity"]["simulations"] == 7 and "dfitness_da2_m_per_deg" in sharp["sensitivity"]
+    assert sharp["final_population"]["count"] == 6
+    optima = sharp["repeats"]["optima"]
+    assert [o["seed"] for o in optima] == [0, 1]
+    lo, hi = sharp["repeats"]["spread"]["l2_m"]
+    assert lo == min(o["l2_m"] for o in optima) and hi == max(o["l2_m"] for o in optima)
+    assert max(o["fitness_m"] for o in optima) == pytest.approx(r["best"]["fitness_m"])
+
+
+def test_text_output_says_which_variables_are_decided(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(["optimize", "--road", "flat", *TOY, "--executor", "serial"], capsys)
+    assert code == 0 and "near-optimal set:" in out and "sensitivity at the best" in out
+    for name in ("a2", "L2", "R_WS"):
+        assert f"\n    {name} is " in out or f"\n    {name} has no effect" in out
+
+
+def test_sweep_reports_the_near_optimal_set(capsys: pytest.CaptureFixture[str]) -> None:
+    r = run_json(["sweep", "--road", "flat", "--grid", "a2_deg=0:300:60,l2_m=0.02|0.1", "--rws", "0.09",
+                  "--duration", "0.2", "--executor", "serial"], capsys)
+    near = r["sharpness"]["near_optimal"]
+    assert near["verdicts"]["rws_m"] == "fixed" and near["evaluated"] == 12
+    assert "R_WS was not varied (90 mm)" in near["sentences"]

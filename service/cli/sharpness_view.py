@@ -1,0 +1,61 @@
+"""Human text of an optimum's sharpness (engine study.sharpness): near-optimal set, sensitivities, spreads."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+
+def spread_text(s: dict[str, list[float]]) -> str:
+    """Ranges of a2 [deg], L2 and R_WS [mm] and the fitness [m]."""
+    lo, hi = s["a2_deg"]
+    if lo is None or math.isnan(lo):
+        a2 = "a2 any (L2 = 0)"
+    else:
+        a2 = f"a2 {lo:.0f} to {hi:.0f} deg" if hi < 360 else f"a2 {lo:.0f} through 0 to {hi - 360:.0f} deg"
+    parts = [a2,
+             f"L2 {1000 * s['l2_m'][0]:.1f} to {1000 * s['l2_m'][1]:.1f} mm",
+             f"R_WS {1000 * s['rws_m'][0]:.1f} to {1000 * s['rws_m'][1]:.1f} mm"]
+    if "fitness_m" in s:
+        parts.append(f"fitness {s['fitness_m'][0]:.3f} to {s['fitness_m'][1]:.3f} m")
+    return ", ".join(parts)
+
+
+def near_lines(near: dict[str, Any], indent: str = "  ") -> list[str]:
+    """The near-optimal set: its size and one sentence a variable (decided or not)."""
+    if not near.get("count"):
+        return [f"{indent}near-optimal set: none (no successful evaluation)"]
+    head = (f"{indent}near-optimal set: {near['count']} of {near['evaluated']} evaluated designs within "
+            f"{1000 * near['tolerance_m']:.3g} mm ({near['tolerance_pct']:g} %) of the best fitness "
+            f"{near['best_fitness_m']:.3f} m: {spread_text(near['ranges'])}")
+    return [head, *(f"{indent}  {s}" for s in near["sentences"])]
+
+
+def sensitivity_lines(s: dict[str, Any] | None, tolerance_m: float, indent: str = "  ") -> list[str]:
+    from finaldrive.engine import sensitivity_sentences
+
+    if s is None:
+        return []
+    schemes = sorted(set(s["schemes"].values()))
+    head = (f"{indent}sensitivity at the best ({s['simulations']} simulations, {' and '.join(schemes)} "
+            f"differences; fitness {s['fitness_m']:.3f} m, distance {s['distance_m']:.3f} m):")
+    return [head, *(f"{indent}  {line}" for line in sensitivity_sentences(s, tolerance_m))]
+
+
+def sharpness_lines(sharp: dict[str, Any]) -> list[str]:
+    """Everything the study reported on its optimum's sharpness."""
+    near = sharp["near_optimal"]
+    lines = ["sharpness:", *near_lines(near)]
+    lines += sensitivity_lines(sharp.get("sensitivity"), near.get("tolerance_m", 0.0))
+    if sharp.get("sensitivity") is None and sharp.get("sensitivity_note"):
+        lines.append(f"  sensitivity: {sharp['sensitivity_note']}")
+    pop = sharp.get("final_population")
+    if pop:
+        lines.append(f"  final DE population ({pop['count']} designs): {spread_text(pop['ranges'])}")
+    rep = sharp.get("repeats")
+    if rep:
+        lines.append(f"  {len(rep['optima'])} seeds ({', '.join(str(o['seed']) for o in rep['optima'])}): optima "
+                     f"{spread_text(rep['spread'])}")
+        lines += [f"    seed {o['seed']}: a2 {o['a2_deg']:.1f} deg, L2 {1000 * o['l2_m']:.1f} mm, "
+                  f"R_WS {1000 * o['rws_m']:.1f} mm, fitness {o['fitness_m']:.3f} m" for o in rep["optima"]]
+    return lines

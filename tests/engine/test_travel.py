@@ -1,0 +1,90 @@
+"""Kinematics over the rear travel: against the paper (Table 14), `finaldrive geometry` at each pose,
+closed forms of the chain run and the squat point, and the squat a simulation shows."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from finaldrive.engine import Design, Road, SimSettings, drive_squat, static_geometry, travel_kinematics
+
+GEOMETRY1 = Design.from_deg(0.0, 0.0, 0.093)        # Table 14, geometry 1: SR 1.092
+OFFSET = Design.from_deg(195.3, 0.037, 0.088)       # Table 11 flat-road optimum
+
+
+def test_geometry1_passes_the_paper_sr_at_the_design_pose(vehicle, tables):
+    sr_paper = tables["table14_geometries"]["geometry1"]["SR"]
+    t = travel_kinematics(GEOMETRY1, vehicle, 41)
+    assert t["design_pose"]["squat_ratio"] == pytest.approx(sr_paper, abs=0.01)
+    travel = [c["travel_m"] for c in t["curve"]]
+    sr = [c["squat_ratio"] for c in t["curve"]]
+    assert travel[0] < t["design_pose"]["travel_m"] < travel[-1]
+    assert np.interp(t["design_pose"]["travel_m"], travel, sr) == pytest.approx(sr_paper, abs=0.01)
+
+
+@pytest.mark.parametrize("design", [GEOMETRY1, OFFSET])
+def test_each_point_is_finaldrive_geometry_at_that_pose(vehicle, design):
+    t = travel_kinematics(design, vehicle, 5)
+    for point in [*t["curve"], t["design_pose"]]:
+        at_pose = vehicle.replace(phi0=vehicle["theta0"] + math.radians(point["swingarm_angle_deg"]))
+        assert point["squat_ratio"] == pytest.approx(static_geometry(design, at_pose)["squat_ratio"], rel=1e-12)
+
+
+def test_travel_ends_spring_free_length_and_wheel_travel(vehicle):
+    t = travel_kinematics(OFFSET, vehicle, 3)
+    ext, comp = math.radians(t["extension_angle_deg"]), math.radians(t["compression_angle_deg"])
+    x3, y3 = vehicle["L3"] * math.cos(vehicle["a3"]), vehicle["L3"] * math.sin(vehicle["a3"])
+    spring = math.hypot(x3 - vehicle["L7"] * math.cos(ext), y3 - vehicle["L7"] * math.sin(ext))   # eq. (13)
+    assert spring == pytest.approx(vehicle["s_rs"], abs=1e-12)
+    lift = vehicle["L_SA"] * (math.sin(comp) - math.sin(ext))
+    assert lift == pytest.approx(vehicle["rear_wheel_travel"], abs=1e-12)
+    assert t["curve"][0]["travel_m"] == 0.0
+    assert t["curve"][-1]["travel_m"] == pytest.approx(vehicle["rear_wheel_travel"], abs=1e-12)
+    assert 0 < t["static_sag"]["travel_m"] < vehicle["rear_wheel_travel"]
+
+
+def test_chain_growth_is_the_closed_form_external_tangent(vehicle):
+    """Upper run = sqrt(d^2 - (R_WS - R_ES)^2), d the sprocket centre distance (law of cosines)."""
+    d_ = OFFSET
+    res = d_.rws / vehicle["sprocket_ratio"]
+
+    def run(angle: float) -> float:
+        d2 = d_.l2**2 + vehicle["L_SA"] ** 2 - 2 * d_.l2 * vehicle["L_SA"] * math.cos(angle - d_.a2)
+        return math.sqrt(d2 - (d_.rws - res) ** 2)
+
+    t = travel_kinematics(d_, vehicle, 7)
+    base = run(math.radians(t["extension_angle_deg"]))
+    growth = [c["chain_growth_m"] for c in t["curve"]]
+    for c in t["curve"]:
+        angle = math.radians(c["swingarm_angle_deg"])
+        assert c["taut_length_m"] == pytest.approx(run(angle), abs=1e-12)
+        assert c["chain_growth_m"] == pytest.approx(run(angle) - base, abs=1e-12)
+    assert max(abs(g) for g in growth) > 1e-4          # an offset sprocket does grow the chain
+
+
+def test_concentric_squat_point_is_the_mirrored_axle(vehicle):
+    """With L2 = 0 and R_WS = 2 R_ES the upper run meets the swingarm line at the circles' external
+    centre of similitude, the rear axle mirrored through the pivot: tan(tau) in closed form."""
+    t = travel_kinematics(GEOMETRY1, vehicle, 5)
+    tan_sigma = vehicle["target_cog_height"] / t["wheelbase_m"]
+    for c in t["curve"]:
+        phi = math.radians(c["swingarm_angle_deg"])
+        ax, ay = vehicle["L_SA"] * math.cos(phi), vehicle["L_SA"] * math.sin(phi)
+        tan_tau = (-ay - (ay - vehicle["rt0"])) / (-ax - ax)
+        assert c["squat_ratio"] == pytest.approx(vehicle["squat_K"] / tan_tau, rel=1e-9)
+        assert c["anti_squat_pct"] == pytest.approx(100 * tan_tau / tan_sigma, rel=1e-9)
+        assert c["chain_growth_m"] == pytest.approx(0.0, abs=1e-12)
+
+
+@pytest.mark.parametrize(("a2_deg", "squats"), [(90.0, True), (270.0, False)])
+def test_simulated_squat_follows_the_static_anti_squat(vehicle, a2_deg, squats):
+    """Below 100 % anti-squat the rear compresses under drive, above it extends (0.5 s, flat road)."""
+    design = Design.from_deg(a2_deg, 0.1, 0.088)
+    sag = travel_kinematics(design, vehicle, 2)["static_sag"]
+    assert (sag["anti_squat_pct"] < 100) is squats
+    d = drive_squat(design, Road(), SimSettings(duration=0.5), vehicle)
+    assert d["status"] == "ok"
+    assert d["travel_static_m"] == pytest.approx(sag["travel_m"], abs=1e-6)   # the same static equilibrium
+    assert (d["squat_mean_m"] > 0) is squats
