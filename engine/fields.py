@@ -64,7 +64,6 @@ _RESULT = [
     _f("fitness_m", "the paper's fitness: the distance scaled down for squat ratio and slack, eq. (67)", 4),
     _f("chain_length_m", "chain length L of the design, eq. (69)", 4),
     _f("taut_length_m", "length of the chain's taut upper run (geometry: at the static pose; series: over time)", 4),
-    _f("sprocket_centre_m", "engine sprocket centre relative to the swingarm pivot, chassis frame (x, y)", 4),
     _f("wall_s", "wall time the simulation took", 3),
     _f("status", "ok, or failed (reason says why)"),
     _f("reason", "why a run failed (empty when ok)"),

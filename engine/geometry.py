@@ -25,5 +25,6 @@ def static_geometry(design: Design, vehicle: Vehicle) -> dict[str, Any]:
         "squat_ratio": setup.squat_ratio,
         "chain_length_m": float(setup.p[P.L_CHAIN]),
         "taut_length_m": taut_length(setup.q0),
-        "sprocket_centre_m": [design.l2 * math.cos(design.a2), design.l2 * math.sin(design.a2)],
+        "engine_sprocket_x_m": design.l2 * math.cos(design.a2),
+        "engine_sprocket_y_m": design.l2 * math.sin(design.a2),
     }

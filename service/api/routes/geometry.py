@@ -53,10 +53,9 @@ def geometry(a2_deg: A2, l2_m: L2, rws_m: RWS, travel: Annotated[bool, Query(
         g = static_geometry(design, default_vehicle())
     except (ValueError, ArithmeticError) as exc:
         raise ApiProblem(422, str(exc), slug="invalid-design") from None
-    x, y = g["sprocket_centre_m"]
     return GeometryOut(a2_deg=a2_deg, l2_m=l2_m, rws_m=rws_m, res_m=g["res_m"], squat_ratio=g["squat_ratio"],
                        chain_length_m=g["chain_length_m"], taut_length_m=g["taut_length_m"],
-                       engine_sprocket_x_m=x, engine_sprocket_y_m=y,
+                       engine_sprocket_x_m=g["engine_sprocket_x_m"], engine_sprocket_y_m=g["engine_sprocket_y_m"],
                        travel_curve=_travel(design, points) if travel else None)
 
 

@@ -23,7 +23,7 @@ def test_geometry_json(capsys):
     assert code == 0
     assert g["squat_ratio"] == pytest.approx(1.092, abs=0.01)     # Table 14, geometry 1
     assert g["res_m"] == pytest.approx(0.0465)
-    assert g["sprocket_centre_m"] == [0.0, 0.0]
+    assert (g["engine_sprocket_x_m"], g["engine_sprocket_y_m"]) == (0.0, 0.0)
     assert g["chain_length_m"] > g["taut_length_m"] > 0.5
 
 
