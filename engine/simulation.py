@@ -24,7 +24,7 @@ from finaldrive.engine.api import (
     SimResult,
     SimSettings,
 )
-from finaldrive.engine.fast import minimal
+from finaldrive.engine.fast import bodies, minimal
 from finaldrive.engine.fast.equilibrium import EquilibriumError, static_equilibrium
 from finaldrive.engine.fast.rosenbrock import N_ST as FAST_N_ST, S_ROW, S_T, run_fast
 from finaldrive.engine.fitness import fitness, slack
@@ -144,10 +144,10 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
         n_out = max(1, math.ceil(settings.duration / (settings.dt * settings.series_stride) - 1e-9))
         n_rows = n_out + 1 if settings.series else 0
         series = np.zeros((n_rows, outcome.N_SERIES))
-        states = np.zeros((n_rows, 2 * minimal.N_DOF))
+        states = np.zeros((n_rows, 2 * bodies.N_DOF))
         st = np.zeros(FAST_N_ST)
         y = np.zeros(minimal.N_STATE)
-        y[:minimal.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
+        y[:bodies.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
 
         def chunk() -> int:
             return int(run_fast(y, p, kind, rp, settings.tyre_longitudinal, settings.duration,
@@ -187,9 +187,9 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
     if code != outcome.OK:
         return _failed(f"{_REASONS[code]} at t = {reached:.4f} s", setup.squat_ratio, chain, start)
     if settings.method == "fast":
-        x1_end = float(y[minimal.ZX1])
+        x1_end = float(y[bodies.ZX1])
         kinetic = float(minimal.kinetic_energy(y, p, kind, rp))
-        x1, y1, theta, phi, fs = (float(c) for c in y[:minimal.ZBETA])
+        x1, y1, theta, phi, fs = (float(c) for c in y[:bodies.ZBETA])
         q_end = assemble(p, road, x1, y1, theta, phi, fs, 0.0, 0.0)  # the pose, but for alpha and beta
         rows = int(st[S_ROW])
     else:

@@ -16,18 +16,8 @@ import math
 
 import numpy as np
 
-from finaldrive.engine.fast.minimal import (
-    N_DOF,
-    N_STATE,
-    ZFS,
-    ZPHI,
-    ZTHETA,
-    ZU,
-    ZX1,
-    ZY1,
-    design_constants,
-    fast_rhs,
-)
+from finaldrive.engine.fast.bodies import N_WS, W_Q, ZFS, ZPHI, ZTHETA, ZX1, ZY1, design_constants
+from finaldrive.engine.fast.minimal import N_STATE, fast_rhs
 from finaldrive.engine.model import params as P
 from finaldrive.engine.model.coordinates import FT, GAMMA, RT
 from finaldrive.engine.model.elements import N_AUX
@@ -54,12 +44,9 @@ def _rest_forces(free, p0, geo, kind, rp, out):
     y[ZX1] = -p0[P.L_SA] * math.cos(free[2])
     ydot = np.zeros(N_STATE)
     aux = np.zeros(N_AUX)
-    L = np.zeros((N_DOF, N_DOF))
-    b = np.zeros(N_DOF)
-    c = np.zeros(N_DOF)
-    ws = np.zeros((6, N_DOF))
-    fast_rhs(y, p0, geo, kind, rp, p0[P.SIGMA_K0], False, False, ydot, aux, L, b, c, ws)
-    F = L @ (L.T @ ydot[N_DOF:ZU])  # M z'' = F at rest (no velocity products)
+    ws = np.zeros(N_WS)
+    fast_rhs(y, p0, geo, kind, rp, p0[P.SIGMA_K0], False, ydot, aux, ws)
+    F = ws[W_Q:]  # the generalized forces (no velocity products at rest)
     w = p0[P.M_CHASSIS] * p0[P.GRAVITY]
     out[0] = F[ZY1] / w
     out[1] = F[ZTHETA] / w

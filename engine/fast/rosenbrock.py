@@ -19,7 +19,8 @@ import math
 
 import numpy as np
 
-from finaldrive.engine.fast.minimal import N_DOF, N_STATE, ZBETA, ZTHETA, ZU, ZX1, design_constants, fast_rhs
+from finaldrive.engine.fast.bodies import N_DOF, N_WS, W_B, W_C, ZBETA, ZTHETA, ZX1, design_constants, mass_solve
+from finaldrive.engine.fast.minimal import N_STATE, ZU, fast_rhs
 from finaldrive.engine.model.diagnostics import (
     E_TAUT_MAX,
     E_TAUT_MIN,
@@ -47,7 +48,6 @@ from finaldrive.engine.model.elements import (
     N_AUX,
 )
 from finaldrive.engine.model.jit import jit
-from finaldrive.engine.model.linalg import cholesky_solve
 from finaldrive.engine.model.tyre import relaxation_length
 from finaldrive.engine.outcome import FRONT_AIRBORNE, NONFINITE, OK, PAUSED, REAR_AIRBORNE
 
@@ -138,9 +138,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
     FRONT_AIRBORNE; st[S_T] is the time reached.
     """
     geo = design_constants(p)
-    L = np.zeros((N_DOF, N_DOF))
-    ws = np.zeros((6, N_DOF))
-    b = np.zeros(N_DOF)
+    ws = np.zeros(N_WS)
     c_row = np.zeros(N_DOF)
     v = np.zeros(N_DOF)
     aux = np.zeros(N_AUX)
@@ -159,10 +157,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
     yi = np.zeros(N_STATE)
     fi = np.zeros(N_STATE)
     auxi = np.zeros(N_AUX)
-    Li = np.zeros((N_DOF, N_DOF))
-    wsi = np.zeros((6, N_DOF))
-    bi = np.zeros(N_DOF)
-    ci = np.zeros(N_DOF)
+    wsi = np.zeros(N_WS)
     scale = np.full(N_STATE, tol)
     for i in range(N_DOF, ZU):
         scale[i] = 10.0 * tol
@@ -172,7 +167,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
         st[S_SIGMA] = relaxation_length(0.0, 0.0, 1.0, p)
         st[S_H] = min(h_max, FIRST_STEP)
         start_records(ext, led)
-        if fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, True, f1, aux, L, b, c_row, ws) != OK:
+        if fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, f1, aux, ws) != OK:
             return NONFINITE
         track_state(ext, aux, p)
         st[S_PREV_TAUT], st[S_PREV_RATE] = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
@@ -181,7 +176,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
             states[0] = y[:2 * N_DOF]
             st[S_ROW] = 1.0
         st[S_STARTED] = 1.0
-    elif fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, True, f1, aux, L, b, c_row, ws) != OK:
+    elif fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, f1, aux, ws) != OK:
         return NONFINITE  # not reached: the same evaluation succeeded before the pause
     t, h, sigma = st[S_T], st[S_H], st[S_SIGMA]
     row = int(st[S_ROW])
@@ -192,7 +187,8 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
             return PAUSED
         # eq. (41) closed with this state's values; f1 and the tyre's outputs moved to the new sigma*
         new_sigma = relaxation_length(aux[AUX_FX], aux[AUX_KAPPA], aux[AUX_FZ_REAR], p)
-        cholesky_solve(L, b, v)                     # M^-1 b
+        mass_solve(geo, ws, ws[W_B:W_B + N_DOF], v)   # M^-1 b
+        c_row[:] = ws[W_C:W_C + N_DOF]
         if new_sigma != sigma:
             dfx = retune_sigma(aux, y[ZU], sigma, new_sigma, p, longitudinal)
             for i in range(N_DOF):
@@ -211,7 +207,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
             _w_solve(f1, gh, v, c_row, a_uu, k1)
             for i in range(N_STATE):
                 y2[i] = y[i] + h * k1[i]
-            if fast_rhs(y2, p, geo, kind, rp, sigma, longitudinal, False, f2, aux, L, b, c_row, ws) != OK:
+            if fast_rhs(y2, p, geo, kind, rp, sigma, longitudinal, f2, aux, ws) != OK:
                 st[S_T] = t
                 return NONFINITE
             for i in range(N_STATE):
@@ -233,7 +229,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
         y_old[:] = y
         f_old[:] = f1
         y[:] = ynew
-        if fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, True, f1, aux, L, b, c_row, ws) != OK:
+        if fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, f1, aux, ws) != OK:
             st[S_T] = t
             return NONFINITE
         # records at the new state and over the step
@@ -257,7 +253,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
                 states[row] = y[:2 * N_DOF]
             else:
                 _hermite(y_old, f_old, y, f1, h_done, (t_row - t_old) / h_done, yi)
-                fast_rhs(yi, p, geo, kind, rp, sigma, longitudinal, False, fi, auxi, Li, bi, ci, wsi)
+                fast_rhs(yi, p, geo, kind, rp, sigma, longitudinal, fi, auxi, wsi)
                 _record(row, t_row, yi, auxi, sigma, series)
                 states[row] = yi[:2 * N_DOF]
             row += 1
