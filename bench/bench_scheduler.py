@@ -19,6 +19,7 @@ end), ``efficiency`` (ideal_s / wall_s), ``peak_in_flight`` (most tasks in fligh
 from __future__ import annotations
 
 import argparse
+import heapq
 import json
 import os
 import sys
@@ -38,6 +39,7 @@ from finaldrive.service.machine import describe
 from finaldrive.service.schemas import JobSpec
 from finaldrive.service.services import open_database
 from finaldrive.workers import make_executor
+from finaldrive.workers.base import Done, ExecutorMixin, Shared
 
 PLANS = {"paper": {"kind": "paper-study", "roads": ["paper"]}}
 
@@ -45,12 +47,13 @@ PLANS = {"paper": {"kind": "paper-study", "roads": ["paper"]}}
 class SleepTask:
     """The stand-in evaluation: ``ms`` of sleep a design, a smooth deterministic fitness, no CPU."""
 
-    def __init__(self, ms: float) -> None:
-        self.ms = ms
+    def __init__(self, ms: float, *, sleep: bool = True) -> None:
+        self.ms, self.sleep = ms, sleep
 
     def __call__(self, rows: np.ndarray, roads: tuple[Road, ...], settings: SimSettings,
                  vehicle: Vehicle | None) -> list[tuple[int, BatchResult]]:
-        time.sleep(self.ms * 1e-3 * len(rows))
+        if self.sleep:
+            time.sleep(self.ms * 1e-3 * len(rows))
         x = rows[:, 1:]
         n = len(x)
         fitness = 20.0 - np.cos(x[:, 0]) * 0.01 - (x[:, 1] - 0.05) ** 2 - (x[:, 2] - 0.09) ** 2
@@ -58,6 +61,60 @@ class SleepTask:
         return [(int(rows[0, 0]), BatchResult(
             designs=x, distance_m=fitness, squat_ratio=ones, slack_m=0.0 * ones, fitness_m=fitness,
             chain_length_m=ones, wall_s=np.full(n, self.ms * 1e-3), status=("ok",) * n, reason=("",) * n))]
+
+
+class VirtualCluster(ExecutorMixin):
+    """``cpus`` CPUs on a clock, no processes: a task holds a CPU for ``ms`` a design (queued
+    first-in first-out while none is free) and is reported when that time has passed on the wall
+    clock. Its result is computed at submission (the stand-in told not to sleep). The scheduler and the store
+    get the whole machine, so the figure is theirs alone, free of Ray's per-worker cost.
+    """
+
+    def __init__(self, cpus: int, ms: float) -> None:
+        super().__init__()
+        self.num_workers, self.capacity, self.ms = cpus, 2 * cpus, ms
+        self._ids = 0
+        self._free_at = [0.0] * cpus                      # heap: when each CPU becomes free
+        self._pending: list[tuple[float, int, Any]] = []  # heap: (finish time, task, result)
+
+    def share(self, value: Any) -> Shared:
+        return Shared.new(value)
+
+    def release(self, shared: Shared) -> None:
+        pass
+
+    def submit(self, fn: Any, batch: Any, *shared: Shared) -> int:
+        values = [handle.ref for handle in shared]
+        result = fn(batch, *values)
+        start = max(time.perf_counter(), heapq.heappop(self._free_at))
+        end = start + self.ms * 1e-3 * len(batch)
+        heapq.heappush(self._free_at, end)
+        self._ids += 1
+        heapq.heappush(self._pending, (end, self._ids, result))
+        return self._ids
+
+    def poll(self, timeout: float) -> list[Done]:
+        if not self._pending:
+            return []
+        wait = min(timeout, self._pending[0][0] - time.perf_counter())
+        if wait > 0:
+            time.sleep(wait)
+        now, out = time.perf_counter(), []
+        while self._pending and self._pending[0][0] <= now:
+            _, task, result = heapq.heappop(self._pending)
+            out.append(Done(task, result=result))
+        return out
+
+    def cancel(self, tasks: Any) -> None:
+        wanted = set(tasks)
+        self._pending = [p for p in self._pending if p[1] not in wanted]
+        heapq.heapify(self._pending)
+
+    def in_flight(self) -> int:
+        return len(self._pending)
+
+    def close(self) -> None:
+        self._pending = []
 
 
 def _warm(executor: Any, cpus: int) -> None:
@@ -69,15 +126,18 @@ def _warm(executor: Any, cpus: int) -> None:
         pending -= len(executor.poll(5.0))
 
 
-def run(cpus: int, eval_ms: float, plan: str, db_url: str | None) -> dict[str, Any]:
+def run(cpus: int, eval_ms: float, plan: str, db_url: str | None, executor_kind: str) -> dict[str, Any]:
     tmp = tempfile.TemporaryDirectory(prefix="finaldrive-bench-")
     url = db_url or f"sqlite:///{Path(tmp.name) / 'bench.db'}"
     settings = Settings(db_url=url, executor="ray", num_workers=cpus)
-    db = open_database(settings)
-    executor = make_executor("ray", num_workers=cpus)
+    db = open_database(settings, durable=False)  # as finaldrive.service.jobs.scheduler.run_scheduler
+    executor: Any = (VirtualCluster(cpus, eval_ms) if executor_kind == "virtual"
+                     else make_executor("ray", num_workers=cpus))
     try:
-        _warm(executor, cpus)
-        scheduler = Scheduler(db, executor, task=SleepTask(eval_ms), warmup=None, executor_kind="ray",
+        if executor_kind == "ray":
+            _warm(executor, cpus)
+        task = SleepTask(eval_ms, sleep=executor_kind == "ray")
+        scheduler = Scheduler(db, executor, task=task, warmup=None, executor_kind=executor_kind,
                               config=SchedulerConfig(recordings=False))
         start = time.perf_counter()
         job, _ = submit_job(db, JobSpec.model_validate(PLANS[plan]), idempotency_key=None,
@@ -110,7 +170,8 @@ def run(cpus: int, eval_ms: float, plan: str, db_url: str | None) -> dict[str, A
         db.dispose()
         tmp.cleanup()
     ideal = stored * eval_ms * 1e-3 / cpus
-    return {"plan": plan, "cpus": cpus, "eval_ms": eval_ms, "store": url.split(":", 1)[0], "state": state,
+    return {"plan": plan, "executor": executor_kind, "cpus": cpus, "eval_ms": eval_ms,
+            "store": url.split(":", 1)[0], "state": state,
             "evaluations": stored, "ideal_s": round(ideal, 3), "wall_s": round(wall, 3),
             "efficiency": round(ideal / wall, 4) if wall else None, "peak_in_flight": peak,
             "evaluations_per_s": round(stored / wall, 1), "machine": describe()}
@@ -122,10 +183,13 @@ def main() -> int:
     parser.add_argument("--eval-ms", type=float, required=True, help="stand-in evaluation time a design [ms]")
     parser.add_argument("--plan", choices=sorted(PLANS), default="paper", help="what to run")
     parser.add_argument("--db", help="SQLAlchemy URL of an empty database (default: a fresh SQLite file)")
+    parser.add_argument("--executor", choices=("ray", "virtual"), default="ray",
+                        help="ray: a local Ray with --cpus CPUs; virtual: CPUs on a clock in this process "
+                             "(the scheduler and store alone, without Ray's per-worker cost)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args()
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
-    out = run(args.cpus, args.eval_ms, args.plan, args.db)
+    out = run(args.cpus, args.eval_ms, args.plan, args.db, args.executor)
     if args.json:
         print(json.dumps(out))
     else:

@@ -30,9 +30,10 @@ class Services:
         self.db.dispose()
 
 
-def open_database(settings: Settings) -> Database:
-    """Open the store; create the schema in an empty database; refuse any other revision."""
-    db = Database(settings.db_url)
+def open_database(settings: Settings, *, durable: bool = True) -> Database:
+    """Open the store; create the schema in an empty database; refuse any other revision.
+    ``durable=False``: for a scheduler (finaldrive.service.db.engine)."""
+    db = Database(settings.db_url, durable=durable)
     try:
         if settings.auto_create_db and is_empty(db.engine):
             log.info("creating the schema in the empty database %s", display_url(settings.db_url))

@@ -1,11 +1,17 @@
 """Database engine and sessions.
 
 SQLite (the default) gets, on every new connection, ``journal_mode=WAL``, ``synchronous=FULL``
-and ``foreign_keys=ON``. pysqlite's implicit transactions are replaced by explicit ``BEGIN``
-(SQLAlchemy's SQLite recipe), each preceded by the transaction's ``busy_timeout``, and write
-transactions start with ``BEGIN IMMEDIATE`` so a reader never has to upgrade its lock.
+(``NORMAL`` for a store opened with ``durable=False``) and ``foreign_keys=ON``. pysqlite's
+implicit transactions are replaced by explicit ``BEGIN`` (SQLAlchemy's SQLite recipe), each
+preceded by the transaction's ``busy_timeout``, and write transactions start with
+``BEGIN IMMEDIATE`` so a reader never has to upgrade its lock.
 PostgreSQL connections time out after 5 s and a write transaction waits for locks at most its
 timeout (``lock_timeout``). Any other SQLAlchemy URL is used as is.
+
+``durable=False`` is for writers whose last commits can be recomputed (a scheduler's results):
+a commit survives the process being killed but not the machine losing power (SQLite WAL with
+``synchronous=NORMAL``, PostgreSQL ``synchronous_commit=off``); the database stays consistent
+either way. Submissions and cancels go through the API's durable store.
 """
 
 from __future__ import annotations
@@ -37,10 +43,11 @@ def display_url(url: str) -> str:
 class Database:
     """An engine plus read and write session factories."""
 
-    def __init__(self, url: str, *, lock_timeout_s: float = LOCK_TIMEOUT_S) -> None:
+    def __init__(self, url: str, *, lock_timeout_s: float = LOCK_TIMEOUT_S, durable: bool = True) -> None:
         self.url = url
         self.lock_timeout_s = lock_timeout_s
-        self.engine = make_engine(url)
+        self.durable = durable
+        self.engine = make_engine(url, durable=durable)
         self._postgres = self.engine.dialect.name == "postgresql"
 
     @contextmanager
@@ -59,13 +66,15 @@ class Database:
         with Session(bind, expire_on_commit=False) as session, session.begin():
             if self._postgres:
                 session.execute(text(f"SET LOCAL lock_timeout = '{int(timeout * 1000)}ms'"))
+                if not self.durable:
+                    session.execute(text("SET LOCAL synchronous_commit = off"))
             yield session
 
     def dispose(self) -> None:
         self.engine.dispose()
 
 
-def make_engine(url: str, **kwargs: Any) -> Engine:
+def make_engine(url: str, *, durable: bool = True, **kwargs: Any) -> Engine:
     """``create_engine`` with the SQLite connection set-up described in the module docstring."""
     backend = make_url(url).get_backend_name()
     if backend == "postgresql":
@@ -86,7 +95,7 @@ def make_engine(url: str, **kwargs: Any) -> Engine:
                 mode = cur.execute("PRAGMA journal_mode = WAL").fetchone()[0]
                 if str(mode).lower() != "wal":
                     raise RuntimeError(f"SQLite refused WAL mode (journal_mode is {mode!r})")
-            cur.execute("PRAGMA synchronous = FULL")
+            cur.execute(f"PRAGMA synchronous = {'FULL' if durable else 'NORMAL'}")
             cur.execute("PRAGMA foreign_keys = ON")
         finally:
             cur.close()

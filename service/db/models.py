@@ -12,6 +12,7 @@ from typing import Any
 
 from sqlalchemy import (
     JSON,
+    BigInteger,
     Boolean,
     DateTime,
     Float,
@@ -126,6 +127,8 @@ class Evaluation(Base):
     wall_s: Mapped[float] = mapped_column(Float)
     cached: Mapped[bool] = mapped_column(Boolean, default=False)
     cache_key: Mapped[str] = mapped_column(String(64))
+    #: the key's first 60 bits, indexed (small and fast to insert); lookups compare the whole key
+    cache_hash: Mapped[int] = mapped_column(BigInteger)
     #: the failure may not recur (a time limit, a lost worker): never reused from the result cache
     transient: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
     created_at: Mapped[datetime] = mapped_column(DateTime)
@@ -134,7 +137,7 @@ class Evaluation(Base):
         UniqueConstraint("job_id", "road_index", "step", "candidate", name="uq_evaluations_slot"),
         Index("ix_evaluations_job_id", "job_id", "id"),
         Index("ix_evaluations_job_road_id", "job_id", "road_index", "id"),
-        Index("ix_evaluations_cache_key", "cache_key"),
+        Index("ix_evaluations_cache_hash", "cache_hash"),
     )
 
 

@@ -1,25 +1,24 @@
 """The scheduler's path through the store: what a job has stored, the result cache, and writes.
 
 Every write of results is fenced: it happens only while the writing scheduler still owns the
-job (:func:`finaldrive.service.db.leases.owns`, in the same transaction), so a scheduler that
-lost its lease can never store anything. Rows are inserted in bulk, and a slot
+job (the job's counters are bumped first, matching only its owner, in the same transaction), so
+a scheduler that lost its lease can never store anything. Rows are inserted in bulk, and a slot
 (job, road, step, candidate) that is somehow stored already is skipped, never stored twice.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field, fields
 from typing import Any
 
-from sqlalchemy import Table, func, insert, select
-from sqlalchemy.dialects import postgresql, sqlite
+from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
 from finaldrive.engine import DIAGNOSTICS
-from finaldrive.service.db.leases import db_now, owns
-from finaldrive.service.db.models import EvalStatus, Evaluation, Generation, Job, JobRoad
+from finaldrive.service.db.leases import db_now
+from finaldrive.service.db.models import EvalStatus, Evaluation, Generation, Job, JobRoad, JobState
 
 #: Rows per ``IN (...)`` query, well under SQLite's variable limit.
 _IN_CHUNK = 500
@@ -29,31 +28,26 @@ class LeaseLost(Exception):
     """The scheduler no longer owns the job: nothing was written."""
 
 
-@dataclass(frozen=True)
-class EvalRow:
-    """One evaluation to store (SI units; fitness None when the simulation failed)."""
+#: The columns of an evaluation the scheduler writes, in the order of a row tuple (SI units, a2
+#: in rad; fitness None when the simulation failed), then the run's diagnostics.
+ROW_COLUMNS: tuple[str, ...] = (
+    "road_index", "step", "candidate", "a2", "l2", "rws", "distance_m", "squat_ratio", "slack_m", "fitness_m",
+    "chain_length_m", "status", "reason", "wall_s", "cached", "cache_key", "cache_hash", "transient",
+    *DIAGNOSTICS)
+ROAD, STEP, CANDIDATE, FITNESS, STATUS, CACHED = (ROW_COLUMNS.index(c) for c in (
+    "road_index", "step", "candidate", "fitness_m", "status", "cached"))
 
-    road_index: int
-    step: int
-    candidate: int
-    a2: float
-    l2: float
-    rws: float
-    distance_m: float | None
-    squat_ratio: float | None
-    slack_m: float | None
-    fitness_m: float | None
-    chain_length_m: float | None
-    status: str
-    reason: str
-    wall_s: float
-    cached: bool
-    cache_key: str
-    transient: bool = False
-    diagnostics: dict[str, float | None] = field(default_factory=dict)  # finaldrive.engine.DIAGNOSTICS
+#: hex digits of a cache key that make its indexed hash (60 bits: a positive BIGINT on every backend)
+HASH_DIGITS = 15
 
 
-_ROW_FIELDS = tuple(f.name for f in fields(EvalRow) if f.name != "diagnostics")
+def key_hash(key: str) -> int:
+    """The indexed part of a cache key (a collision only costs a comparison of the whole key)."""
+    return int(key[:HASH_DIGITS], 16)
+
+
+#: An evaluation to store: values in :data:`ROW_COLUMNS` order.
+Row = tuple[Any, ...]
 
 
 def stored_fitness(session: Session, job_id: int, road_index: int, step: int,
@@ -79,15 +73,19 @@ def stored_slots(session: Session, job_id: int, step: int) -> set[tuple[int, int
 
 
 def cached_evaluations(session: Session, keys: Iterable[str]) -> dict[str, Evaluation]:
-    """The first stored evaluation for each cache key that has one (transient failures excluded)."""
-    wanted = sorted(set(keys))
+    """The first stored evaluation for each cache key that has one (transient failures excluded).
+
+    Looked up by the keys' indexed hashes, then matched on the whole key."""
+    wanted = set(keys)
+    hashes = sorted({key_hash(key) for key in wanted})
     out: dict[str, Evaluation] = {}
-    for start in range(0, len(wanted), _IN_CHUNK):
-        chunk = wanted[start:start + _IN_CHUNK]
-        query = (select(Evaluation).where(Evaluation.cache_key.in_(chunk), Evaluation.transient.is_(False))
+    for start in range(0, len(hashes), _IN_CHUNK):
+        chunk = hashes[start:start + _IN_CHUNK]
+        query = (select(Evaluation).where(Evaluation.cache_hash.in_(chunk), Evaluation.transient.is_(False))
                  .order_by(Evaluation.id))
         for e in session.scalars(query):
-            out.setdefault(e.cache_key, e)
+            if e.cache_key in wanted:
+                out.setdefault(e.cache_key, e)
     return out
 
 
@@ -103,63 +101,84 @@ def last_generations(session: Session, job_id: int) -> dict[int, Generation]:
     return {g.run: g for g in session.scalars(query)}
 
 
-def store_evaluations(session: Session, scheduler_id: str, job_id: int, rows: Sequence[EvalRow]) -> int:
-    """Insert rows, bump the job's counters and each road's best; returns how many were new.
+def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequence[Row],
+                  generations: Sequence[dict[str, Any]]) -> int:
+    """Insert evaluations (then told DE generations), bump the job's counters and each road's best;
+    returns how many evaluations were new.
 
-    Raises :class:`LeaseLost` (and writes nothing) unless the scheduler still owns the job.
+    Fenced: the counters' update matches only while the scheduler owns the running job, so nothing
+    is written otherwise (:class:`LeaseLost`). Rows go to the driver's ``executemany`` as they are
+    (no ORM, no per-row statement building); a slot stored already is skipped, never stored twice.
     """
-    if not owns(session, scheduler_id, job_id):
+    ok = sum(row[STATUS] == EvalStatus.ok.value for row in rows)
+    cached = sum(bool(row[CACHED]) for row in rows)
+    fenced = session.execute(
+        update(Job).where(Job.id == job_id, Job.owner == scheduler_id, Job.state == JobState.running.value)
+        .values(n_done=Job.n_done + ok, n_failed=Job.n_failed + len(rows) - ok, n_cached=Job.n_cached + cached))
+    if fenced.rowcount != 1:  # type: ignore[attr-defined]
         raise LeaseLost(job_id)
-    if not rows:
-        return 0
+    now = _bound_now(session, Evaluation)
+    inserted = _insert_many(session, "evaluations", ("job_id", "created_at", *ROW_COLUMNS),
+                            [(job_id, now, *row) for row in rows], ("job_id", "road_index", "step", "candidate"))
+    if inserted != len(rows):  # some slots were stored already: count the job's rows afresh
+        _recount(session, job_id)
+    _update_best(session, job_id, rows)
+    if generations:
+        now = _bound_now(session, Generation)
+        columns = ("job_id", "run", "generation", "population", "fitness", "state", "best_f", "n_evals", "created_at")
+        _insert_many(session, "generations", columns, [
+            (job_id, g["run"], g["generation"], json.dumps(g["population"]), json.dumps(g["fitness"]),
+             json.dumps(g["state"]), g["best_f"], g["n_evals"], now) for g in generations],
+            ("job_id", "run", "generation"))
+    return inserted
+
+
+def _bound_now(session: Session, model: Any) -> Any:
+    """The database's time as the driver takes it for ``model.created_at`` (SQLite: text)."""
+    dialect = session.get_bind().dialect
+    processor = model.__table__.c.created_at.type.dialect_impl(dialect).bind_processor(dialect)
     now = db_now(session)
-    values = [{**{name: getattr(row, name) for name in _ROW_FIELDS}, **dict.fromkeys(DIAGNOSTICS),
-               **row.diagnostics, "job_id": job_id, "created_at": now} for row in rows]
-    dialect = session.get_bind().dialect.name
-    statement: Any
-    table = Evaluation.__table__  # Core, not the ORM: a bulk insert of plain rows
-    assert isinstance(table, Table)
-    if dialect == "sqlite":
-        statement = sqlite.insert(table).on_conflict_do_nothing()
-    elif dialect == "postgresql":
-        statement = postgresql.insert(table).on_conflict_do_nothing()
-    else:
-        statement = insert(table)
-    c = table.c
-    returned = session.execute(statement.returning(c.id, c.road_index, c.step, c.candidate), values)
-    ids = {(int(r), int(s), int(k)): int(i) for i, r, s, k in returned}
-    new = [row for row in rows if (row.road_index, row.step, row.candidate) in ids]
-    ok = [row for row in new if row.status == EvalStatus.ok.value]
-    job = session.get(Job, job_id)
-    assert job is not None
-    job.n_done += len(ok)
-    job.n_failed += len(new) - len(ok)
-    job.n_cached += sum(row.cached for row in new)
-    best: dict[int, EvalRow] = {}
-    for row in ok:
-        current = best.get(row.road_index)
-        if current is None or _better(row.fitness_m, current.fitness_m):
-            best[row.road_index] = row
-    for road_index, row in best.items():
-        road = session.get(JobRoad, (job_id, road_index))
-        assert road is not None
-        if road.best_fitness is None or _better(row.fitness_m, road.best_fitness):
-            road.best_fitness = row.fitness_m
-            road.best_evaluation_id = ids[(row.road_index, row.step, row.candidate)]
-    return len(new)
+    return processor(now) if processor else now
 
 
-def store_generation(session: Session, scheduler_id: str, job_id: int, *, run: int, generation: int,
-                     state: dict[str, Any], population: list[list[float]], fitness: list[float | None],
-                     best_f: float | None, n_evals: int) -> None:
-    """Record a told DE generation (its state resumes the run); fenced like the evaluations."""
-    if not owns(session, scheduler_id, job_id):
-        raise LeaseLost(job_id)
-    exists = session.execute(select(Generation.id).where(
-        Generation.job_id == job_id, Generation.run == run, Generation.generation == generation)).first()
-    if exists is None:
-        session.add(Generation(job_id=job_id, run=run, generation=generation, state=state, population=population,
-                               fitness=fitness, best_f=best_f, n_evals=n_evals, created_at=db_now(session)))
+def _insert_many(session: Session, table: str, columns: Sequence[str], values: list[Row],
+                 unique: Sequence[str]) -> int:
+    """``INSERT ... ON CONFLICT (unique) DO NOTHING`` of ``values`` through the driver's executemany;
+    returns how many rows were inserted."""
+    if not values:
+        return 0
+    marker = "?" if session.get_bind().dialect.paramstyle == "qmark" else "%s"
+    sql = (f"INSERT INTO {table} ({', '.join(columns)}) VALUES ({', '.join([marker] * len(columns))}) "
+           f"ON CONFLICT ({', '.join(unique)}) DO NOTHING")
+    return int(session.connection().exec_driver_sql(sql, values).rowcount)
+
+
+def _recount(session: Session, job_id: int) -> None:
+    def count(*where: Any) -> Any:
+        return select(func.count()).where(Evaluation.job_id == job_id, *where).scalar_subquery()
+
+    session.execute(update(Job).where(Job.id == job_id).values(
+        n_done=count(Evaluation.status == EvalStatus.ok.value),
+        n_failed=count(Evaluation.status != EvalStatus.ok.value), n_cached=count(Evaluation.cached.is_(True))))
+
+
+def _update_best(session: Session, job_id: int, rows: Sequence[Row]) -> None:
+    """Each road's best evaluation, if one of ``rows`` beats it."""
+    best: dict[int, Row] = {}
+    for row in rows:
+        current = best.get(row[ROAD])
+        if row[STATUS] == EvalStatus.ok.value and (current is None or _better(row[FITNESS], current[FITNESS])):
+            best[row[ROAD]] = row
+    if not best:
+        return
+    roads = session.scalars(select(JobRoad).where(JobRoad.job_id == job_id, JobRoad.road_index.in_(list(best))))
+    for road in roads:
+        row = best[road.road_index]
+        if road.best_fitness is None or _better(row[FITNESS], road.best_fitness):
+            road.best_fitness = row[FITNESS]
+            road.best_evaluation_id = session.execute(select(Evaluation.id).where(
+                Evaluation.job_id == job_id, Evaluation.road_index == row[ROAD], Evaluation.step == row[STEP],
+                Evaluation.candidate == row[CANDIDATE])).scalar_one()
 
 
 def _better(a: float | None, b: float | None) -> bool:

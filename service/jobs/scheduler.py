@@ -29,12 +29,11 @@ import time
 import uuid
 from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import partial
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
-from sqlalchemy.exc import SQLAlchemyError
 
 from finaldrive.engine import (
     DIAGNOSTICS,
@@ -53,25 +52,25 @@ from finaldrive.service.db.engine import Database
 from finaldrive.service.db.leases import beat, claim_jobs, finish_job, register_scheduler, stop_scheduler
 from finaldrive.service.db.models import EvalStatus, Evaluation, Job, JobState
 from finaldrive.service.db.results import (
-    EvalRow,
-    LeaseLost,
+    FITNESS,
+    ROW_COLUMNS,
+    Row,
     cached_evaluations,
+    key_hash,
     last_generations,
-    store_evaluations,
-    store_generation,
     stored_fitness,
     stored_slots,
 )
 from finaldrive.service.jobs.cache import context_prefix, design_keys
 from finaldrive.service.jobs.plan import JobPlan, build_plan
 from finaldrive.service.jobs.recordings import RecordingProducer
+from finaldrive.service.jobs.writer import Guard, Writer, Writes
 from finaldrive.service.schemas import JobSpec
 from finaldrive.workers import Executor
 from finaldrive.workers.dispatch import Dispatcher, Task, Work
 from finaldrive.workers.evaluate import run_engine_on_roads, warm_up_engine
 
 log = logging.getLogger(__name__)
-T = TypeVar("T")
 
 #: How the engine's reason for a simulation stopped by its wall-time limit begins (not reused from the cache).
 TIME_LIMIT = "time limit"
@@ -93,17 +92,6 @@ class SchedulerConfig:
     recordings: bool = True        # also produce queued recordings
 
 
-@dataclass
-class _Writes:
-    """What a job has to store, in order: evaluations, then each completed generation."""
-
-    rows: list[EvalRow] = field(default_factory=list)
-    generations: list[dict[str, Any]] = field(default_factory=list)
-
-    def __len__(self) -> int:
-        return len(self.rows) + len(self.generations)
-
-
 class ActiveJob:
     """A job this scheduler owns: its runs, what waits to be stored, and its dispatcher work."""
 
@@ -113,7 +101,7 @@ class ActiveJob:
         self.runs = {run.index: run for run in runs}
         self.resumed = resumed
         self.intake: deque[Request] = deque()
-        self.writes = _Writes()
+        self.writes = Writes()
         self.copies: dict[tuple[int, int, int], list[int]] = {}   # (road, step, first candidate) -> duplicates
         self.keys: dict[tuple[int, int, int], str] = {}           # dispatched (road, step, candidate) -> key
         self.prefixes = [context_prefix(r.road, plan.settings, plan.vehicle, engine_version)
@@ -141,11 +129,11 @@ class Scheduler:
         self.dispatcher = Dispatcher(executor, task, warmup=warmup, batch_size=config.batch_size)
         self.jobs: dict[int, ActiveJob] = {}
         self.recordings = RecordingProducer(db, self.id, lease_s=config.lease_s) if config.recordings else None
+        self._db = Guard(db, f"scheduler {self.id}")
+        self.writer = Writer(db, self.id)
         self._registered = False
         self._next_beat = 0.0
         self._next_flush = 0.0
-        self._backoff = 0.0
-        self._db_down_since: float | None = None
 
     # ------------------------------------------------------------------ the loop
     def run(self, stop: threading.Event) -> None:
@@ -177,38 +165,12 @@ class Scheduler:
         self.dispatcher.close()
         if self.recordings is not None:
             self.recordings.stop()
-        deadline = time.monotonic() + 2.0
-        while any(len(j.writes) for j in self.jobs.values()) and time.monotonic() < deadline:
-            self._backoff = 0.0
-            self._flush()
+        self._flush()
+        self.writer.drain(2.0)
+        self.writer.close()
         self.jobs.clear()
         self._db(lambda s: stop_scheduler(s, self.id), "give the jobs back")
         log.info("scheduler %s stopped", self.id)
-
-    # ------------------------------------------------------------------ the store, guarded
-    def _db(self, fn: Callable[[Any], T], what: str, *, write: bool = True) -> T | None:
-        """Run ``fn(session)`` in a write (or read) transaction; a database error is logged and
-        returns None."""
-        if self._backoff and time.monotonic() < self._backoff:
-            return None
-        try:
-            with self.db.write() if write else self.db.read() as session:
-                result = fn(session)
-        except LeaseLost:
-            raise
-        except SQLAlchemyError as exc:
-            now = time.monotonic()
-            if self._db_down_since is None:
-                self._db_down_since = now
-                log.warning("scheduler %s: the store is unavailable (%s): %s; retrying", self.id, what,
-                            " ".join(str(exc).split())[:500])
-            self._backoff = now + min(5.0, 0.25 + 0.5 * (now - self._db_down_since))
-            return None
-        if self._db_down_since is not None:
-            log.warning("scheduler %s: the store is back after %.1f s", self.id, time.monotonic() - self._db_down_since)
-            self._db_down_since = None
-        self._backoff = 0.0
-        return result
 
     def _maintain(self) -> None:
         if not self._registered:
@@ -255,6 +217,7 @@ class Scheduler:
         log.info("scheduler %s: job %s %s", self.id, job_id, "resumed" if resumed else "started")
 
     def _drop(self, job_id: int) -> None:
+        self.writer.forget(job_id)
         job = self.jobs.pop(job_id, None)
         if job is not None and job.work is not None:
             self.dispatcher.remove(job.work.key)
@@ -266,15 +229,16 @@ class Scheduler:
             for run in job.runs.values():
                 if not run.done:
                     job.intake.extend(run.take())
-            while job.intake:
-                request = job.intake[0]
-                found = self._db(partial(_lookup, job=job, request=request), f"job {job.id}", write=False)
-                if found is None:
-                    break  # the store is unavailable: keep the request, retry next turn
-                job.intake.popleft()
-                self._admit(job, request, *found)
+            if job.intake:
+                requests = list(job.intake)
+                found = self._db(partial(_lookup, job=job, requests=requests), f"job {job.id}", write=False)
+                if found is not None:  # else the store is unavailable: keep the requests, retry next turn
+                    job.intake.clear()
+                    hits = found[1]
+                    for request, (stored, keys) in zip(requests, found[0], strict=True):
+                        self._admit(job, request, stored, keys, hits)
             assert job.work is not None
-            job.work.paused = len(job.writes) > self.config.max_backlog_rows
+            job.work.paused = len(job.writes) + self.writer.pending(job.id) > self.config.max_backlog_rows
 
     def _admit(self, job: ActiveJob, request: Request, stored: dict[int, float], keys: list[str],
                hits: dict[str, Evaluation]) -> None:
@@ -302,7 +266,7 @@ class Scheduler:
             rows = [_row_from_cache(hits[keys[i]], part.road, part.step, int(part.candidates[j]), part.designs[j],
                                     keys[i]) for j, i in enumerate(hit)]
             job.writes.rows += rows
-            self._tell(job, part, np.array([math.nan if r.fitness_m is None else r.fitness_m for r in rows]))
+            self._tell(job, part, np.array([math.nan if r[FITNESS] is None else r[FITNESS] for r in rows]))
         if todo:
             assert job.work is not None
             job.work.queue.append(request.part(np.array(todo)))
@@ -311,19 +275,18 @@ class Scheduler:
         if job.id not in self.jobs:
             return
         fitness = fitness_values(batch)
-        rows = []
-        for j, candidate in enumerate(part.candidates):
-            slot = (part.road, part.step, int(candidate))
-            key = job.keys.pop(slot)
-            rows.append(_row_from_result(batch, fitness, j, slot, part.designs[j], key, cached=False,
-                                         transient=transient))
-            for copy in job.copies.pop(slot, []):
-                rows.append(_row_from_result(batch, fitness, j, (part.road, part.step, copy), part.designs[j], key,
-                                             cached=True, transient=transient))
+        keys = [job.keys.pop((part.road, part.step, int(c))) for c in part.candidates]
+        rows = _rows_from_result(part, batch, fitness, keys, transient)
+        told_candidates, told_fitness, told_designs = list(part.candidates), list(fitness), list(part.designs)
+        for j, candidate in enumerate(part.candidates):  # designs that were duplicates of this one
+            for copy in job.copies.pop((part.road, part.step, int(candidate)), []):
+                rows.append((part.road, part.step, copy, *rows[j][3:_WALL], 0.0, True, *rows[j][_CACHED + 1:]))
+                told_candidates.append(copy)
+                told_fitness.append(fitness[j])
+                told_designs.append(part.designs[j])
         job.writes.rows += rows
-        told = Request(part.run, part.step, part.road, np.array([r.candidate for r in rows]),
-                       np.array([[r.a2, r.l2, r.rws] for r in rows]))
-        self._tell(job, told, np.array([math.nan if r.fitness_m is None else r.fitness_m for r in rows]))
+        told = Request(part.run, part.step, part.road, np.array(told_candidates), np.array(told_designs))
+        self._tell(job, told, np.array(told_fitness, dtype=float))
 
     def _on_failure(self, job: ActiveJob, part: Request, reason: str) -> None:
         """A part that could not be evaluated: failed evaluations with the reason, never reused."""
@@ -344,7 +307,7 @@ class Scheduler:
 
     def _finish_ready(self) -> None:
         for job in list(self.jobs.values()):
-            if not job.done(self.dispatcher.in_flight(job.id)) or job.writes:
+            if not job.done(self.dispatcher.in_flight(job.id)) or job.writes or self.writer.pending(job.id):
                 continue
             finished = partial(finish_job, scheduler_id=self.id, job_id=job.id, state=JobState.succeeded)
             if self._db(finished, f"finish job {job.id}") is not None:
@@ -352,21 +315,14 @@ class Scheduler:
                 self._drop(job.id)
 
     def _flush(self) -> None:
+        """Hand each job's new results to the writer; drop the jobs it found lost."""
         self._next_flush = time.monotonic() + self.config.flush_s
-        for job in list(self.jobs.values()):
-            if not job.writes:
-                continue
-            writes, job.writes = job.writes, _Writes()
-            try:
-                done = self._db(partial(_store, owner=self.id, job_id=job.id, writes=writes),
-                                f"store results of job {job.id}")
-            except LeaseLost:
-                log.info("scheduler %s: lost job %s before storing its results", self.id, job.id)
-                self._drop(job.id)
-                continue
-            if done is None:  # keep them, in order, before anything newer
-                job.writes = _Writes(writes.rows + job.writes.rows, writes.generations + job.writes.generations)
-                return
+        for job in self.jobs.values():
+            if job.writes:
+                writes, job.writes = job.writes, Writes()
+                self.writer.put(job.id, writes)
+        for job_id in self.writer.lost():
+            self._drop(job_id)
 
 
 def _load(session: Any, job_id: int) -> tuple[dict[str, Any], bool, set[tuple[int, int]], dict[int, Any]]:
@@ -381,54 +337,53 @@ def _load(session: Any, job_id: int) -> tuple[dict[str, Any], bool, set[tuple[in
     return dict(job.spec), True, stored_slots(session, job_id, sweep_step), de_states
 
 
-def _lookup(session: Any, job: ActiveJob, request: Request) -> tuple[dict[int, float], list[str], dict[str, Any]]:
-    """What the store knows of a request: stored slots (a resumed job) and result-cache hits."""
-    stored = stored_fitness(session, job.id, request.road, request.step, request.candidates) if job.resumed else {}
-    rest = request.part(np.array([i for i, c in enumerate(request.candidates) if int(c) not in stored], dtype=int))
-    keys = design_keys(job.prefixes[request.road], rest.designs)
-    return stored, keys, cached_evaluations(session, keys)
+def _lookup(session: Any, job: ActiveJob, requests: list[Request]
+            ) -> tuple[list[tuple[dict[int, float], list[str]]], dict[str, Any]]:
+    """What the store knows of requests: for each, its stored slots (a resumed job) and the cache
+    keys of the rest; and the result-cache hits among all those keys (one query)."""
+    out = []
+    for request in requests:
+        stored = (stored_fitness(session, job.id, request.road, request.step, request.candidates)
+                  if job.resumed else {})
+        rest = request.part(np.array([i for i, c in enumerate(request.candidates) if int(c) not in stored],
+                                     dtype=int))
+        out.append((stored, design_keys(job.prefixes[request.road], rest.designs)))
+    return out, cached_evaluations(session, [key for _, keys in out for key in keys])
 
 
-def _store(session: Any, owner: str, job_id: int, writes: _Writes) -> bool:
-    store_evaluations(session, owner, job_id, writes.rows)
-    for generation in writes.generations:
-        store_generation(session, owner, job_id, **generation)
-    return True
+#: where the wall time and the cached flag sit in a row (a copy of a duplicate: 0 s, cached)
+_WALL, _CACHED = ROW_COLUMNS.index("wall_s"), ROW_COLUMNS.index("cached")
 
 
-def _row_from_result(batch: BatchResult, fitness: np.ndarray, j: int, slot: tuple[int, int, int],
-                     design: np.ndarray, key: str, *, cached: bool, transient: bool) -> EvalRow:
-    value = float(fitness[j])
-    ok = math.isfinite(value)
-    reason = batch.reason[j] or ("" if ok else f"non-finite fitness ({batch.fitness_m[j]})")
-    transient = transient or (batch.status[j] != STATUS_OK and reason.startswith(TIME_LIMIT))
-    return EvalRow(
-        road_index=slot[0], step=slot[1], candidate=slot[2], a2=float(design[0]), l2=float(design[1]),
-        rws=float(design[2]), distance_m=_finite(batch.distance_m[j]), squat_ratio=_finite(batch.squat_ratio[j]),
-        slack_m=_finite(batch.slack_m[j]), fitness_m=value if ok else None,
-        chain_length_m=_finite(batch.chain_length_m[j]),
-        status=EvalStatus.ok.value if ok else EvalStatus.failed.value, reason=reason,
-        wall_s=0.0 if cached else float(batch.wall_s[j]), cached=cached, cache_key=key, transient=transient,
-        diagnostics={name: _finite(getattr(batch, name)[j]) for name in DIAGNOSTICS},
-    )
+def _rows_from_result(part: Request, batch: BatchResult, fitness: np.ndarray, keys: list[str],
+                      transient: bool) -> list[Row]:
+    """The rows of a finished part, built column by column (NaN stored as NULL)."""
+    n = len(part)
+    ok = np.isfinite(fitness)
+    reasons = [batch.reason[j] or ("" if ok[j] else f"non-finite fitness ({batch.fitness_m[j]})") for j in range(n)]
+    failed_for_now = [transient or (batch.status[j] != STATUS_OK and reasons[j].startswith(TIME_LIMIT))
+                      for j in range(n)]
+    columns = [
+        [part.road] * n, [part.step] * n, part.candidates.tolist(), *(_nullable(c) for c in part.designs.T),
+        _nullable(batch.distance_m), _nullable(batch.squat_ratio), _nullable(batch.slack_m), _nullable(fitness),
+        _nullable(batch.chain_length_m),
+        [EvalStatus.ok.value if good else EvalStatus.failed.value for good in ok.tolist()], reasons,
+        batch.wall_s.tolist(), [False] * n, keys, [key_hash(key) for key in keys], failed_for_now,
+        *(_nullable(getattr(batch, name)) for name in DIAGNOSTICS),
+    ]
+    return list(zip(*columns, strict=True))
 
 
-def _row_from_cache(hit: Evaluation, road: int, step: int, candidate: int, design: np.ndarray, key: str) -> EvalRow:
-    return EvalRow(
-        road_index=road, step=step, candidate=candidate, a2=float(design[0]), l2=float(design[1]),
-        rws=float(design[2]), distance_m=hit.distance_m, squat_ratio=hit.squat_ratio, slack_m=hit.slack_m,
-        fitness_m=hit.fitness_m, chain_length_m=hit.chain_length_m, status=hit.status, reason=hit.reason,
-        wall_s=0.0, cached=True, cache_key=key, diagnostics={name: getattr(hit, name) for name in DIAGNOSTICS},
-    )
-
-
-def _finite(v: float) -> float | None:
-    v = float(v)
-    return v if math.isfinite(v) else None
+def _row_from_cache(hit: Evaluation, road: int, step: int, candidate: int, design: np.ndarray, key: str) -> Row:
+    values = {name: getattr(hit, name) for name in ROW_COLUMNS[6:]}
+    values.update(wall_s=0.0, cached=True, cache_key=key, cache_hash=key_hash(key), transient=False)
+    return (road, step, candidate, *_nullable(design), *values.values())
 
 
 def _nullable(values: Sequence[float] | np.ndarray) -> list[float | None]:
-    return [float(v) if math.isfinite(v) else None for v in values]
+    """Plain floats, None for NaN and infinities."""
+    plain = values.tolist() if isinstance(values, np.ndarray) else [float(v) for v in values]
+    return [v if math.isfinite(v) else None for v in plain]
 
 
 
@@ -441,7 +396,7 @@ def run_scheduler(settings: Settings, stop: threading.Event, *, scheduler_id: st
     from finaldrive.service.services import open_database
     from finaldrive.workers import make_executor
 
-    db = open_database(settings)
+    db = open_database(settings, durable=False)  # results lost with the machine's power are recomputed
     db.lock_timeout_s = SCHEDULER_LOCK_TIMEOUT_S
     executor = make_executor(settings.executor, num_workers=settings.num_workers, address=settings.ray_address,
                              niceness=settings.niceness)

@@ -108,7 +108,6 @@ def test_de_survives_three_sigkills(server: Any, tmp_path: Path) -> None:
     client = server.start()
     job_id = client.post("/v1/jobs", json=LONG_DE).json()["id"]
     total = client.get(f"/v1/jobs/{job_id}").json()["total"]
-    reference = reference_de(LONG_DE)
     for kill in range(3):
         target = total * (kill + 1) // 4
         deadline = time.monotonic() + 120
@@ -123,6 +122,7 @@ def test_de_survives_three_sigkills(server: Any, tmp_path: Path) -> None:
         assert client.get(f"/v1/jobs/{job_id}").json()["state"] in ("interrupted", "running")
     job = wait(client, job_id)
     assert job["state"] == "succeeded"
+    reference = reference_de(LONG_DE)  # after the kills: the server must not race ahead meanwhile
 
     with sqlite3.connect(tmp_path / "e2e.db") as db:
         slots = db.execute("SELECT step, candidate FROM evaluations WHERE job_id = ?", (job_id,)).fetchall()

@@ -1,0 +1,178 @@
+"""The scheduler's way to the store: guarded transactions, and results written by a thread of their own.
+
+:class:`Guard` runs a transaction and turns a database error (locked past the busy timeout, disk
+full, connection lost) into ``None`` with back-off, logged once per outage, so the caller keeps
+its data and tries again later. :class:`Writer` stores each job's results in order in its own
+thread, so the scheduler's loop keeps dispatching while a write waits for the disk or a lock
+(the database drivers release the GIL while they work).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+from sqlalchemy.exc import SQLAlchemyError
+
+from finaldrive.service.db.engine import Database
+from finaldrive.service.db.results import LeaseLost, Row, store_results
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
+
+
+@dataclass
+class Writes:
+    """What a job has to store, in order: evaluations, then each completed DE generation."""
+
+    rows: list[Row] = field(default_factory=list)
+    generations: list[dict[str, Any]] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.rows) + len(self.generations)
+
+    def extend(self, later: Writes) -> None:
+        self.rows += later.rows
+        self.generations += later.generations
+
+
+class Guard:
+    """Transactions that survive the store's outages: an error is logged, backs off, returns None."""
+
+    def __init__(self, db: Database, name: str) -> None:
+        self.db = db
+        self.name = name
+        self._retry_at = 0.0
+        self._down_since: float | None = None
+
+    def waiting(self) -> float:
+        """Seconds until the next attempt is allowed (0: now)."""
+        return max(0.0, self._retry_at - time.monotonic())
+
+    def __call__(self, fn: Callable[[Any], T], what: str, *, write: bool = True) -> T | None:
+        """``fn(session)`` in a write (or read) transaction; None if the store failed or is backing off.
+        :class:`LeaseLost` is raised (nothing was written)."""
+        if self.waiting():
+            return None
+        try:
+            with self.db.write() if write else self.db.read() as session:
+                result = fn(session)
+        except LeaseLost:
+            raise
+        except SQLAlchemyError as exc:
+            now = time.monotonic()
+            if self._down_since is None:
+                self._down_since = now
+                log.warning("%s: the store is unavailable (%s): %s; retrying", self.name, what,
+                            " ".join(str(exc).split())[:500])
+            self._retry_at = now + min(5.0, 0.25 + 0.5 * (now - self._down_since))
+            return None
+        if self._down_since is not None:
+            log.warning("%s: the store is back after %.1f s", self.name, time.monotonic() - self._down_since)
+            self._down_since = None
+        self._retry_at = 0.0
+        return result
+
+
+class Writer:
+    """Stores jobs' :class:`Writes` in a thread, each job's in the order given, one transaction a
+    job at a time (what queued meanwhile is merged into it)."""
+
+    def __init__(self, db: Database, scheduler_id: str) -> None:
+        self.scheduler_id = scheduler_id
+        self._guard = Guard(db, f"scheduler {scheduler_id} (writer)")
+        self._cond = threading.Condition()
+        self._queue: deque[int] = deque()           # jobs with writes waiting, oldest first
+        self._waiting: dict[int, Writes] = {}       # job -> its writes not yet taken by the thread
+        self._busy: dict[int, int] = {}             # job -> rows+generations being written now
+        self._lost: list[int] = []
+        self._stop = False
+        self._thread = threading.Thread(target=self._run, name="finaldrive-writer", daemon=True)
+        self._thread.start()
+
+    def put(self, job_id: int, writes: Writes) -> None:
+        """Queue ``writes`` after everything queued for the job before."""
+        with self._cond:
+            if job_id in self._waiting:
+                self._waiting[job_id].extend(writes)
+            else:
+                self._waiting[job_id] = writes
+                self._queue.append(job_id)
+            self._cond.notify()
+
+    def pending(self, job_id: int) -> int:
+        """Rows and generations of the job not yet stored."""
+        with self._cond:
+            waiting = self._waiting.get(job_id)
+            return (len(waiting) if waiting else 0) + self._busy.get(job_id, 0)
+
+    def lost(self) -> list[int]:
+        """Jobs whose lease was found lost when their results were written (each reported once);
+        their results were dropped."""
+        with self._cond:
+            lost, self._lost = self._lost, []
+            return lost
+
+    def forget(self, job_id: int) -> None:
+        """Drop the job's writes that wait (the job is no longer ours)."""
+        with self._cond:
+            if self._waiting.pop(job_id, None) is not None:
+                self._queue.remove(job_id)
+
+    def drain(self, timeout: float) -> bool:
+        """Wait until everything queued is stored (or ``timeout`` s); True if it was."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while self._waiting or self._busy:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cond.wait(left)
+            return True
+
+    def close(self) -> None:
+        """Stop the thread; what still waits is dropped (the jobs resume from what is stored)."""
+        with self._cond:
+            self._stop = True
+            self._cond.notify_all()
+        self._thread.join(5.0)
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._queue and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                job_id = self._queue.popleft()
+                writes = self._waiting.pop(job_id)
+                self._busy[job_id] = len(writes)
+            stored = self._store(job_id, writes)
+            with self._cond:
+                del self._busy[job_id]
+                if not stored and not self._stop:  # the store is unavailable: first in line again
+                    if job_id in self._waiting:
+                        writes.extend(self._waiting[job_id])
+                        self._queue.remove(job_id)
+                    self._waiting[job_id] = writes
+                    self._queue.appendleft(job_id)
+                self._cond.notify_all()
+            if not stored:
+                time.sleep(min(self._guard.waiting(), 0.5) or 0.01)
+
+    def _store(self, job_id: int, writes: Writes) -> bool:
+        """True when stored, or dropped because the job is no longer ours."""
+        try:
+            done = self._guard(lambda s: store_results(s, self.scheduler_id, job_id, writes.rows, writes.generations),
+                               f"store results of job {job_id}")
+        except LeaseLost:
+            log.info("scheduler %s: lost job %s before storing its results", self.scheduler_id, job_id)
+            with self._cond:
+                self._lost.append(job_id)
+            return True
+        return done is not None
