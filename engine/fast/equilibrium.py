@@ -80,13 +80,14 @@ def _newton(free, p0, kind, rp, xtol, max_iter, fd):
     return free, False
 
 
-def static_equilibrium(p: np.ndarray, road: Road) -> np.ndarray:
-    """The equilibrium pose q (sprocket reference points opposite the tangent points)."""
+def static_equilibrium(p: np.ndarray, road: Road, pose: np.ndarray | None = None) -> np.ndarray:
+    """The equilibrium pose q (sprocket reference points opposite the tangent points); pose: the
+    design pose (kinematics.design_pose) if known."""
     p0 = p.copy()
     p0[P.TORQUE] = 0.0
     kind, rp = road.packed()
     try:
-        free, ok = _newton(first_guess(p, road), p0, kind, rp, _XTOL, _MAX_NEWTON, _FD_STEP)
+        free, ok = _newton(first_guess(p, road, pose), p0, kind, rp, _XTOL, _MAX_NEWTON, _FD_STEP)
     except np.linalg.LinAlgError:
         raise EquilibriumError("static equilibrium not found: singular stiffness") from None
     if not ok:

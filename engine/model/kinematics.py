@@ -175,16 +175,16 @@ def squat_ratio_at(q: np.ndarray, p: np.ndarray, contact_x: float, contact_y: fl
     return float(p[P.SQUAT_K] * run / rise)
 
 
-def design_squat_ratio(p: np.ndarray) -> float:
-    """Squat ratio at the design pose (theta = 0, phi = phi0, unloaded tyres)."""
-    q = design_pose(p)
+def design_squat_ratio(p: np.ndarray, pose: np.ndarray | None = None) -> float:
+    """Squat ratio at the design pose (theta = 0, phi = phi0, unloaded tyres; pose: design_pose(p))."""
+    q = design_pose(p) if pose is None else pose
     return squat_ratio_at(q, p, q[X6], q[Y6] - p[P.RT0])
 
 
-def first_guess(p: np.ndarray, road: Road) -> np.ndarray:
-    """A start for the static equilibrium, (y1, theta, phi, fs): the design pose pitched onto the
-    road about the rear contact point, both tyres preloaded."""
-    q0 = design_pose(p)
+def first_guess(p: np.ndarray, road: Road, pose: np.ndarray | None = None) -> np.ndarray:
+    """A start for the static equilibrium, (y1, theta, phi, fs): the design pose (pose:
+    design_pose(p)) pitched onto the road about the rear contact point, both tyres preloaded."""
+    q0 = design_pose(p) if pose is None else pose
     wheelbase = q0[X15] - q0[X14]
     h_rear, h_front = float(road.height_at(0.0)), float(road.height_at(wheelbase))
     pitch = math.atan2(h_front - h_rear, wheelbase)
