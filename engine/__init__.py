@@ -26,6 +26,7 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("Vehicle", "VehicleError", "default_vehicle", "load_vehicle", "load_vehicle_dict"),
                     "finaldrive.engine.vehicle"),
     "static_geometry": "finaldrive.engine.geometry",
+    "compile_engine": "finaldrive.engine.precompile",
     **dict.fromkeys(("Cost", "estimate_cost"), "finaldrive.engine.cost"),
     **dict.fromkeys(("StaticLoads", "calibration_design", "solve_chassis_cog", "solve_torque", "static_loads"),
                     "finaldrive.engine.calibrate"),
@@ -86,6 +87,7 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
     )
     from finaldrive.engine.model.road import Road as Road, RoadError as RoadError
     from finaldrive.engine.optimize import DifferentialEvolution as DifferentialEvolution
+    from finaldrive.engine.precompile import compile_engine as compile_engine
     from finaldrive.engine.simulation import evaluate as evaluate, simulate as simulate
     from finaldrive.engine.study.plan import (
         PAPER_SWEEP_STEP as PAPER_SWEEP_STEP,

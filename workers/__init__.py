@@ -53,9 +53,16 @@ def make_executor(
     simulations. ``address``: Ray cluster to join (else ``RAY_ADDRESS``, else a local Ray);
     ignored by serial and process. ``niceness``: added to the worker processes' OS niceness
     (``os.nice``, once per process), so the calling process keeps its core; ignored by serial.
+
+    Before a process or Ray pool starts, the engine's compiled code is built once on this machine
+    if it is not yet (``engine.compile_engine``), so the workers only load it.
     """
     if kind == "serial":
         return SerialExecutor()
+    if kind in ("process", "ray"):
+        from finaldrive.engine import compile_engine
+
+        compile_engine()
     if kind == "process":
         return ProcessExecutor(num_workers=num_workers, max_retries=max_retries, niceness=niceness)
     if kind == "ray":
