@@ -1,61 +1,75 @@
 """The engine's compiled code, built once per machine before any worker starts.
 
 numba compiles a kernel at its first call and caches it on disk (engine.model.jit). Left to the
-workers, every worker of a fresh machine would compile the same code at once, each for 15-40 s.
-:func:`compile_engine` instead compiles everything once, in a child process (the caller never
-imports numba), and leaves a marker in the cache directory; later processes only load the cache.
+workers, every worker of a fresh machine would compile the same code at once, each for 30-50 s a
+method. :func:`compile_engine` instead compiles each method once, in child processes (the caller
+never imports numba), and leaves a marker per method in the cache directory; later processes
+only load the cache.
 
-    python -m finaldrive.engine.precompile      # what compile_engine runs when the marker is missing
+    python -m finaldrive.engine.precompile fast [reference] [--nice]    # what compile_engine runs
 """
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import time
 
 from finaldrive.engine.model.jit import cache_dir
 
-#: File in the cache directory that says every kernel is compiled there.
-MARKER = "compiled"
-#: Simulated time of the runs that compile the kernels (both methods, with series) [s].
+#: Simulated time of the runs that compile a method's kernels (with series) [s].
 _SIMULATED_S = 0.02
+#: Added to the niceness of a method compiled in the background.
+_BACKGROUND_NICENESS = 10
 
 
-def is_compiled() -> bool:
-    """Whether this machine's cache holds the engine's compiled code (for the current sources)."""
-    return (cache_dir() / MARKER).exists()
+def is_compiled(method: str) -> bool:
+    """Whether this machine's cache holds the method's compiled code (for the current sources)."""
+    return (cache_dir() / f"compiled-{method}").exists()
 
 
-def compile_engine() -> float:
-    """Compile the engine's kernels into the on-disk cache unless already there; the seconds spent.
+def _command(method: str) -> list[str]:
+    return [sys.executable, "-m", "finaldrive.engine.precompile", method]
 
-    Runs ``python -m finaldrive.engine.precompile`` and waits for it; raises
-    subprocess.CalledProcessError with its output if it fails."""
-    if is_compiled():
-        return 0.0
+
+def compile_engine(now: tuple[str, ...] = ("fast",), later: tuple[str, ...] = ("reference",)) -> float:
+    """Compile the kernels of the methods ``now`` into the on-disk cache unless already there, and
+    wait; start those of ``later`` in a background child process (niced) and do not wait. Returns
+    the seconds spent waiting. Raises subprocess.CalledProcessError if a compilation fails.
+
+    The default method (fast) is ready when this returns; a reference run that starts before its
+    background compilation has finished compiles for itself, as without this function."""
     start = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "finaldrive.engine.precompile"], check=True, capture_output=True)
+    for method in now:
+        if not is_compiled(method):
+            subprocess.run(_command(method), check=True, capture_output=True)
+    for method in later:
+        if not is_compiled(method):
+            subprocess.Popen([*_command(method), "--nice"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                             start_new_session=True)
     return time.perf_counter() - start
 
 
-def _compile_here() -> None:
-    """Simulate briefly with each method (every kernel a run calls gets compiled and cached), then
-    write the marker."""
+def _compile_here(method: str) -> None:
+    """Simulate briefly (every kernel a run of the method calls gets compiled and cached), then
+    write the method's marker."""
     from finaldrive.engine.api import Design, SimSettings
     from finaldrive.engine.model.road import Road
     from finaldrive.engine.simulation import simulate
 
-    design = Design.from_deg(195.3, 0.037, 0.088)
-    road = Road.parse("sine:0.04:3")
-    for settings in (SimSettings(method="fast", duration=_SIMULATED_S, series=True),
-                     SimSettings(method="reference", duration=_SIMULATED_S, series=True)):
-        result = simulate(design, road, settings)
-        if not result.ok:
-            raise RuntimeError(f"the {settings.method} method failed while compiling: {result.reason}")
+    settings = SimSettings(method="reference" if method == "reference" else "fast", duration=_SIMULATED_S,
+                           series=True)
+    result = simulate(Design.from_deg(195.3, 0.037, 0.088), Road.parse("sine:0.04:3"), settings)
+    if not result.ok:
+        raise RuntimeError(f"the {method} method failed while compiling: {result.reason}")
     cache_dir().mkdir(parents=True, exist_ok=True)
-    (cache_dir() / MARKER).touch()
+    (cache_dir() / f"compiled-{method}").touch()
 
 
 if __name__ == "__main__":
-    _compile_here()
+    if "--nice" in sys.argv:
+        os.nice(_BACKGROUND_NICENESS)
+    for name in sys.argv[1:]:
+        if name != "--nice":
+            _compile_here(name)
