@@ -15,11 +15,14 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 
 from finaldrive.engine.model.jit import cache_dir
 
 #: Simulated time of the runs that compile a method's kernels (with series) [s].
 _SIMULATED_S = 0.02
+#: A background compilation younger than this [s] is taken as still running.
+_LOCK_S = 600.0
 #: Added to the niceness of a method compiled in the background.
 _BACKGROUND_NICENESS = 10
 
@@ -33,22 +36,34 @@ def _command(method: str) -> list[str]:
     return [sys.executable, "-m", "finaldrive.engine.precompile", method]
 
 
-def compile_engine(now: tuple[str, ...] = ("fast",), later: tuple[str, ...] = ("reference",)) -> float:
-    """Compile the kernels of the methods ``now`` into the on-disk cache unless already there, and
-    wait; start those of ``later`` in a background child process (niced) and do not wait. Returns
-    the seconds spent waiting. Raises subprocess.CalledProcessError if a compilation fails.
+def compile_engine(now: tuple[str, ...] = ("fast",),
+                   later: tuple[str, ...] = ("reference",)) -> Callable[[], float]:
+    """Start compiling the kernels of the methods ``now`` into the on-disk cache, unless already
+    there, and those of ``later`` in a niced background process; return ``wait``, which waits for
+    ``now`` (the seconds since the start) and raises RuntimeError if a compilation failed.
 
-    The default method (fast) is ready when this returns; a reference run that starts before its
-    background compilation has finished compiles for itself, as without this function."""
+    The caller may start its workers' pool meanwhile, as long as no task runs before ``wait()``.
+    A reference run that starts before its background compilation has finished compiles for itself."""
     start = time.perf_counter()
-    for method in now:
-        if not is_compiled(method):
-            subprocess.run(_command(method), check=True, capture_output=True)
+    children = [subprocess.Popen(_command(m), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                for m in now if not is_compiled(m)]
     for method in later:
-        if not is_compiled(method):
-            subprocess.Popen([*_command(method), "--nice"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                             start_new_session=True)
-    return time.perf_counter() - start
+        lock = cache_dir() / f"compiling-{method}"
+        if is_compiled(method) or (lock.exists() and time.time() - lock.stat().st_mtime < _LOCK_S):
+            continue
+        cache_dir().mkdir(parents=True, exist_ok=True)
+        lock.touch()
+        subprocess.Popen([*_command(method), "--nice"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                         start_new_session=True)
+
+    def wait() -> float:
+        for child in children:
+            _, err = child.communicate()
+            if child.returncode != 0:
+                raise RuntimeError(f"compiling the engine failed: {err.decode(errors='replace')[-2000:]}")
+        return time.perf_counter() - start
+
+    return wait
 
 
 def _compile_here(method: str) -> None:
