@@ -129,7 +129,7 @@ import time, sys
 t0 = time.perf_counter()
 sys.path.insert(0, {repo!r})
 from finaldrive.engine import compile_engine
-compile_engine()
+print(compile_engine(now=("fast",), later=())(), compile_engine(now=("reference",), later=())())
 print(time.perf_counter() - t0)
 """
 
@@ -144,16 +144,23 @@ print(time.perf_counter() - t0)
 """
 
 
+def finaldrive_command() -> str:
+    """The `finaldrive` script of this interpreter's environment (else the one on PATH)."""
+    beside = Path(sys.executable).parent / "finaldrive"
+    return str(beside) if beside.exists() else shutil.which("finaldrive") or "finaldrive"
+
+
 def cold_start(repeat: int) -> dict[str, float]:
-    """Seconds: compile_engine into an empty cache directory (once); a fresh process's first
+    """Seconds: compile_engine into an empty cache directory (once per method); a fresh process's first
     result with that cache, median of `repeat` per method; `finaldrive geometry`, median."""
     out: dict[str, float] = {}
     with tempfile.TemporaryDirectory() as cache:
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
-        t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-c", _COMPILE.format(repo=str(REPO))], env=env, check=True,
-                       capture_output=True)
-        out["compile_engine, empty cache"] = time.perf_counter() - t0
+        done = subprocess.run([sys.executable, "-c", _COMPILE.format(repo=str(REPO))], env=env, check=True,
+                              capture_output=True, text=True)
+        fast, reference = (float(v) for v in done.stdout.split()[-2:])
+        out["compile_engine, empty cache: fast method"] = fast
+        out["compile_engine, empty cache: reference method"] = reference
         for method in ("fast", "reference"):
             code = _FIRST_CALL.format(repo=str(REPO), method=method)
             walls = []
@@ -162,7 +169,7 @@ def cold_start(repeat: int) -> dict[str, float]:
                 subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True)
                 walls.append(time.perf_counter() - t0)
             out[f"first {method} result, fresh process, cached"] = statistics.median(walls)
-    exe = shutil.which("finaldrive") or "finaldrive"
+    exe = finaldrive_command()
     walls = []
     for _ in range(repeat):
         t0 = time.perf_counter()
@@ -180,7 +187,7 @@ def cli_evaluate_cost(n_extra: int = 100, repeat: int = 3) -> tuple[float, float
     rows += [
         f"{rng.uniform(0, 360):.3f},{rng.uniform(0, 0.2):.4f},{rng.uniform(0.05, 0.15):.4f}" for _ in range(n_extra)
     ]
-    exe = shutil.which("finaldrive") or "finaldrive"
+    exe = finaldrive_command()
     with tempfile.TemporaryDirectory() as tmp:
         one, many = Path(tmp) / "one.csv", Path(tmp) / "many.csv"
         one.write_text("\n".join(rows[:2]) + "\n")
