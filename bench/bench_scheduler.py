@@ -19,12 +19,12 @@ end), ``efficiency`` (ideal_s / wall_s), ``peak_in_flight`` (most tasks in fligh
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import heapq
 import json
 import os
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -33,6 +33,7 @@ import numpy as np
 
 from finaldrive.engine import BatchResult, Road, SimSettings, Vehicle
 from finaldrive.service.config import Settings
+from finaldrive.service.db.models import Job
 from finaldrive.service.jobs.scheduler import Scheduler, SchedulerConfig
 from finaldrive.service.jobs.submit import submit_job
 from finaldrive.service.machine import describe
@@ -66,7 +67,8 @@ class SleepTask:
 class VirtualCluster(ExecutorMixin):
     """``cpus`` CPUs on a clock, no processes: a task holds a CPU for ``ms`` a design (queued
     first-in first-out while none is free) and is reported when that time has passed on the wall
-    clock. Its result is computed at submission (the stand-in told not to sleep). The scheduler and the store
+    clock. Its result is computed at submission (the stand-in told not to sleep), with the
+    in-worker times it would have had. The scheduler and the store
     get the whole machine, so the figure is theirs alone, free of Ray's per-worker cost.
     """
 
@@ -85,9 +87,10 @@ class VirtualCluster(ExecutorMixin):
 
     def submit(self, fn: Any, batch: Any, *shared: Shared) -> int:
         values = [handle.ref for handle in shared]
-        result = fn(batch, *values)
+        held = self.ms * 1e-3 * len(batch)
+        result = dataclasses.replace(fn(batch, *values), busy_s=held, compute_s=held)  # as if it had slept
         start = max(time.perf_counter(), heapq.heappop(self._free_at))
-        end = start + self.ms * 1e-3 * len(batch)
+        end = start + held
         heapq.heappush(self._free_at, end)
         self._ids += 1
         heapq.heappush(self._pending, (end, self._ids, result))
@@ -126,6 +129,19 @@ def _warm(executor: Any, cpus: int) -> None:
         pending -= len(executor.poll(5.0))
 
 
+def _count_submissions(executor: Any) -> list[int]:
+    """Count the tasks submitted to ``executor`` from now on (in the returned one-element list)."""
+    count = [0]
+    submit = executor.submit
+
+    def counted(*args: Any) -> int:
+        count[0] += 1
+        return submit(*args)
+
+    executor.submit = counted
+    return count
+
+
 def run(cpus: int, eval_ms: float, plan: str, db_url: str | None, executor_kind: str) -> dict[str, Any]:
     tmp = tempfile.TemporaryDirectory(prefix="finaldrive-bench-")
     url = db_url or f"sqlite:///{Path(tmp.name) / 'bench.db'}"
@@ -137,14 +153,13 @@ def run(cpus: int, eval_ms: float, plan: str, db_url: str | None, executor_kind:
         if executor_kind == "ray":
             _warm(executor, cpus)
         task = SleepTask(eval_ms, sleep=executor_kind == "ray")
+        tasks = _count_submissions(executor)
         scheduler = Scheduler(db, executor, task=task, warmup=None, executor_kind=executor_kind,
                               config=SchedulerConfig(recordings=False))
         start = time.perf_counter()
         job, _ = submit_job(db, JobSpec.model_validate(PLANS[plan]), idempotency_key=None,
                             max_evaluations=10**9, max_cpu_hours=1e9)
         peak = 0
-        stop = threading.Event()
-        from finaldrive.service.db.models import Job
 
         def done() -> bool:
             with db.read() as session:
@@ -152,7 +167,7 @@ def run(cpus: int, eval_ms: float, plan: str, db_url: str | None, executor_kind:
             return state in ("succeeded", "failed", "cancelled")
 
         next_check = 0.0
-        while not stop.is_set():
+        while True:
             scheduler.turn(0.02)
             peak = max(peak, scheduler.dispatcher.in_flight())
             if time.perf_counter() >= next_check:
@@ -174,6 +189,7 @@ def run(cpus: int, eval_ms: float, plan: str, db_url: str | None, executor_kind:
             "store": url.split(":", 1)[0], "state": state,
             "evaluations": stored, "ideal_s": round(ideal, 3), "wall_s": round(wall, 3),
             "efficiency": round(ideal / wall, 4) if wall else None, "peak_in_flight": peak,
+            "tasks": tasks[0], "designs_per_task": round(stored / max(1, tasks[0]), 2),
             "evaluations_per_s": round(stored / wall, 1), "machine": describe()}
 
 

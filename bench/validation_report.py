@@ -253,7 +253,7 @@ def main() -> None:
           "to survive (the diagnostic is there to show it).")
     strides = [simulate(GEOMETRIES["g2_150"], sine3, SimSettings(series=True, series_stride=k)) for k in (1, 10, 20)]
     print("\nPeak chain tension of geometry 2 with R_WS = 0.150 m (fast) read off the series at strides 1, 10 and 20 "
-          "(1, 10 and 20 ms): " + ", ".join(f"{float(r.series['chain_tension'].max()):,.0f} N" for r in strides)
+          "(1, 10 and 20 ms): " + ", ".join(f"{float(r.series['chain_tension_n'].max()):,.0f} N" for r in strides)
           + f"; tracked at every step: {strides[0].chain_tension_max_n:,.0f} N in all three runs (the runs are"
           " bit-identical: the stride no longer moves the steps).\n")
     print("Chain overrun: with the load range, no Table 14 geometry pushes its upper run by more than a few hundred")
@@ -316,7 +316,7 @@ def main() -> None:
           f"{abs(r11s.distance_m - r11sh.distance_m) * 1000:.4f} mm |")
     print("\n## Constraints, derivatives and energy without dissipation\n")
     print(f"- max|Phi| over a 3.5 s run on sine:0.04:2 (Table 11 design): "
-          f"{rough.series['residual'].max():.2e} (limit 1e-6).")
+          f"{rough.series['residual_m'].max():.2e} (limit 1e-6).")
     print("- Energy: drive, dampers and longitudinal tyre force off, the bike dropped 2 cm onto a flat road: the total")
     print("  mechanical energy (kinetic + gravity + suspension and tyre springs) drifts by 1.75e-3 of the 39.9 J drop")
     print("  energy over 1 s with the reference method, and by 2.7e-5 with the fast path's minimal-coordinate")

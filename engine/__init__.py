@@ -21,17 +21,19 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("DIAGNOSTIC_MEANINGS", "DIAGNOSTICS", "STATUS_FAILED", "STATUS_OK", "BatchResult", "Design",
                      "DesignError", "Method", "SimResult", "SimSettings"), "finaldrive.engine.api"),
     **dict.fromkeys(("evaluate", "simulate"), "finaldrive.engine.simulation"),
-    **dict.fromkeys(("Road", "RoadError"), "finaldrive.engine.model.road"),
+    **dict.fromkeys(("PROFILE_MAX_POINTS", "Road", "RoadError"), "finaldrive.engine.model.road"),
     **dict.fromkeys(("coordinate_index", "point_positions"), "finaldrive.engine.model.coordinates"),
-    **dict.fromkeys(("Vehicle", "VehicleError", "default_vehicle", "load_vehicle", "load_vehicle_dict"),
-                    "finaldrive.engine.vehicle"),
+    **dict.fromkeys(("VEHICLE_VALUE_LIMIT", "Vehicle", "VehicleError", "default_vehicle", "load_vehicle",
+                     "load_vehicle_dict"), "finaldrive.engine.vehicle"),
     "static_geometry": "finaldrive.engine.geometry",
     "compile_engine": "finaldrive.engine.precompile",
+    **dict.fromkeys(("FIELDS", "Field", "base_of", "design_label", "history_record", "human", "unit_of"),
+                    "finaldrive.engine.fields"),
     **dict.fromkeys(("Cost", "estimate_cost"), "finaldrive.engine.cost"),
     **dict.fromkeys(("StaticLoads", "calibration_design", "solve_chassis_cog", "solve_torque", "static_loads"),
                     "finaldrive.engine.calibrate"),
     "DifferentialEvolution": "finaldrive.engine.optimize",
-    **dict.fromkeys(("PRESETS", "GROUPS", "NamedRoad", "ProfileResolver", "paper_tables", "preset_group",
+    **dict.fromkeys(("PRESETS", "GROUPS", "NamedRoad", "ProfileResolver", "paper_row", "paper_tables", "preset_group",
                      "resolve_roads"), "finaldrive.engine.study.presets"),
     **dict.fromkeys(("MAX_GRID_DESIGNS", "TABLE9_DEFAULT_RWS_M", "parse_grid", "product_grid", "table9_grid"),
                     "finaldrive.engine.study.sweep"),
@@ -80,12 +82,25 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         static_loads as static_loads,
     )
     from finaldrive.engine.cost import Cost as Cost, estimate_cost as estimate_cost
+    from finaldrive.engine.fields import (
+        FIELDS as FIELDS,
+        Field as Field,
+        base_of as base_of,
+        design_label as design_label,
+        history_record as history_record,
+        human as human,
+        unit_of as unit_of,
+    )
     from finaldrive.engine.geometry import static_geometry as static_geometry
     from finaldrive.engine.model.coordinates import (
         coordinate_index as coordinate_index,
         point_positions as point_positions,
     )
-    from finaldrive.engine.model.road import Road as Road, RoadError as RoadError
+    from finaldrive.engine.model.road import (
+        PROFILE_MAX_POINTS as PROFILE_MAX_POINTS,
+        Road as Road,
+        RoadError as RoadError,
+    )
     from finaldrive.engine.optimize import DifferentialEvolution as DifferentialEvolution
     from finaldrive.engine.precompile import compile_engine as compile_engine
     from finaldrive.engine.simulation import evaluate as evaluate, simulate as simulate
@@ -104,6 +119,7 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         PRESETS as PRESETS,
         NamedRoad as NamedRoad,
         ProfileResolver as ProfileResolver,
+        paper_row as paper_row,
         paper_tables as paper_tables,
         preset_group as preset_group,
         resolve_roads as resolve_roads,
@@ -133,6 +149,7 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         table9_grid as table9_grid,
     )
     from finaldrive.engine.vehicle import (
+        VEHICLE_VALUE_LIMIT as VEHICLE_VALUE_LIMIT,
         Vehicle as Vehicle,
         VehicleError as VehicleError,
         default_vehicle as default_vehicle,

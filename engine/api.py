@@ -200,10 +200,6 @@ class SimResult:
     def ok(self) -> bool:
         return self.status == STATUS_OK
 
-    @property
-    def slack_mm(self) -> float:
-        return self.slack_m * 1000.0
-
     def summary(self) -> dict[str, float | str]:
         """The scalar outputs as a JSON-ready dict (CLI keys)."""
         return {
@@ -211,7 +207,7 @@ class SimResult:
             "reason": self.reason,
             "distance_m": self.distance_m,
             "squat_ratio": self.squat_ratio,
-            "slack_mm": self.slack_mm,
+            "slack_m": self.slack_m,
             "fitness_m": self.fitness_m,
             "chain_length_m": self.chain_length_m,
             "wall_s": self.wall_s,

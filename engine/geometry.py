@@ -24,9 +24,9 @@ def static_geometry(design: Design, vehicle: Vehicle) -> dict[str, Any]:
         setup = prepare(design, Road(), SimSettings(), vehicle)
     return {
         "a2_deg": design.a2_deg,
-        "l2": design.l2,
-        "rws": design.rws,
-        "res": float(setup.p[P.R_ES]),
+        "l2_m": design.l2,
+        "rws_m": design.rws,
+        "res_m": float(setup.p[P.R_ES]),
         "squat_ratio": setup.squat_ratio,
         "chain_length_m": float(setup.p[P.L_CHAIN]),
         "taut_length_m": taut_length(setup.q0),

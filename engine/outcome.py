@@ -6,8 +6,9 @@ from __future__ import annotations
 # loop did its share of steps and returns its whole state; called again it continues exactly.
 OK, NONFINITE, RESIDUAL, CORRECTOR, REAR_AIRBORNE, FRONT_AIRBORNE, PAUSED = 0, 1, 2, 3, 4, 5, 6
 
-# Columns of the time series (engine.simulation names them).
-SERIES_COLUMNS = ("t", "x1", "theta", "chain_tension", "fz_rear", "fz_front", "kappa",
-                  "fx", "effective_radius", "wheel_speed", "sprocket_speed", "taut_length",
-                  "tyre_u", "sigma", "residual")
+# Columns of the time series, unit in the name (engine.simulation turns x1_m into distance_m and
+# theta_rad into pitch_deg; docs/fields.md).
+SERIES_COLUMNS = ("t_s", "x1_m", "theta_rad", "chain_tension_n", "fz_rear_n", "fz_front_n", "kappa",
+                  "fx_n", "effective_radius_m", "wheel_speed_rad_s", "sprocket_speed_rad_s", "taut_length_m",
+                  "tyre_u_m", "sigma_m", "residual_m")
 N_SERIES = len(SERIES_COLUMNS)

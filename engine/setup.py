@@ -45,7 +45,9 @@ class Setup:
 
 def prepare(design: Design, road: Road, settings: SimSettings, vehicle: Vehicle) -> Setup:
     """Parameters, static equilibrium and the chain length L of eq. (69) at t = 0. Each method
-    finds the equilibrium of its own model (the reference in its 39 natural coordinates)."""
+    finds the equilibrium of its own model (the reference in its 39 natural coordinates).
+    Raises DesignError for a design beyond the vehicle's limits (Vehicle.check_design)."""
+    vehicle.check_design(design)
     p = pack_parameters(vehicle, design, settings)
     pose = design_pose(p)
     equilibrium = reference_equilibrium if settings.method == "reference" else static_equilibrium

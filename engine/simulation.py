@@ -95,6 +95,8 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
     vehicle = vehicle or default_vehicle()
     try:
         setup = prepare(design, road, settings, vehicle)
+    except DesignError as exc:
+        return _failed(f"invalid design: {exc}", math.nan, math.nan, start)
     except (GeometryError, EquilibriumError, ReferenceEquilibriumError) as exc:
         return _failed(str(exc), math.nan, math.nan, start)
     p = setup.p
@@ -205,12 +207,12 @@ def _series(series: np.ndarray, qs: np.ndarray, setup: Setup, p: np.ndarray,
             method: str) -> dict[str, np.ndarray]:
     """Name the recorded columns (Fig. 13 quantities) and add derived ones."""
     out = {name: series[:, k].copy() for k, name in enumerate(outcome.SERIES_COLUMNS)}
-    out["distance"] = out.pop("x1") - setup.q0[X1]
-    out["pitch"] = out.pop("theta")
+    out["distance_m"] = out.pop("x1_m") - setup.q0[X1]
+    out["pitch_deg"] = np.degrees(out.pop("theta_rad"))
     out["squat_ratio"] = np.array([squat_ratio_at(q, p, q[X14], q[Y14]) for q in qs])
     out["q"] = np.array(qs, dtype=float)
     if method == "fast":
-        del out["residual"]  # minimal coordinates satisfy the constraints exactly
+        del out["residual_m"]  # minimal coordinates satisfy the constraints exactly
     return out
 
 

@@ -1,8 +1,10 @@
 """Vehicle parameters: the paper's bike by default, or a user's file of the same shape.
 
 The file (engine/data/vehicle.json) groups parameters; each is ``{"value", "unit", "source"}``.
-Loading validates every key: a missing key, a non-number, or a physically impossible value
-(negative mass, zero stiffness, ...) raises :class:`VehicleError` naming the key.
+Loading validates every key: a missing key, a non-number, a value beyond :data:`VEHICLE_VALUE_LIMIT`,
+or a physically impossible value (negative mass, zero stiffness, ...) raises :class:`VehicleError`
+naming the key. The file also bounds the designs it can carry (group ``design_limits``, see
+:meth:`Vehicle.check_design`).
 """
 
 from __future__ import annotations
@@ -18,12 +20,20 @@ from typing import Any
 
 import numpy as np
 
+from finaldrive.engine.api import Design, DesignError
+
 #: A rule: (lower bound, lower inclusive, upper bound); None = unbounded.
 Rule = tuple[float | None, bool, float | None]
 _POSITIVE = (0.0, False, None)
 _NON_NEGATIVE = (0.0, True, None)
 _FRACTION = (0.0, True, 1.0)
 _ANY = (None, True, None)
+
+#: Largest magnitude of any vehicle value (SI units): far above every parameter of a motorcycle
+#: (docs/engine.md's Fz_max = 1e9 N, which switches the load range off, included), far below where
+#: the model's arithmetic overflows. Positive values are also at least POSITIVE_MIN.
+VEHICLE_VALUE_LIMIT = 1.0e10
+POSITIVE_MIN = 1.0e-9
 
 #: The model's vehicle parameters, in the order the compiled model packs them (engine.model.params is
 #: generated from this list), each with its rule: (lower bound, lower inclusive, upper bound).
@@ -54,6 +64,11 @@ _TARGET_RULES: dict[str, Rule] = {
     "calibration_a2_deg": _ANY,
     "calibration_l2": _NON_NEGATIVE,
     "calibration_rws": _POSITIVE,
+}
+#: Physical limits of a design on this vehicle (group ``design_limits``): validated and carried, not packed.
+_LIMIT_RULES: dict[str, Rule] = {
+    "l2_max": _POSITIVE,
+    "rws_tyre_margin": _NON_NEGATIVE,
 }
 
 
@@ -89,6 +104,22 @@ class Vehicle:
             d["parameters"][group][key]["value"] = value
         return load_vehicle_dict(d)
 
+    def design_limits(self) -> dict[str, float]:
+        """The largest L2 and R_WS a design may have on this vehicle [m]: L2 <= l2_max (the room around
+        the swingarm pivot), R_WS <= rt0 - rws_tyre_margin (the wheel sprocket inside the rear tyre)."""
+        return {"l2_m": self["l2_max"], "rws_m": round(self["rt0"] - self["rws_tyre_margin"], 12)}
+
+    def check_design(self, design: Design) -> None:
+        """Raise :class:`DesignError` naming the variable and the limit if ``design`` does not fit."""
+        limits = self.design_limits()
+        if design.l2 > limits["l2_m"]:
+            raise DesignError(f"l2 = {design.l2:g} m: must be <= l2_max = {limits['l2_m']:g} m "
+                              "(vehicle file, design_limits)")
+        if design.rws > limits["rws_m"]:
+            raise DesignError(f"rws = {design.rws:g} m: must be <= {limits['rws_m']:g} m, the rear tyre's radius "
+                              f"rt0 = {self['rt0']:g} m less rws_tyre_margin = {self['rws_tyre_margin']:g} m "
+                              "(vehicle file)")
+
     def to_dict(self) -> dict[str, Any]:
         units, sources, groups = dict(self.units), dict(self.sources), dict(self.groups)
         out: dict[str, Any] = {"name": self.name, "parameters": {}}
@@ -105,17 +136,30 @@ class Vehicle:
 
 def _check(key: str, raw: Any, rule: tuple[float | None, bool, float | None]) -> float:
     if isinstance(raw, bool) or not isinstance(raw, (int, float)):
-        raise VehicleError(f"vehicle parameter {key!r}: value must be a number, got {raw!r}")
-    value = float(raw)
+        raise VehicleError(f"vehicle parameter {key!r}: value must be a number, got {_show(raw)}")
+    try:
+        value = float(raw)
+    except OverflowError:  # an integer beyond any float
+        value = math.inf
     if not math.isfinite(value):
-        raise VehicleError(f"vehicle parameter {key!r}: value must be finite, got {raw!r}")
+        raise VehicleError(f"vehicle parameter {key!r}: value must be finite, got {_show(raw)}")
+    if abs(value) > VEHICLE_VALUE_LIMIT:
+        raise VehicleError(f"vehicle parameter {key!r}: magnitude must be <= {VEHICLE_VALUE_LIMIT:g}, got {value:g}")
     lo, lo_inclusive, hi = rule
     if lo is not None and (value < lo or (value == lo and not lo_inclusive)):
         bound = ">=" if lo_inclusive else ">"
         raise VehicleError(f"vehicle parameter {key!r}: must be {bound} {lo:g}, got {value:g}")
     if hi is not None and value > hi:
         raise VehicleError(f"vehicle parameter {key!r}: must be <= {hi:g}, got {value:g}")
+    if rule == _POSITIVE and value < POSITIVE_MIN:
+        raise VehicleError(f"vehicle parameter {key!r}: must be >= {POSITIVE_MIN:g}, got {value:g}")
     return value
+
+
+def _show(raw: Any) -> str:
+    """A value for a message, never longer than 24 characters (an integer of any size included)."""
+    text = repr(raw) if not isinstance(raw, int) or abs(raw) < 10**20 else f"an integer beyond {VEHICLE_VALUE_LIMIT:g}"
+    return text if len(text) <= 24 else text[:21] + "..."
 
 
 def load_vehicle_dict(data: Any) -> Vehicle:
@@ -132,7 +176,7 @@ def load_vehicle_dict(data: Any) -> Vehicle:
             if key in found:
                 raise VehicleError(f"vehicle parameter {key!r}: given twice")
             found[key] = (group, entry["value"], str(entry.get("unit", "")), str(entry.get("source", "")))
-    rules = {**_RULES, **_TARGET_RULES}
+    rules = {**_RULES, **_TARGET_RULES, **_LIMIT_RULES}
     for key in rules:
         if key not in found:
             raise VehicleError(f"vehicle parameter {key!r}: missing")
@@ -147,6 +191,8 @@ def load_vehicle_dict(data: Any) -> Vehicle:
         raise VehicleError("vehicle parameter 'Fz_max': the load range Fz_min < Fz0 < Fz_max is required")
     if v["rt_bottoming"] >= v["rt0"]:
         raise VehicleError("vehicle parameter 'rt_bottoming': must be less than the unloaded radius rt0")
+    if v["rws_tyre_margin"] >= v["rt0"]:
+        raise VehicleError("vehicle parameter 'rws_tyre_margin': must be less than the rear tyre's radius rt0")
     return Vehicle(
         name=str(data.get("name", "")),
         values=values,

@@ -83,6 +83,11 @@ class ServiceClient:
         headers = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
         return self.object("POST", "/v1/jobs", json=spec, headers=headers)
 
+    def upload_profile(self, csv_text: str, name: str = "") -> dict[str, Any]:
+        """Store a measured road (CSV of x, y [m]); the answer's ``spec`` (profile:ID) names it in jobs."""
+        return self.object("POST", "/v1/roads", content=csv_text.encode(), params={"name": name},
+                           headers={"Content-Type": "text/csv"})
+
     def jobs(self, *, state: str | None = None, kind: str | None = None, limit: int = 50) -> list[dict[str, Any]]:
         params = {k: v for k, v in {"state": state, "kind": kind, "limit": limit}.items() if v is not None}
         return list(self.json("GET", "/v1/jobs", params=params)["items"])

@@ -28,12 +28,12 @@ from finaldrive.service.scene import ROW_OFFSET_M
 
 #: Fig. 13 panels: (series key, axis label).
 SERIES_PANELS: tuple[tuple[str, str], ...] = (
-    ("distance", "distance [m]"),
-    ("chain_tension", "chain tension [N]"),
+    ("distance_m", "distance [m]"),
+    ("chain_tension_n", "chain tension [N]"),
     ("squat_ratio", "squat ratio SR [-]"),
-    ("fz_rear", "rear vertical force Fz [N]"),
+    ("fz_rear_n", "rear vertical force Fz [N]"),
     ("kappa", "rear longitudinal slip κ [-]"),
-    ("fx", "rear longitudinal force Fx [N]"),
+    ("fx_n", "rear longitudinal force Fx [N]"),
 )
 _DPI = 110
 
@@ -122,15 +122,16 @@ def _edges(centres: np.ndarray, periodic: bool = False) -> np.ndarray:
 def de_history_png(path: str | Path, history: list[dict[str, Any]], population: np.ndarray, *, title: str) -> None:
     """Best and mean fitness per generation (left) and the final population on the polar map (right).
 
-    ``history`` holds engine.optimize.de records: ``generation``, ``best_f``, ``mean_f``;
+    ``history`` holds generation records in the outputs' names (``finaldrive.engine.history_record``):
+    ``generation``, ``best_fitness_m``, ``mean_fitness_m``;
     ``population`` is (n, 3), or (n, 4) with the fitness as fourth column (used for colour).
     """
     population = np.asarray(population, dtype=float)
     fig = Figure(figsize=(12, 5.2))
     ax = fig.add_subplot(121)
     gens = [h["generation"] for h in history]
-    ax.plot(gens, [_num(h.get("best_f")) for h in history], "o-", label="best fitness")
-    ax.plot(gens, [_num(h.get("mean_f")) for h in history], "s--", label="mean fitness (finite)")
+    ax.plot(gens, [_num(h.get("best_fitness_m")) for h in history], "o-", label="best fitness")
+    ax.plot(gens, [_num(h.get("mean_fitness_m")) for h in history], "s--", label="mean fitness (finite)")
     ax.set_xlabel("generation (0 = initial population)")
     ax.set_ylabel("fitness [m]")
     ax.grid(alpha=0.3)
@@ -170,7 +171,7 @@ def series_png(path: str | Path, runs: list[tuple[str, Mapping[str, np.ndarray]]
     axes = fig.subplots(3, 2, sharex=True)
     for ax, (key, label) in zip(axes.ravel(), SERIES_PANELS, strict=True):
         for name, series in runs:
-            ax.plot(series["t"], series[key], lw=1.2, label=name)
+            ax.plot(series["t_s"], series[key], lw=1.2, label=name)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
     for ax in axes[-1]:

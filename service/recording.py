@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import rerun as rr
@@ -25,13 +26,13 @@ APPLICATION_ID = "finaldrive"
 TIMELINE = "sim_time"
 #: (series key, entity name, legend unit) of the Fig. 13 plots.
 PLOTS: tuple[tuple[str, str, str], ...] = (
-    ("distance", "distance", "m"),
-    ("chain_tension", "chain_tension", "N"),
+    ("distance_m", "distance_m", "m"),
+    ("chain_tension_n", "chain_tension_n", "N"),
     ("squat_ratio", "squat_ratio", "-"),
-    ("fz_rear", "fz_rear", "N"),
-    ("fz_front", "fz_front", "N"),
-    ("kappa", "slip", "-"),
-    ("fx", "fx", "N"),
+    ("fz_rear_n", "fz_rear_n", "N"),
+    ("fz_front_n", "fz_front_n", "N"),
+    ("kappa", "kappa", "-"),
+    ("fx_n", "fx_n", "N"),
 )
 PARTS = ("chassis", "swingarm", "damper", "fork", "rear_wheel", "front_wheel",
          "engine_sprocket", "wheel_sprocket", "chain")
@@ -65,7 +66,8 @@ def simulate_runs(designs: Sequence[tuple[str, Design]], road: Road, settings: S
         result = simulate(design, road, settings, vehicle)
         if not result.ok or result.series is None:
             raise RecordingError(f"{label}: the simulation failed: {result.reason}")
-        runs.append(Run(label, design, result.series))
+        outcome = {k: float(v) for k, v in result.summary().items() if isinstance(v, float)}
+        runs.append(Run(label, design, result.series, outcome))
     return runs
 
 
@@ -98,11 +100,12 @@ def _log_run(rec: rr.RecordingStream, run: Run, key: str, index: int, road: Road
     d = run.design
     offset = -index * ROW_OFFSET_M
     root = f"/world/{key}"
-    rec.send_property(key, rr.AnyValues(label=run.label, a2_deg=d.a2_deg, l2_m=d.l2, rws_m=d.rws))
+    values: dict[str, Any] = {"label": run.label, "a2_deg": d.a2_deg, "l2_m": d.l2, "rws_m": d.rws, **run.outcome}
+    rec.send_property(key, rr.AnyValues(**values))
     rec.log(root, rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)  # into the view's y-down space
     rec.log(f"{root}/road", rr.LineStrips2D([road_strip(road, [run], offset)], radii=0.004, colors=(90, 90, 90),
                                             labels=[run.label], show_labels=True), static=True)
-    t = run.series["t"]
+    t = run.series["t_s"]
     times = rr.TimeColumn(TIMELINE, duration=t)
     for series_key, name, unit in PLOTS:
         path = f"/plots/{name}/{key}"
@@ -154,6 +157,19 @@ def scene_at(path: str | Path, t: float) -> tuple[dict[str, list[np.ndarray]], l
             arrows.append((np.asarray(batch.column("Arrows2D:origins")[row].as_py()),
                            np.asarray(batch.column("Arrows2D:vectors")[row].as_py())))
     return strips, arrows
+
+
+def properties_of(path: str | Path, key: str) -> dict[str, object]:
+    """The recording property ``key`` (a run's label, design and outcome) of a finished .rrd."""
+    from rerun.chunk import RrdReader
+
+    for chunk in RrdReader(str(path)).stream().to_chunks():
+        if chunk.is_static and chunk.entity_path == f"/__properties/{key}":
+            batch = chunk.to_record_batch()
+            values = {name: batch.column(name)[0].as_py() for name in batch.schema.names
+                      if not name.startswith("rerun.")}
+            return {name: v[0] if isinstance(v, list) and len(v) == 1 else v for name, v in values.items()}
+    raise KeyError(f"{path}: no property {key!r}")
 
 
 def read_rows(path: str | Path) -> dict[str, list[object]]:

@@ -8,7 +8,7 @@ so that several geometries can ride the same road one above the other.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -23,11 +23,13 @@ _CIRCLE = np.linspace(0.0, 2.0 * np.pi, 49)
 
 @dataclass(frozen=True)
 class Run:
-    """One simulated geometry: its label, design and engine series (``series=True``)."""
+    """One simulated geometry: its label, design, engine series (``series=True``) and its scalar
+    outcome (distance, squat ratio, slack, fitness and the run's exact extremes and energy ledger)."""
 
     label: str
     design: Design
     series: dict[str, np.ndarray]
+    outcome: dict[str, float] = field(default_factory=dict)
 
 
 _RT, _FT, _BETA, _ALPHA = (coordinate_index(n) for n in ("rt", "ft", "beta", "alpha"))
@@ -74,7 +76,7 @@ def tyre_forces(run: Run, k: int, offset: float = 0.0) -> tuple[np.ndarray, np.n
     """Arrow origins and vectors [m]: rear Fz, rear Fx, front Fz at the contact points."""
     s, q = run.series, run.series["q"][k]
     rear, front = _pt(q, 14, offset), _pt(q, 15, offset)
-    vectors = np.array([[0.0, s["fz_rear"][k]], [s["fx"][k], 0.0], [0.0, s["fz_front"][k]]])
+    vectors = np.array([[0.0, s["fz_rear_n"][k]], [s["fx_n"][k], 0.0], [0.0, s["fz_front_n"][k]]])
     return np.array([rear, rear, front]), vectors * FORCE_SCALE_M_PER_N
 
 

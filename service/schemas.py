@@ -8,11 +8,23 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StringConstraints, create_model, model_validator
+from pydantic import (
+    AllowInfNan,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    Strict,
+    StringConstraints,
+    create_model,
+    model_validator,
+)
 
 from finaldrive.engine import (
     DE_LIMITS,
     DIAGNOSTIC_MEANINGS,
+    PROFILE_MAX_POINTS,
+    VEHICLE_VALUE_LIMIT,
     Bounds as StudyBounds,
     DESettings,
     SimSettings,
@@ -24,6 +36,12 @@ JobKind = StudyKind
 JobStateName = Literal["queued", "running", "succeeded", "failed", "cancelled", "interrupted"]
 
 _STRICT = ConfigDict(extra="forbid")
+
+#: A number in a request: a JSON number, finite (never a string, NaN or Infinity).
+Num = Annotated[float, Strict(), AllowInfNan(False)]
+#: A whole number in a request: a JSON integer (never a string or 10.0).
+Whole = Annotated[int, Strict()]
+Name = Annotated[str, StringConstraints(max_length=64)]
 
 
 _SIM = SimSettings()
@@ -41,8 +59,8 @@ class SimulationSpec(BaseModel):
 
     model_config = _STRICT
 
-    duration: float = Field(_SIM.duration, gt=0, le=60, description="simulated time [s]")
-    dt: float = Field(_SIM.dt, gt=0, le=0.01, description="time step [s]")
+    duration: Num = Field(_SIM.duration, gt=0, le=60, description="simulated time [s]")
+    dt: Num = Field(_SIM.dt, ge=1e-6, le=0.01, description="time step [s]")
     method: Literal["reference", "fast"] = Field(
         _SIM.method, description="fast (default, validated against the paper's method) or reference")
 
@@ -52,14 +70,14 @@ class DESpec(BaseModel):
 
     model_config = _STRICT
 
-    np: int = _de_field("np", "population size NP")
-    f: float = _de_field("f", "differential weight F")
-    cp: float = _de_field("cp", "crossover probability CP")
-    mp: float = _de_field("mp", "mutation probability MP")
-    mr_fraction: float = _de_field("mr_fraction", "mutation range MR / (upper - lower)")
-    iters: int = _de_field("iters", "generations after the initial population")
-    patience: int | None = _de_field("patience", "stop after this many generations without improvement")
-    max_evals: int | None = _de_field("max_evals", "evaluation budget per DE run (>= np)")
+    np: Whole = _de_field("np", "population size NP")
+    f: Num = _de_field("f", "differential weight F")
+    cp: Num = _de_field("cp", "crossover probability CP")
+    mp: Num = _de_field("mp", "mutation probability MP")
+    mr_fraction: Num = _de_field("mr_fraction", "mutation range MR / (upper - lower)")
+    iters: Whole = _de_field("iters", "generations after the initial population")
+    patience: Whole | None = _de_field("patience", "stop after this many generations without improvement")
+    max_evals: Whole | None = _de_field("max_evals", "evaluation budget per DE run (>= np)")
 
     @model_validator(mode="after")
     def _valid(self) -> DESpec:
@@ -70,7 +88,7 @@ class DESpec(BaseModel):
         return self
 
 
-Interval = tuple[float, float]
+Interval = tuple[Num, Num]
 
 
 class Bounds(BaseModel):
@@ -79,8 +97,9 @@ class Bounds(BaseModel):
     model_config = _STRICT
 
     a2_deg: Interval = Field(_BOX.a2_deg, description="sprocket angle a2 [deg], periodic over a full turn")
-    l2_m: Interval = Field(_BOX.l2_m, description="pivot-to-sprocket distance L2 [m]")
-    rws_m: Interval = Field(_BOX.rws_m, description="wheel sprocket radius R_WS [m]")
+    l2_m: Interval = Field(_BOX.l2_m, description="pivot-to-sprocket distance L2 [m]; at most the vehicle's l2_max")
+    rws_m: Interval = Field(_BOX.rws_m, description="wheel sprocket radius R_WS [m]; at most the vehicle's "
+                            "rt0 - rws_tyre_margin")
 
     @model_validator(mode="after")
     def _valid(self) -> Bounds:
@@ -89,6 +108,33 @@ class Bounds(BaseModel):
         except SpaceError as exc:
             raise ValueError(str(exc)) from None
         return self
+
+
+def _not_huge(value: Any) -> Any:
+    """An integer too large for a float is refused with the limit (not as "not a number")."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > VEHICLE_VALUE_LIMIT:
+        raise ValueError(f"magnitude must be <= {VEHICLE_VALUE_LIMIT:g}")
+    return value
+
+
+class VehicleValue(BaseModel):
+    """One vehicle parameter, as in engine/data/vehicle.json."""
+
+    model_config = _STRICT
+
+    value: Annotated[Num, BeforeValidator(_not_huge)] = Field(ge=-VEHICLE_VALUE_LIMIT, le=VEHICLE_VALUE_LIMIT)
+    unit: str = Field("", max_length=40)
+    source: str = Field("", max_length=2000)
+
+
+class VehicleFile(BaseModel):
+    """A vehicle file (engine/data/vehicle.json's layout: groups of parameters); the engine checks
+    every key and value (magnitude at most 1e10, each parameter's own rule, the design limits)."""
+
+    model_config = _STRICT
+
+    name: str = Field("", max_length=200)
+    parameters: dict[Name, dict[Name, VehicleValue]] = Field(max_length=32)
 
 
 class JobSpec(BaseModel):
@@ -106,9 +152,9 @@ class JobSpec(BaseModel):
     bounds: Bounds | None = Field(None, description="de / robust-de / paper-study (default: Table 8)")
     de: DESpec | None = Field(None, description="de / robust-de / paper-study (default: Table 10)")
     aggregate: Literal["mean", "worst"] | None = Field(None, description="robust-de only (default mean)")
-    seed: int = Field(0, ge=0, le=2**32 - 1)
+    seed: Whole = Field(0, ge=0, le=2**32 - 1)
     settings: SimulationSpec = Field(default_factory=SimulationSpec)
-    vehicle: dict[str, Any] | None = Field(None, description="vehicle parameters (default: the paper's)")
+    vehicle: VehicleFile | None = Field(None, description="vehicle parameters (default: the paper's)")
 
     @model_validator(mode="after")
     def _kind_fields(self) -> JobSpec:
@@ -141,10 +187,9 @@ class _EvaluationCore(BaseModel):
     road: str
     step: int = Field(description="DE generation (0 = initial population); 0 for sweeps, -1 for a paper-study's sweep")
     candidate: int = Field(description="row in the sweep grid or the DE generation")
-    a2: float = Field(description="[rad]")
-    a2_deg: float
-    l2: float = Field(description="[m]")
-    rws: float = Field(description="[m]")
+    a2_deg: float = Field(description="sprocket angle a2 [deg]")
+    l2_m: float = Field(description="pivot-to-sprocket distance L2 [m]")
+    rws_m: float = Field(description="wheel sprocket radius R_WS [m]")
     distance_m: float | None
     squat_ratio: float | None
     slack_m: float | None
@@ -177,11 +222,10 @@ class RoadProgress(BaseModel):
 
 class RobustBest(BaseModel):
     aggregate: Literal["mean", "worst"]
-    score_m: float | None = Field(description="aggregate fitness of the best design")
-    a2: float
-    a2_deg: float
-    l2: float
-    rws: float
+    score_m: float | None = Field(description="aggregate fitness of the best design [m]")
+    a2_deg: float = Field(description="sprocket angle a2 [deg]")
+    l2_m: float = Field(description="pivot-to-sprocket distance L2 [m]")
+    rws_m: float = Field(description="wheel sprocket radius R_WS [m]")
     generation: int
 
 
@@ -224,9 +268,42 @@ class RoadOut(BaseModel):
     paper: dict[str, float] | None = Field(description="the paper's optimum on this road")
 
 
+class RoadProfileIn(BaseModel):
+    """A measured road: (x, y) points in metres, x strictly increasing (the road is piecewise linear
+    through them and level beyond the ends; x = 0 is the rear tyre's starting contact point)."""
+
+    model_config = _STRICT
+
+    name: str = Field("", max_length=64, description="a label (not part of its identity)")
+    points: list[tuple[Num, Num]] = Field(
+        min_length=2, max_length=PROFILE_MAX_POINTS, description="[[x, y], ...] [m]")
+
+
+class RoadProfileOut(BaseModel):
+    id: int
+    spec: str = Field(description="how a job names it: profile:ID")
+    name: str
+    content_hash: str = Field(description="sha256 of the points: the profile's identity (and result-cache key)")
+    n_points: int
+    x_min_m: float
+    x_max_m: float
+    y_min_m: float
+    y_max_m: float
+    created_at: datetime
+
+
+class RoadProfileDetail(RoadProfileOut):
+    points: list[tuple[float, float]] = Field(description="[[x, y], ...] [m]")
+
+
+class RoadProfilePage(BaseModel):
+    items: list[RoadProfileOut]
+    next_cursor: str | None = Field(description="pass as ?cursor= for the next page; null at the end")
+
+
 class StoreOut(BaseModel):
     writable: bool = Field(description="a write transaction could start within a second")
-    latency_ms: float = Field(description="how long the check took [ms]")
+    latency_s: float = Field(description="how long the check took [s]")
 
 
 class SchedulerOut(BaseModel):
@@ -272,9 +349,10 @@ class RecordingDesign(BaseModel):
 
     model_config = _STRICT
 
-    a2_deg: float = Field(ge=-720, le=720)
-    l2: float = Field(ge=0, le=0.5, description="[m]")
-    rws: float = Field(gt=0, le=0.5, description="[m]")
+    a2_deg: Num = Field(ge=-720, le=720, description="sprocket angle a2 [deg]")
+    l2_m: Num = Field(ge=0, le=0.5, description="pivot-to-sprocket distance L2 [m]; at most the vehicle's l2_max")
+    rws_m: Num = Field(gt=0, le=0.5, description="wheel sprocket radius R_WS [m]; at most the vehicle's rt0 - "
+                                               "rws_tyre_margin")
     label: str | None = Field(None, max_length=80)
 
 
@@ -283,11 +361,12 @@ class RecordingRequest(BaseModel):
 
     model_config = _STRICT
 
-    job_id: int | None = Field(None, ge=1, le=2**63 - 1, description="record this job's best design (on `road`) first")
+    job_id: Whole | None = Field(None, ge=1, le=2**63 - 1,
+                                 description="record this job's best design (on `road`) first")
     road: str | None = Field(None, min_length=1, max_length=500,
                              description="road spec or preset; default: the job's first road")
     designs: list[RecordingDesign] = Field(default_factory=list, max_length=4)
-    duration: float = Field(3.5, gt=0, le=10, description="simulated time [s]")
+    duration: Num = Field(3.5, gt=0, le=10, description="simulated time [s]")
     fps: Literal[10, 20, 25, 50, 100] = Field(50, description="frames per simulated second")
 
     @model_validator(mode="after")

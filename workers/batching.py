@@ -16,6 +16,13 @@ The rule (docs/workers.md, "Batching"):
    second: a cancel waits for little, a DE generation is not held by one long task, and a
    queueing delay mistaken for overhead cannot grow batches without bound. When the rules
    cannot all hold, giving every worker work wins.
+4. **Keep up.** The thread that dispatches spends ``d`` seconds of its own on each task
+   (submitting it, taking its result, storing it: measured by the dispatcher as its time not spent
+   waiting for results, over finished tasks). ``N`` workers finishing a task every ``b c`` seconds
+   keep it busy ``N d / (b c)`` of the time; batches hold at least ``N d / (DRIVER_SHARE c)``
+   designs so that stays under ``DRIVER_SHARE``. On a big cluster with short simulations the
+   dispatcher, not the workers, would otherwise set the pace, and no number of waves helps then:
+   this rule overrides rule 3's waves, not its longest task.
 """
 
 from __future__ import annotations
@@ -27,6 +34,7 @@ TARGET_OVERHEAD = 0.05   # overhead / compute per task
 MIN_WAVES = 4            # batches per worker that must remain
 PROBE_SIZE = 1           # designs per batch before any measurement
 MAX_TASK_S = 0.5         # longest task aimed for [s]
+DRIVER_SHARE = 0.5       # largest share of the dispatching thread's time its task traffic may take
 
 
 def batch_size(
@@ -35,19 +43,22 @@ def batch_size(
     num_workers: int,
     per_design_s: float,
     overhead_s: float,
+    driver_s: float = 0.0,
     target: float = TARGET_OVERHEAD,
     min_waves: int = MIN_WAVES,
 ) -> int:
-    """Designs for the next batch (>= 1 while ``remaining`` > 0; 0 when nothing remains)."""
+    """Designs for the next batch (>= 1 while ``remaining`` > 0; 0 when nothing remains);
+    ``driver_s``: the dispatching thread's own time a task (rule 4)."""
     if remaining <= 0:
         return 0
-    cap = max(1, remaining // (max(1, num_workers) * min_waves))
-    if per_design_s > 0.0:
-        cap = min(cap, max(1, int(MAX_TASK_S / per_design_s)))
+    waves = max(1, remaining // (max(1, num_workers) * min_waves))
     if per_design_s <= 0.0:
-        return cap
+        return waves
+    longest = max(1, int(MAX_TASK_S / per_design_s))
     needed = math.ceil(max(0.0, overhead_s) / (target * per_design_s))
-    return max(1, min(needed, cap))
+    keep_up = math.ceil(max(1, num_workers) * max(0.0, driver_s) / (DRIVER_SHARE * per_design_s))
+    size = max(1, min(needed, waves, longest), min(keep_up, longest))
+    return min(size, remaining)
 
 
 @dataclass
@@ -66,8 +77,8 @@ class BatchSizer:
         self.compute_s += compute_s
         self.overhead_s = min(self.overhead_s, max(0.0, round_trip_s - busy_s))
 
-    def next_size(self, remaining: int) -> int:
-        """Designs for the next batch."""
+    def next_size(self, remaining: int, driver_s: float = 0.0) -> int:
+        """Designs for the next batch; ``driver_s``: the dispatcher's own time a task."""
         if self.designs_done == 0:
             return min(self.probe_size, max(0, remaining))
         return batch_size(
@@ -75,4 +86,5 @@ class BatchSizer:
             num_workers=self.num_workers,
             per_design_s=self.compute_s / self.designs_done,
             overhead_s=self.overhead_s,
+            driver_s=driver_s,
         )

@@ -81,6 +81,11 @@ class Dispatcher:
         self._works: dict[Hashable, tuple[Work, tuple[Any, ...]]] = {}
         self._tasks: dict[int, _Task] = {}
         self._turn: deque[Hashable] = deque()
+        # the driving thread's own time a finished task (batching rule 4), from windows of >= 1 s
+        self.driver_s = 0.0
+        self._window_start = time.perf_counter()
+        self._window_wait_s = 0.0
+        self._window_tasks = 0
 
     # ------------------------------------------------------------------ sources
     def add(self, work: Work) -> None:
@@ -148,7 +153,7 @@ class Dispatcher:
         else:
             request = work.queue[0]
             assert work.sizer is not None
-            size = self._batch_size or work.sizer.next_size(work.queued())
+            size = self._batch_size or work.sizer.next_size(work.queued(), self.driver_s)
             if size >= len(request):
                 part = work.queue.popleft()
             else:
@@ -160,7 +165,11 @@ class Dispatcher:
 
     def collect(self, timeout: float) -> int:
         """Deliver the results of finished tasks (waiting up to ``timeout`` s for the first)."""
+        waited = time.perf_counter()
+        busy = bool(self._tasks)
         done = self.executor.poll(timeout)
+        now = time.perf_counter()
+        self._measure(now - waited, len(done), now, busy)
         for d in done:
             task = self._tasks.pop(d.task, None)
             if task is None or d.cancelled:
@@ -179,6 +188,20 @@ class Dispatcher:
                 ((_, batch),) = timed.result
                 work.on_result(part, batch)
         return len(done)
+
+    def _measure(self, waited_s: float, finished: int, now: float, busy: bool) -> None:
+        """Account the driving thread's time: what it did not spend waiting for results,
+        over the tasks that finished (updated once a window of at least a second holds tasks;
+        time with nothing in flight is no task's)."""
+        if not busy:
+            self._window_start, self._window_wait_s, self._window_tasks = now, 0.0, 0
+            return
+        self._window_wait_s += waited_s
+        self._window_tasks += finished
+        elapsed = now - self._window_start
+        if elapsed >= 1.0 and self._window_tasks:
+            self.driver_s = max(0.0, elapsed - self._window_wait_s) / self._window_tasks
+            self._window_start, self._window_wait_s, self._window_tasks = now, 0.0, 0
 
     def close(self) -> None:
         """Remove every source (cancelling what runs); the executor stays open."""

@@ -20,7 +20,7 @@ TABLE14 = [("geometry 1 (a2 0°, L2 0, R_WS 93 mm)", Design.from_deg(0.0, 0.0, 0
 
 
 def sweep_map() -> None:
-    grid = parse_grid("a2_deg=0:354:6,l2=0:0.2:0.02,rws=0.093")
+    grid = parse_grid("a2_deg=0:354:6,l2_m=0:0.2:0.02,rws_m=0.093")
     batch = evaluate(grid, ROAD, SimSettings())
     best = int(np.nanargmax(batch.fitness_m))
     plots.sweep_map_png(HERE / "sweep-map.png", grid, batch.distance_m, best=(grid[best, 0], grid[best, 1]),

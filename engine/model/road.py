@@ -21,8 +21,26 @@ _KIND_CODES = {"flat": FLAT, "sine": SINE, "bump": BUMP, "profile": PROFILE}
 DEFAULT_BUMP_CENTRE_M = 5.0
 
 
+#: Limits of road parameters [m] (docs/engine.md#road-limits): beyond them a road is not one this
+#: model can drive (a height above the tyre's radius, a wave shorter than the contact patch) or
+#: no different from a flat one over any run (a wave or bump longer than 10 km).
+MAX_HEIGHT_M = 0.5
+MIN_WAVELENGTH_M = 0.05
+MIN_SIGMA_M = 0.01
+MAX_LENGTH_M = 10_000.0
+#: A measured profile: 2 to PROFILE_MAX_POINTS points, x within +-MAX_LENGTH_M, y within +-PROFILE_MAX_Y_M.
+PROFILE_MIN_POINTS = 2
+PROFILE_MAX_POINTS = 100_000
+PROFILE_MAX_Y_M = 1_000.0
+
+
 class RoadError(ValueError):
-    """A road spec that cannot be parsed or is not physical."""
+    """A road spec that cannot be parsed or is not physical; ``row`` is the profile point at fault (0-based)."""
+
+    def __init__(self, msg: str, row: int | None = None) -> None:
+        super().__init__(msg if row is None else f"row {row}: {msg}")
+        self.msg = msg
+        self.row = row
 
 
 @dataclass(frozen=True)
@@ -49,19 +67,18 @@ class Road:
         for key in ("height", "wavelength", "sigma", "mu"):
             if not math.isfinite(getattr(self, key)):
                 raise RoadError(f"road {key} must be a finite number")
-        if self.kind == "sine" and self.wavelength <= 0:
-            raise RoadError("sine road: wavelength LAMBDA must be > 0")
-        if self.kind == "bump" and self.sigma <= 0:
-            raise RoadError("bump road: width SIGMA must be > 0")
+        if abs(self.height) > MAX_HEIGHT_M:
+            raise RoadError(f"road height H must be within +-{MAX_HEIGHT_M:g} m, got {self.height:g}")
+        if abs(self.mu) > MAX_LENGTH_M:
+            raise RoadError(f"bump centre MU must be within +-{MAX_LENGTH_M:g} m, got {self.mu:g}")
+        if self.kind == "sine" and not MIN_WAVELENGTH_M <= self.wavelength <= MAX_LENGTH_M:
+            raise RoadError(f"sine road: wavelength LAMBDA must be in [{MIN_WAVELENGTH_M:g}, {MAX_LENGTH_M:g}] m, "
+                            f"got {self.wavelength:g}")
+        if self.kind == "bump" and not MIN_SIGMA_M <= self.sigma <= MAX_LENGTH_M:
+            raise RoadError(f"bump road: width SIGMA must be in [{MIN_SIGMA_M:g}, {MAX_LENGTH_M:g}] m, "
+                            f"got {self.sigma:g}")
         if self.kind == "profile":
-            xs = np.asarray(self.xs, dtype=float)
-            ys = np.asarray(self.ys, dtype=float)
-            if xs.size < 2 or xs.size != ys.size:
-                raise RoadError("profile road needs at least two (x, y) points")
-            if not (np.all(np.isfinite(xs)) and np.all(np.isfinite(ys))):
-                raise RoadError("profile road points must be finite numbers")
-            if np.any(np.diff(xs) <= 0):
-                raise RoadError("profile road x values must be strictly increasing")
+            _check_profile(self.xs, self.ys)
 
     @property
     def code(self) -> int:
@@ -131,10 +148,29 @@ class Road:
 
     @classmethod
     def from_points(cls, xs: np.typing.ArrayLike, ys: np.typing.ArrayLike, name: str = "user") -> Road:
-        """A piecewise-linear road through (x, y) points, x increasing."""
+        """A piecewise-linear road through (x, y) points, x strictly increasing (RoadError names the row)."""
         return cls(
             "profile",
             xs=tuple(float(v) for v in np.asarray(xs, dtype=float).ravel()),
             ys=tuple(float(v) for v in np.asarray(ys, dtype=float).ravel()),
             name=name,
         )
+
+
+def _check_profile(xs: tuple[float, ...], ys: tuple[float, ...]) -> None:
+    """Refuse a profile that is not a road, naming the first row at fault."""
+    if len(xs) != len(ys):
+        raise RoadError(f"profile road: {len(xs)} x values but {len(ys)} y values")
+    if not PROFILE_MIN_POINTS <= len(xs) <= PROFILE_MAX_POINTS:
+        raise RoadError(f"profile road needs {PROFILE_MIN_POINTS} to {PROFILE_MAX_POINTS} points, got {len(xs)}")
+    x = np.asarray(xs, dtype=float)
+    y = np.asarray(ys, dtype=float)
+    for values, name, limit in ((x, "x", MAX_LENGTH_M), (y, "y", PROFILE_MAX_Y_M)):
+        bad = np.flatnonzero(~(np.abs(values) <= limit))  # NaN too
+        if bad.size:
+            i = int(bad[0])
+            raise RoadError(f"{name} must be a finite number within +-{limit:g} m, got {float(values[i])!r}", i)
+    back = np.flatnonzero(np.diff(x) <= 0)
+    if back.size:
+        i = int(back[0]) + 1
+        raise RoadError(f"x must be strictly increasing, got {x[i]:g} m after {x[i - 1]:g} m", i)

@@ -22,6 +22,7 @@ from finaldrive.engine.study.runs import DERun, SweepRun
 from finaldrive.engine.study.scoring import OBJECTIVES, Objective
 from finaldrive.engine.study.space import Bounds, DESettings, SpaceError
 from finaldrive.engine.study.sweep import parse_grid, table9_grid
+from finaldrive.engine.vehicle import Vehicle, default_vehicle
 
 StudyKind = Literal["sweep", "de", "robust-de", "paper-study"]
 STUDY_KINDS: tuple[str, ...] = ("sweep", "de", "robust-de", "paper-study")
@@ -31,6 +32,9 @@ SWEEP_RUN = -1
 PAPER_SWEEP_STEP = -1
 
 Run = SweepRun | DERun
+
+#: Where each design limit comes from (vehicle file, group design_limits).
+_LIMIT_SOURCE = {"l2_m": "l2_max", "rws_m": "rt0 - rws_tyre_margin"}
 
 
 class PlanError(ValueError):
@@ -108,11 +112,13 @@ class StudyPlan:
 def plan_study(
     kind: str, roads: Sequence[str], *, grid: str | np.ndarray | None = None, bounds: Bounds | None = None,
     de: DESettings | None = None, objective: str | None = None, seed: int = 0,
-    profiles: ProfileResolver | None = None,
+    profiles: ProfileResolver | None = None, vehicle: Vehicle | None = None,
 ) -> StudyPlan:
     """Resolve a study; raises :class:`PlanError` naming the field (``roads``, ``grid``, ...).
 
     Missing parts take the paper's values: Table 9 grid, Table 8 box, Table 10 DE, mean objective.
+    Every design the study can evaluate must fit ``vehicle`` (default: the paper's bike; see
+    :meth:`Vehicle.design_limits`): each grid row, and the box's upper L2 and R_WS.
     """
     if kind not in STUDY_KINDS:
         raise PlanError(("kind",), f"unknown study {kind!r}: expected one of {', '.join(STUDY_KINDS)}")
@@ -147,6 +153,19 @@ def plan_study(
                     raise ValueError(f"designs must have shape (n >= 1, 3), got {designs.shape}")
         except ValueError as exc:
             raise PlanError(("grid",), str(exc)) from None
+    limits = (vehicle or default_vehicle()).design_limits()
+    if designs is not None:
+        for column, name in ((1, "l2_m"), (2, "rws_m")):
+            beyond = np.flatnonzero(designs[:, column] > limits[name])
+            if beyond.size:
+                i = int(beyond[0])
+                raise PlanError(("grid",), f"design {i} has {name} = {designs[i, column]:g} m, more than the "
+                                f"vehicle's limit of {limits[name]:g} m ({_LIMIT_SOURCE[name]})")
+    box = bounds or Bounds()
+    for field in ("l2_m", "rws_m"):
+        if kind != "sweep" and getattr(box, field)[1] > limits[field]:
+            raise PlanError(("bounds", field), f"upper bound {getattr(box, field)[1]:g} m is more than the "
+                            f"vehicle's limit of {limits[field]:g} m ({_LIMIT_SOURCE[field]})")
     if kind == "sweep":
         return StudyPlan("sweep", tuple(named), designs=designs, seed=seed)
     try:

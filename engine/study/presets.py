@@ -13,10 +13,12 @@ Roads (paper section 5.1; Tables 11-13), built with :class:`engine.model.road.Ro
 Groups: ``paper`` (all 23 in the order Table 11, Table 12 rows, Table 13 rows),
 ``sine`` and ``bump``.
 
-Each preset's ``paper`` dict is its row of Tables 11-13 (the DE optimum the paper found):
-``a2_deg, L2_m, R_WS_m, slack_mm, SR, fitness_m``, as printed (Table 12 prints
-a2 = 371.0 deg for ``sine-h4cm-l2m``: angles wrap, 371 deg = 11 deg; it is kept as
-printed). The rows are read from the shipped ``engine/data/paper_tables.json``.
+Each preset's ``paper`` dict is its row of Tables 11-13 (the DE optimum the paper found) in
+the outputs' names (docs/fields.md, :func:`paper_row`): ``a2_deg, l2_m, rws_m, slack_m,
+squat_ratio, fitness_m`` (Table 12 prints a2 = 371.0 deg for ``sine-h4cm-l2m``: angles wrap,
+371 deg = 11 deg; it is kept as printed). The rows are read from the shipped
+``engine/data/paper_tables.json``, which keeps the paper's own column names (``L2_m``,
+``R_WS_m``, ``slack_mm``, ``SR``, ``d_m``).
 """
 
 from __future__ import annotations
@@ -31,7 +33,9 @@ from typing import Any
 from finaldrive.engine.model.road import DEFAULT_BUMP_CENTRE_M, Road, RoadError
 
 #: Keys of a preset's paper reference row (Tables 11-13).
-PAPER_KEYS = ("a2_deg", "L2_m", "R_WS_m", "slack_mm", "SR", "fitness_m")
+PAPER_KEYS = ("a2_deg", "l2_m", "rws_m", "slack_m", "squat_ratio", "fitness_m")
+#: The paper's column names in paper_tables.json -> the outputs' names (slack_mm is converted to m).
+_PAPER_NAMES = {"L2_m": "l2_m", "R_WS_m": "rws_m", "SR": "squat_ratio", "d_m": "distance_m", "slack_mm": "slack_m"}
 
 GROUPS = ("paper", "sine", "bump")
 
@@ -66,8 +70,14 @@ def _cm(metres: float) -> int:
     return round(metres * 100)
 
 
+def paper_row(row: dict[str, Any]) -> dict[str, Any]:
+    """A row of paper_tables.json in the outputs' names and units (docs/fields.md)."""
+    return {_PAPER_NAMES.get(k, k): (v / 1000.0 if k == "slack_mm" and v is not None else v) for k, v in row.items()}
+
+
 def _reference(row: dict[str, Any]) -> dict[str, float]:
-    return {key: float(row[key]) for key in PAPER_KEYS}
+    named = paper_row(row)
+    return {key: float(named[key]) for key in PAPER_KEYS}
 
 
 def _build() -> dict[str, NamedRoad]:

@@ -12,7 +12,7 @@ DE optima that the paper itself uses for its geometry 1 (section 5.3, Table 14).
 
 Grid spec syntax (``parse_grid``): comma-separated ``name=values`` items, where name is
 
-- ``a2_deg`` (degrees) or ``a2`` (radians), ``l2`` (m), ``rws`` (m);
+- ``a2_deg`` (degrees), ``l2_m`` (m), ``rws_m`` (m) (docs/fields.md);
 
 and values is one of
 
@@ -21,10 +21,10 @@ and values is one of
 - ``a|b|c``: an explicit list, kept in the given order;
 - ``v``: a single value.
 
-A variable not named takes its Table 9 value (a2_deg = 0:358:2, l2 = 0:0.2:0.02,
-rws = 0.093), so ``"rws=0.08"`` is Table 9 at R_WS = 80 mm and the empty spec is Table 9.
+A variable not named takes its Table 9 value (a2_deg = 0:358:2, l2_m = 0:0.2:0.02,
+rws_m = 0.093), so ``"rws_m=0.08"`` is Table 9 at R_WS = 80 mm and the empty spec is Table 9.
 Range values are rounded to 12 decimals (0.06, not 0.06000000000000001).
-Example: ``"a2_deg=0:358:2,l2=0:0.2:0.02,rws=0.093"`` == Table 9.
+Example: ``"a2_deg=0:358:2,l2_m=0:0.2:0.02,rws_m=0.093"`` == Table 9.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ TABLE9_L2_M = (0.0, 0.2, 0.02)
 #: Largest grid parse_grid builds (a guard against typos such as a step of 1e-6).
 MAX_GRID_DESIGNS = 1_000_000
 
-_VARIABLES = ("a2_deg", "a2", "l2", "rws")
+_VARIABLES = ("a2_deg", "l2_m", "rws_m")
 _GRID_TOL = 1e-9
 
 
@@ -50,8 +50,8 @@ def table9_grid(rws: float = TABLE9_DEFAULT_RWS_M) -> np.ndarray:
     """Table 9's 1,980 designs (n, 3): a2 [rad], L2 [m], R_WS = ``rws`` [m]."""
     return product_grid(
         np.radians(_range("a2_deg", *TABLE9_A2_DEG)),
-        _range("l2", *TABLE9_L2_M),
-        _check("rws", np.array([float(rws)])),
+        _range("l2_m", *TABLE9_L2_M),
+        _check("rws_m", np.array([float(rws)])),
     )
 
 
@@ -74,14 +74,12 @@ def parse_grid(spec: str) -> np.ndarray:
             raise ValueError(f"grid item {raw.strip()!r}: expected name=values")
         if name not in _VARIABLES:
             raise ValueError(f"unknown grid variable {name!r}: expected one of {', '.join(_VARIABLES)}")
-        axis = "a2" if name.startswith("a2") else name
-        if axis in values:
-            raise ValueError(f"{name}: grid variable {axis} given twice")
-        v = _check(name, _values(name, text))
-        values[axis] = np.radians(v) if name == "a2_deg" else v
-    a2 = values.get("a2", np.radians(_range("a2_deg", *TABLE9_A2_DEG)))
-    l2 = values.get("l2", _range("l2", *TABLE9_L2_M))
-    rws = values.get("rws", np.array([TABLE9_DEFAULT_RWS_M]))
+        if name in values:
+            raise ValueError(f"{name}: grid variable given twice")
+        values[name] = _check(name, _values(name, text))
+    a2 = np.radians(values.get("a2_deg", _range("a2_deg", *TABLE9_A2_DEG)))
+    l2 = values.get("l2_m", _range("l2_m", *TABLE9_L2_M))
+    rws = values.get("rws_m", np.array([TABLE9_DEFAULT_RWS_M]))
     n = a2.size * l2.size * rws.size
     if n > MAX_GRID_DESIGNS:
         raise ValueError(f"grid has {n:,} designs, more than {MAX_GRID_DESIGNS:,}")
@@ -122,10 +120,10 @@ def _range(name: str, start: float, stop: float, step: float) -> np.ndarray:
 def _check(name: str, v: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(v)):
         raise ValueError(f"{name}: values must be finite numbers")
-    if name == "l2" and np.any(v < 0):
-        raise ValueError(f"l2: L2 must be >= 0 m, got {v.min():g}")
-    if name == "rws" and np.any(v <= 0):
-        raise ValueError(f"rws: R_WS must be > 0 m, got {v.min():g}")
+    if name == "l2_m" and np.any(v < 0):
+        raise ValueError(f"l2_m: L2 must be >= 0 m, got {v.min():g}")
+    if name == "rws_m" and np.any(v <= 0):
+        raise ValueError(f"rws_m: R_WS must be > 0 m, got {v.min():g}")
     if np.unique(v).size != v.size:
         raise ValueError(f"{name}: repeated values")
     return v

@@ -105,9 +105,10 @@ def documented(*statuses: int) -> dict[int | str, dict[str, Any]]:
     text = {
         400: "the body could not be read (its bytes are not UTF-8)",
         401: "missing or wrong bearer token (only when FINALDRIVE_API_TOKEN is set)",
-        404: "no such job",
+        404: "no such job or resource",
         409: "the resource is not ready for this (e.g. a recording still being produced)",
         413: "request body larger than FINALDRIVE_MAX_BODY_BYTES",
+        415: "the body's Content-Type is not one this operation takes",
         422: "invalid request; `errors` names each field and the reason",
         503: "the results store is unavailable (locked, full or unreachable); retry after Retry-After seconds",
     }

@@ -21,7 +21,7 @@ def _aware(t: datetime | None) -> datetime | None:
 def evaluation_out(e: Evaluation, road_name: str) -> EvaluationOut:
     return EvaluationOut(
         id=e.id, road_index=e.road_index, road=road_name, step=e.step, candidate=e.candidate,
-        a2=e.a2, a2_deg=math.degrees(e.a2), l2=e.l2, rws=e.rws, distance_m=e.distance_m,
+        a2_deg=e.a2_deg, l2_m=e.l2_m, rws_m=e.rws_m, distance_m=e.distance_m,
         squat_ratio=e.squat_ratio, slack_m=e.slack_m, fitness_m=e.fitness_m,
         chain_length_m=e.chain_length_m, status=e.status,
         reason=e.reason, wall_s=e.wall_s, cached=e.cached, **{name: getattr(e, name) for name in DIAGNOSTICS},
@@ -42,16 +42,16 @@ def robust_best(session: Session, job: Job) -> RobustBest | None:
     if job.kind != "robust-de":
         return None
     row = session.execute(
-        select(Generation.generation, Generation.population, Generation.best_f)
+        select(Generation.generation, Generation.population, Generation.best_fitness_m)
         .where(Generation.job_id == job.id, Generation.run == 0)
         .order_by(Generation.generation.desc()).limit(1)
     ).first()
     if row is None or not row.population:
         return None
-    a2, l2, rws = row.population[0]
+    a2, l2, rws = row.population[0]  # the optimiser's state: a2 in rad
     return RobustBest(
-        aggregate=job.spec.get("aggregate") or "mean", score_m=row.best_f, a2=a2, a2_deg=math.degrees(a2),
-        l2=l2, rws=rws, generation=row.generation,
+        aggregate=job.spec.get("aggregate") or "mean", score_m=row.best_fitness_m, a2_deg=math.degrees(a2),
+        l2_m=l2, rws_m=rws, generation=row.generation,
     )
 
 

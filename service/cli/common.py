@@ -105,13 +105,17 @@ def load_vehicle_arg(path: str | None) -> Vehicle:
         raise UsageError(str(exc)) from None
 
 
-def design_from_args(args: argparse.Namespace) -> Design:
+def design_from_args(args: argparse.Namespace, vehicle: Vehicle) -> Design:
+    """The design of --a2-deg, --l2, --rws, within the vehicle's limits (else UsageError naming the option)."""
     from finaldrive.engine import Design, DesignError
 
     try:
-        return Design.from_deg(args.a2_deg, args.l2, args.rws)
+        design = Design.from_deg(args.a2_deg, args.l2, args.rws)
+        vehicle.check_design(design)
     except DesignError as exc:
-        raise UsageError(str(exc)) from None
+        option = {"a2": "--a2-deg", "l2": "--l2"}.get(str(exc).split(" ", 1)[0], "--rws")
+        raise UsageError(f"{option}: {exc}") from None
+    return design
 
 
 def settings_from_args(args: argparse.Namespace, **extra: Any) -> SimSettings:
@@ -146,17 +150,15 @@ def de_from_args(args: argparse.Namespace) -> tuple[Any, Any]:
 
 def read_profile(path: Path) -> Road:
     """A measured road from a CSV of x, y [m] (an optional header line; # comments)."""
-    from finaldrive.engine import Road, RoadError
+    from finaldrive.service.profiles import ProfileError, road_from_csv
 
     try:
-        rows = [r for r in csv.reader(path.read_text().splitlines()) if r and not r[0].startswith("#")]
-    except OSError as exc:
-        raise UsageError(f"road profile {str(path)!r}: {exc.strerror or exc}") from None
-    if rows and not _is_number(rows[0][0]):
-        rows = rows[1:]  # header
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UsageError(f"road profile {str(path)!r}: {getattr(exc, 'strerror', None) or exc}") from None
     try:
-        return Road.from_points([float(r[0]) for r in rows], [float(r[1]) for r in rows], name=path.name)
-    except (IndexError, ValueError, RoadError) as exc:
+        return road_from_csv(text, name=path.name)
+    except ProfileError as exc:
         raise UsageError(f"road profile {str(path)!r}: {exc}") from None
 
 
@@ -180,21 +182,21 @@ def road_from_arg(text: str) -> Road:
 
 
 def read_designs_csv(path: str) -> np.ndarray:
-    """Rows (a2 [rad], L2 [m], R_WS [m]) from a CSV with header a2_deg,l2,rws."""
+    """Rows (a2 [rad], L2 [m], R_WS [m]) from a CSV with header a2_deg,l2_m,rws_m."""
     try:
         text = Path(path).read_text()
     except OSError as exc:
         raise UsageError(f"designs file {path!r}: {exc.strerror or exc}") from None
     reader = csv.DictReader(io.StringIO(text))
-    missing = {"a2_deg", "l2", "rws"} - set(reader.fieldnames or ())
+    missing = {"a2_deg", "l2_m", "rws_m"} - set(reader.fieldnames or ())
     if missing:
         raise UsageError(f"designs file {path!r}: missing column(s) {', '.join(sorted(missing))}")
     rows = []
     for n, row in enumerate(reader, start=2):
         try:
-            rows.append([math.radians(float(row["a2_deg"])), float(row["l2"]), float(row["rws"])])
+            rows.append([math.radians(float(row["a2_deg"])), float(row["l2_m"]), float(row["rws_m"])])
         except (TypeError, ValueError):
-            raise UsageError(f"designs file {path!r}, line {n}: a2_deg, l2 and rws must be numbers") from None
+            raise UsageError(f"designs file {path!r}, line {n}: a2_deg, l2_m and rws_m must be numbers") from None
     return np.array(rows, dtype=float).reshape(-1, 3)
 
 
@@ -206,14 +208,6 @@ def writable(path: str, option: str) -> Path:
     if out.is_dir():
         raise UsageError(f"{option} {path!r}: is a folder")
     return out
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-        return True
-    except ValueError:
-        return False
 
 
 # --- output ------------------------------------------------------------------------------------

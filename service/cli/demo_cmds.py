@@ -100,15 +100,15 @@ def _run_job(args: argparse.Namespace, client: Any) -> int:
         print(f"finaldrive: error: job {job['id']} {job['state']}: {job.get('error') or ''}", file=sys.stderr)
         return EXIT_FAILED
     best = job["roads"][0]["best"]
-    result = {"job": job["id"], "road": job["roads"][0]["spec"], "a2_deg": best["a2_deg"], "l2": best["l2"],
-              "rws": best["rws"], "fitness_m": best["fitness_m"], "distance_m": best["distance_m"],
+    result = {"job": job["id"], "road": job["roads"][0]["spec"], "a2_deg": best["a2_deg"], "l2_m": best["l2_m"],
+              "rws_m": best["rws_m"], "fitness_m": best["fitness_m"], "distance_m": best["distance_m"],
               "simulations": job["done"] + job["failed"], "wall_s": round(time.monotonic() - start, 1)}
     if args.json:
         print_json(result)
     else:
         print(f"best geometry on {result['road']} (job {result['job']}, {result['simulations']} simulations, "
               f"{result['wall_s']} s):")
-        print(f"  a2 = {best['a2_deg']:.1f} deg   L2 = {best['l2']:.4f} m   R_WS = {best['rws']:.4f} m")
+        print(f"  a2 = {best['a2_deg']:.1f} deg   L2 = {best['l2_m']:.4f} m   R_WS = {best['rws_m']:.4f} m")
         print(f"  fitness = {best['fitness_m']:.3f} m   distance = {best['distance_m']:.3f} m")
     return EXIT_OK
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from finaldrive.engine import DIAGNOSTICS
+from finaldrive.engine import DIAGNOSTICS, design_label, human
 from finaldrive.service.cli.common import (
     ROAD_HELP,
     UsageError,
@@ -39,45 +39,46 @@ def run_geometry(args: argparse.Namespace) -> int:
     from finaldrive.engine import static_geometry
 
     vehicle = load_vehicle_arg(args.vehicle)
-    design = design_from_args(args)
+    design = design_from_args(args, vehicle)
     start = time.perf_counter()
     try:
         g = static_geometry(design, vehicle)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    g["wall_ms"] = (time.perf_counter() - start) * 1000.0
+    g["wall_s"] = time.perf_counter() - start
     if args.json:
         print_json(g)
     else:
         for key, value in g.items():
-            print(f"{key:>22}: {value}")
+            print(f"{key:>22}: {human(key, value)}")
     return 0
 
 
 # --- simulate -------------------------------------------------------------------------------
 
-SERIES_CSV_COLUMNS = ("t", "distance", "pitch", "chain_tension", "squat_ratio", "fz_rear", "fz_front",
-                      "kappa", "fx", "effective_radius", "wheel_speed", "sprocket_speed", "taut_length")
+SERIES_CSV_COLUMNS = ("t_s", "distance_m", "pitch_deg", "chain_tension_n", "squat_ratio", "fz_rear_n", "fz_front_n",
+                      "kappa", "fx_n", "effective_radius_m", "wheel_speed_rad_s", "sprocket_speed_rad_s",
+                      "taut_length_m")
 
 
 def run_simulate(args: argparse.Namespace) -> int:
     from finaldrive.engine import simulate
 
     vehicle = load_vehicle_arg(args.vehicle)
-    design = design_from_args(args)
+    design = design_from_args(args, vehicle)
     road = road_from_arg(args.road)
     settings = settings_from_args(args, series=bool(args.series), series_stride=args.stride)
     series_path = writable(args.series, "--series") if args.series else None
     record_path = writable(args.record, "--record") if args.record else None
     result = simulate(design, road, settings, vehicle)
     summary = {k: (clean(v) if isinstance(v, float) else v) for k, v in result.summary().items()}
-    summary.update({"a2_deg": design.a2_deg, "l2": design.l2, "rws": design.rws, "road": road.spec})
+    summary.update({"a2_deg": design.a2_deg, "l2_m": design.l2, "rws_m": design.rws, "road": road.spec})
     if series_path is not None and result.series is not None:
         _write_series(series_path, result.series)
     if record_path is not None and result.ok:
         from finaldrive.service.recording import record
 
-        label = f"a2={design.a2_deg:g} L2={design.l2:g} Rws={design.rws:g}"
+        label = design_label(design.a2_deg, design.l2, design.rws)
         try:
             record(record_path, [(label, design)], road, duration=settings.duration, fps=args.fps,
                    base=settings, vehicle=vehicle)
@@ -92,12 +93,12 @@ def run_simulate(args: argparse.Namespace) -> int:
             "reason",
             "distance_m",
             "squat_ratio",
-            "slack_mm",
+            "slack_m",
             "fitness_m",
             "chain_length_m",
             "wall_s",
         ):
-            print(f"{key:>15}: {summary[key]}")
+            print(f"{key:>15}: {human(key, summary[key])}")
         if "record" in summary:
             print(f"{'record':>15}: {summary['record']}")
     return 0 if result.ok else 1
@@ -114,7 +115,7 @@ def _write_series(path: Path, series: dict[str, np.ndarray]) -> None:
 
 # --- evaluate -------------------------------------------------------------------------------
 
-EVALUATE_COLUMNS = ("a2_deg", "l2", "rws", "status", "distance_m", "squat_ratio", "slack_mm",
+EVALUATE_COLUMNS = ("a2_deg", "l2_m", "rws_m", "status", "distance_m", "squat_ratio", "slack_m",
                     "fitness_m", "chain_length_m", "wall_s", "reason", *DIAGNOSTICS)
 
 
@@ -123,9 +124,9 @@ def batch_rows(batch: Any) -> list[dict[str, Any]]:
     for i in range(len(batch)):
         a2, l2, rws = batch.designs[i]
         out.append({
-            "a2_deg": math.degrees(a2), "l2": float(l2), "rws": float(rws), "status": batch.status[i],
+            "a2_deg": math.degrees(a2), "l2_m": float(l2), "rws_m": float(rws), "status": batch.status[i],
             "distance_m": clean(batch.distance_m[i]), "squat_ratio": clean(batch.squat_ratio[i]),
-            "slack_mm": clean(batch.slack_m[i] * 1000.0), "fitness_m": clean(batch.fitness_m[i]),
+            "slack_m": clean(batch.slack_m[i]), "fitness_m": clean(batch.fitness_m[i]),
             "chain_length_m": clean(batch.chain_length_m[i]), "wall_s": float(batch.wall_s[i]),
             "reason": batch.reason[i], **{name: clean(getattr(batch, name)[i]) for name in DIAGNOSTICS},
         })
@@ -140,11 +141,16 @@ def write_rows_csv(rows: list[dict[str, Any]], stream: Any) -> None:
 
 
 def run_evaluate(args: argparse.Namespace) -> int:
-    from finaldrive.engine import evaluate
+    from finaldrive.engine import Design, DesignError, evaluate
 
     vehicle = load_vehicle_arg(args.vehicle)
     road = road_from_arg(args.road)
     designs = read_designs_csv(args.designs)
+    for line, (a2, l2, rws) in enumerate(designs.tolist(), start=2):
+        try:
+            vehicle.check_design(Design(a2, l2, rws))
+        except DesignError as exc:
+            raise UsageError(f"designs file {args.designs!r}, line {line}: {exc}") from None
     settings = settings_from_args(args)
     batch = evaluate(designs, road, settings, vehicle)
     rows = batch_rows(batch)
@@ -168,9 +174,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
         vehicle = solve_torque(vehicle)
     loads = static_loads(vehicle)
     out.write_text(json.dumps(vehicle.to_dict(), indent=2) + "\n")
-    print_json({"chassis_cog_x": vehicle["chassis_cog_x"], "chassis_cog_y": vehicle["chassis_cog_y"],
-                "torque": vehicle["torque"], "rear_share": loads.rear_share,
-                "cog_height": loads.cog_height, "wheelbase": loads.wheelbase, "out": args.out})
+    print_json({"chassis_cog_x_m": vehicle["chassis_cog_x"], "chassis_cog_y_m": vehicle["chassis_cog_y"],
+                "torque_nm": vehicle["torque"], "rear_share": loads.rear_share,
+                "cog_height_m": loads.cog_height, "wheelbase_m": loads.wheelbase, "out": args.out})
     return 0
 
 
@@ -194,8 +200,9 @@ def register(sub: Any) -> None:
     p.add_argument("--fps", type=int, default=50, help="--record: frames per simulated second")
     p.set_defaults(run=run_simulate)
 
-    p = sub.add_parser("evaluate", help="simulate a CSV of designs (a2_deg,l2,rws) in this process", **parser_options())
-    p.add_argument("--designs", required=True, metavar="FILE.csv", help="CSV with the header a2_deg,l2,rws")
+    p = sub.add_parser("evaluate", help="simulate a CSV of designs (a2_deg,l2_m,rws_m) in this process",
+                       **parser_options())
+    p.add_argument("--designs", required=True, metavar="FILE.csv", help="CSV with the header a2_deg,l2_m,rws_m")
     p.add_argument("--road", required=True, help=ROAD_HELP)
     add_vehicle_arg(p)
     add_settings_args(p)

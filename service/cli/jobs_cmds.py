@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from finaldrive.service.cli import remote
 from finaldrive.service.cli.common import UsageError, add_de_args, de_from_args, parser_options, print_json, writable
@@ -21,6 +21,9 @@ from finaldrive.service.cli.remote import (
     follow,
     progress_line,
 )
+
+if TYPE_CHECKING:
+    from finaldrive.service.client import ServiceClient
 
 
 def job_spec(args: argparse.Namespace) -> dict[str, Any]:
@@ -53,10 +56,32 @@ def job_spec(args: argparse.Namespace) -> dict[str, Any]:
     return spec
 
 
+def upload_profiles(client: ServiceClient, roads: list[str]) -> list[str]:
+    """The roads with each ``profile:FILE`` uploaded (POST /v1/roads) and named ``profile:ID``."""
+    from finaldrive.service.client import ApiError
+
+    out = []
+    for road in roads:
+        path = Path(road[len("profile:"):]) if road.lower().startswith("profile:") else None
+        if path is None or (road[len("profile:"):].isdigit() and not path.exists()):
+            out.append(road)  # a preset, spec or stored profile:ID
+            continue
+        try:
+            text = path.read_text()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise UsageError(f"road profile {str(path)!r}: {getattr(exc, 'strerror', None) or exc}") from None
+        try:
+            out.append(client.upload_profile(text, name=path.name[:64])["spec"])
+        except ApiError as exc:
+            raise UsageError(f"road profile {str(path)!r}: {exc.detail}") from None
+    return out
+
+
 @client_command
 def run_submit(args: argparse.Namespace) -> int:
     spec = job_spec(args)
     with remote.connect(args) as client:
+        spec["roads"] = upload_profiles(client, spec["roads"])
         job = client.submit(spec, idempotency_key=args.idempotency_key)
         if args.follow:
             job = follow(client, job["id"])
@@ -126,18 +151,18 @@ def run_results(args: argparse.Namespace) -> int:
 
 
 def _print_best(best: dict[str, Any]) -> None:
-    print(f"{'road':<18} {'a2_deg':>8} {'l2 [m]':>8} {'rws [m]':>8} {'fitness [m]':>12} {'distance [m]':>13}")
+    print(f"{'road':<18} {'a2_deg':>8} {'l2_m':>8} {'rws_m':>8} {'fitness [m]':>12} {'distance [m]':>13}")
     for road in best["roads"]:
         b = road.get("best")
         if b is None:
             print(f"{road['name']:<18} {'(no successful evaluation)':>52}")
         else:
-            print(f"{road['name']:<18} {b['a2_deg']:>8.1f} {b['l2']:>8.4f} {b['rws']:>8.4f} "
+            print(f"{road['name']:<18} {b['a2_deg']:>8.1f} {b['l2_m']:>8.4f} {b['rws_m']:>8.4f} "
                   f"{b['fitness_m']:>12.3f} {b['distance_m']:>13.3f}")
     rb = best.get("robust_best")
     if rb:
         score = "-" if rb["score_m"] is None else f"{rb['score_m']:.3f}"
-        print(f"robust ({rb['aggregate']}): a2_deg {rb['a2_deg']:.1f}  l2 {rb['l2']:.4f}  rws {rb['rws']:.4f}  "
+        print(f"robust ({rb['aggregate']}): a2_deg {rb['a2_deg']:.1f}  l2_m {rb['l2_m']:.4f}  rws_m {rb['rws_m']:.4f}  "
               f"score {score} m")
 
 
@@ -173,9 +198,11 @@ def register(sub: Any) -> None:
     p.add_argument("kind", choices=("sweep", "de", "robust-de"),
                    help="sweep: a design grid on each road; de: the paper's DE on each road; "
                         "robust-de: one DE scored over all the roads")
-    p.add_argument("--road", action="append", help=f"a road (repeatable): {ROAD_HELP}")
+    p.add_argument("--road", action="append",
+                   help=f"a road (repeatable): {ROAD_HELP}; a profile file is uploaded first (profile:ID names "
+                        "one uploaded before)")
     p.add_argument("--roads", action="append", help="comma-separated roads, or a group (paper, sine, bump)")
-    p.add_argument("--grid", help='sweep: "table9" (the default) or e.g. "a2_deg=0:350:10,l2=0:0.2:0.02,rws=0.093"')
+    p.add_argument("--grid", help='sweep: "table9" (the default) or e.g. "a2_deg=0:350:10,l2_m=0:0.2:0.02,rws_m=0.093"')
     add_de_args(p)
     add_vehicle_arg(p)
     p.add_argument("--objective", choices=("mean", "worst"), default="mean",

@@ -77,14 +77,14 @@ def run_study(runs: list[Run], plan: StudyPlan, settings: SimSettings, vehicle: 
 
 
 def design_dict(x: np.ndarray) -> dict[str, float]:
-    return {"a2_deg": math.degrees(float(x[0])), "l2": float(x[1]), "rws": float(x[2])}
+    return {"a2_deg": math.degrees(float(x[0])), "l2_m": float(x[1]), "rws_m": float(x[2])}
 
 
 def result_dict(batch: BatchResult, fitness: np.ndarray, i: int) -> dict[str, Any]:
     """Design and outcome of row ``i`` of a batch (JSON-ready)."""
     return {**design_dict(batch.designs[i]), "fitness_m": clean(fitness[i]),
             "distance_m": clean(batch.distance_m[i]), "squat_ratio": clean(batch.squat_ratio[i]),
-            "slack_mm": clean(batch.slack_m[i] * 1000.0)}
+            "slack_m": clean(batch.slack_m[i])}
 
 
 @dataclass

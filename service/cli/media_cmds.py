@@ -23,13 +23,15 @@ def parse_design(text: str) -> tuple[float, float, float]:
 
 
 def _designs(texts: list[str]) -> list[tuple[str, Any]]:
-    from finaldrive.engine import Design, DesignError
+    from finaldrive.engine import Design, DesignError, default_vehicle, design_label
 
     out = []
     for text in texts:
         a2, l2, rws = parse_design(text)
         try:
-            out.append((f"a2={a2:g} L2={l2:g} Rws={rws:g}", Design.from_deg(a2, l2, rws)))
+            design = Design.from_deg(a2, l2, rws)
+            default_vehicle().check_design(design)
+            out.append((design_label(a2, l2, rws), design))
         except DesignError as exc:
             raise UsageError(f"design {text!r}: {exc}") from None
     return out
@@ -53,8 +55,8 @@ def run_record(args: argparse.Namespace) -> int:
         return EXIT_FAILED
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    summary = {"out": args.out, "road": road.spec, "frames": len(runs[0].series["t"]),
-               "geometries": [{"label": r.label, "distance_m": float(r.series["distance"][-1])} for r in runs]}
+    summary = {"out": args.out, "road": road.spec, "frames": len(runs[0].series["t_s"]),
+               "geometries": [{"label": r.label, "distance_m": float(r.series["distance_m"][-1])} for r in runs]}
     if args.json:
         print_json(summary)
     else:
@@ -72,7 +74,7 @@ def _record_remote(args: argparse.Namespace) -> int:
         body["job_id"] = args.job
     if args.road is not None:
         body["road"] = args.road
-    body["designs"] = [dict(zip(("a2_deg", "l2", "rws"), parse_design(t), strict=True)) for t in args.designs or []]
+    body["designs"] = [dict(zip(("a2_deg", "l2_m", "rws_m"), parse_design(t), strict=True)) for t in args.designs or []]
     out = writable(args.out, "--out")
     with remote.connect(args) as client:
         rec = client.create_recording(body)

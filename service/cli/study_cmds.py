@@ -16,6 +16,7 @@ from typing import IO, Any
 
 import numpy as np
 
+from finaldrive.engine import history_record
 from finaldrive.service.cli.common import (
     ROAD_HELP,
     UsageError,
@@ -72,7 +73,8 @@ def _plan(kind: str, args: argparse.Namespace, **parts: Any) -> Any:
     from finaldrive.service.cli.common import read_profile
 
     try:
-        return plan_study(kind, _roads(args), profiles=lambda name: read_profile(Path(name)), **parts)
+        return plan_study(kind, _roads(args), profiles=lambda name: read_profile(Path(name)),
+                          vehicle=load_vehicle_arg(args.vehicle), **parts)
     except PlanError as exc:
         raise UsageError(str(exc)) from None
 
@@ -120,7 +122,8 @@ def run_optimize(args: argparse.Namespace) -> int:
         "command": "optimize", "roads": [r.name for r in plan.roads], "objective": args.objective if several else None,
         "best": best, "per_road": per_road, "evaluations": tally.progress.done, "failed": tally.progress.failed,
         "designs_evaluated": de_run.n_evals, "generations": de_run.generation, "stop_reason": de_run.stop_reason,
-        "history": [{k: (clean(v) if isinstance(v, float) else v) for k, v in h.items()} for h in de_run.history],
+        "history": [{k: (clean(v) if isinstance(v, float) else v) for k, v in history_record(h).items()}
+                    for h in de_run.history],
         "seed": args.seed, "de": {"np": de.np, "iters": de.iters, "f": de.f, "cp": de.cp, "mp": de.mp,
                                   "mr": de.mr_fraction, "patience": de.patience, "max_evals": de.max_evals},
         "bounds": {"a2_deg": list(bounds.a2_deg), "l2_m": list(bounds.l2_m), "rws_m": list(bounds.rws_m)},
@@ -144,11 +147,11 @@ def sweep_grid(args: argparse.Namespace) -> tuple[str, np.ndarray]:
     try:
         if spec.lower() == "table9":
             rws = TABLE9_DEFAULT_RWS_M if args.rws is None else args.rws
-            return f"table9 (rws={rws:g})", table9_grid(rws)
+            return f"table9 (rws_m={rws:g})", table9_grid(rws)
         if args.rws is not None:
             if "rws" in spec.lower():
-                raise UsageError("give R_WS either in --grid (rws=...) or with --rws, not both")
-            spec = f"{spec},rws={args.rws!r}" if spec else f"rws={args.rws!r}"
+                raise UsageError("give R_WS either in --grid (rws_m=...) or with --rws, not both")
+            spec = f"{spec},rws_m={args.rws!r}" if spec else f"rws_m={args.rws!r}"
         return spec, parse_grid(spec)
     except ValueError as exc:
         option = "--rws" if args.rws is not None and str(exc).startswith("rws") else "--grid"
@@ -233,7 +236,7 @@ def _design_text(d: dict[str, Any] | None) -> str:
         return "none (every simulation failed)"
     fitness = "failed" if d["fitness_m"] is None else f"{d['fitness_m']:.4f} m"
     distance = "-" if d.get("distance_m") is None else f"{d['distance_m']:.3f} m"
-    return (f"a2 = {d['a2_deg']:.2f} deg, L2 = {d['l2']:.4f} m, R_WS = {d['rws']:.4f} m, "
+    return (f"a2 = {d['a2_deg']:.2f} deg, L2 = {d['l2_m']:.4f} m, R_WS = {d['rws_m']:.4f} m, "
             f"fitness {fitness}, distance {distance}")
 
 
@@ -250,7 +253,7 @@ def run_roads(args: argparse.Namespace) -> int:
     for p in PRESETS.values():
         ref = p.paper or {}
         print(f"{p.name:<20} {p.road.spec:<20} {ref.get('a2_deg', math.nan):7.1f} "
-              f"{ref.get('L2_m', math.nan):6.3f} {ref.get('R_WS_m', math.nan):7.3f} "
+              f"{ref.get('l2_m', math.nan):6.3f} {ref.get('rws_m', math.nan):7.3f} "
               f"{ref.get('fitness_m', math.nan):7.3f}  {p.description}")
     return 0
 
@@ -270,7 +273,7 @@ def register(sub: Any) -> None:
                        **parser_options())
     add_road_args(p)
     p.add_argument("--grid", default="table9",
-                   help="table9, or a grid spec such as a2_deg=0:358:2,l2=0:0.2:0.02,rws=0.093")
+                   help="table9, or a grid spec such as a2_deg=0:358:2,l2_m=0:0.2:0.02,rws_m=0.093")
     p.add_argument("--rws", type=float, default=None, help="R_WS [m] of the grid (default 0.093, Table 9)")
     p.add_argument("--out", metavar="FILE.csv", help="write every result (road, design, outcome) as CSV")
     add_run_args(p)

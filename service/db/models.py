@@ -95,12 +95,13 @@ class JobRoad(Base):
     road_index: Mapped[int] = mapped_column(Integer, primary_key=True)
     name: Mapped[str] = mapped_column(String(64))
     spec: Mapped[str] = mapped_column(String(255))
-    best_fitness: Mapped[float | None] = mapped_column(Float)
+    best_fitness_m: Mapped[float | None] = mapped_column(Float)
     best_evaluation_id: Mapped[int | None] = mapped_column(Integer)
 
 
 class Evaluation(Base):
-    """One simulation result of a job: a design on a road (SI units, a2 in rad), with the run's
+    """One simulation result of a job: a design on a road (names with units,
+    docs/fields.md), with the run's
     diagnostics (finaldrive.engine.DIAGNOSTICS, one column each, added below the class).
 
     ``step`` is the DE generation (0 = initial population; always 0 for sweeps) and
@@ -114,9 +115,9 @@ class Evaluation(Base):
     road_index: Mapped[int] = mapped_column(Integer)
     step: Mapped[int] = mapped_column(Integer)
     candidate: Mapped[int] = mapped_column(Integer)
-    a2: Mapped[float] = mapped_column(Float)
-    l2: Mapped[float] = mapped_column(Float)
-    rws: Mapped[float] = mapped_column(Float)
+    a2_deg: Mapped[float] = mapped_column(Float)
+    l2_m: Mapped[float] = mapped_column(Float)
+    rws_m: Mapped[float] = mapped_column(Float)
     distance_m: Mapped[float | None] = mapped_column(Float)
     squat_ratio: Mapped[float | None] = mapped_column(Float)
     slack_m: Mapped[float | None] = mapped_column(Float)
@@ -158,13 +159,35 @@ class Generation(Base):
     run: Mapped[int] = mapped_column(Integer)
     generation: Mapped[int] = mapped_column(Integer)
     population: Mapped[list[list[float]]] = mapped_column(JSON)
-    fitness: Mapped[list[float | None]] = mapped_column(JSON)
+    fitness_m: Mapped[list[float | None]] = mapped_column(JSON)
     state: Mapped[dict[str, Any]] = mapped_column(JSON)
-    best_f: Mapped[float | None] = mapped_column(Float)
+    best_fitness_m: Mapped[float | None] = mapped_column(Float)
     n_evals: Mapped[int] = mapped_column(Integer)
     created_at: Mapped[datetime] = mapped_column(DateTime)
 
     __table_args__ = (UniqueConstraint("job_id", "run", "generation", name="uq_generations_step"),)
+
+
+class RoadProfile(Base):
+    """A measured road uploaded to the service (POST /v1/roads), named ``profile:ID`` in job specs.
+
+    Stored once per content (``content_hash``, the sha256 of its points, also its part of the
+    result-cache key); the points are loaded only when asked for.
+    """
+
+    __tablename__ = "road_profiles"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(64))
+    content_hash: Mapped[str] = mapped_column(String(64), unique=True)
+    n_points: Mapped[int] = mapped_column(Integer)
+    x_min_m: Mapped[float] = mapped_column(Float)
+    x_max_m: Mapped[float] = mapped_column(Float)
+    y_min_m: Mapped[float] = mapped_column(Float)
+    y_max_m: Mapped[float] = mapped_column(Float)
+    xs: Mapped[list[float]] = mapped_column(JSON, deferred=True)
+    ys: Mapped[list[float]] = mapped_column(JSON, deferred=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
 
 
 class Recording(Base):

@@ -11,9 +11,10 @@ from datetime import UTC, datetime
 from typing import Any
 
 from sqlalchemy import func, select, update
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, undefer
 
-from finaldrive.service.db.models import ACTIVE_STATES, Evaluation, Job, JobRoad, JobState, Recording
+from finaldrive.engine import Road
+from finaldrive.service.db.models import ACTIVE_STATES, Evaluation, Job, JobRoad, JobState, Recording, RoadProfile
 
 
 def utcnow() -> datetime:
@@ -99,6 +100,37 @@ def list_evaluations(
     if after_id is not None:
         query = query.where(Evaluation.id > after_id)
     return list(session.scalars(query))
+
+
+# ---------------------------------------------------------------------- road profiles
+def profile_by_hash(session: Session, digest: str) -> RoadProfile | None:
+    return session.scalars(select(RoadProfile).where(RoadProfile.content_hash == digest)).one_or_none()
+
+
+def create_profile(session: Session, road: Road, *, name: str, digest: str) -> RoadProfile:
+    """Store a profile road (validated by the engine); ``digest`` is its content hash."""
+    profile = RoadProfile(
+        name=name, content_hash=digest, n_points=len(road.xs), x_min_m=road.xs[0], x_max_m=road.xs[-1],
+        y_min_m=min(road.ys), y_max_m=max(road.ys), xs=list(road.xs), ys=list(road.ys), created_at=utcnow(),
+    )
+    session.add(profile)
+    session.flush()
+    return profile
+
+
+def list_profiles(session: Session, *, before_id: int | None, limit: int) -> list[RoadProfile]:
+    """Newest first, without their points; ``before_id`` is the cursor."""
+    query = select(RoadProfile).order_by(RoadProfile.id.desc()).limit(limit)
+    if before_id is not None:
+        query = query.where(RoadProfile.id < before_id)
+    return list(session.scalars(query))
+
+
+def profile_roads(session: Session, ids: Sequence[int]) -> dict[int, Road]:
+    """The stored profiles among ``ids`` as roads named by their id (spec ``profile:ID``)."""
+    rows = session.scalars(select(RoadProfile).options(undefer(RoadProfile.xs), undefer(RoadProfile.ys))
+                           .where(RoadProfile.id.in_(ids)))
+    return {r.id: Road.from_points(r.xs, r.ys, name=str(r.id)) for r in rows}
 
 
 # ---------------------------------------------------------------------- recordings

@@ -28,10 +28,10 @@ class LeaseLost(Exception):
     """The scheduler no longer owns the job: nothing was written."""
 
 
-#: The columns of an evaluation the scheduler writes, in the order of a row tuple (SI units, a2
-#: in rad; fitness None when the simulation failed), then the run's diagnostics.
+#: The columns of an evaluation the scheduler writes, in the order of a row tuple (units in the
+#: names, docs/fields.md; fitness None when the simulation failed), then the run's diagnostics.
 ROW_COLUMNS: tuple[str, ...] = (
-    "road_index", "step", "candidate", "a2", "l2", "rws", "distance_m", "squat_ratio", "slack_m", "fitness_m",
+    "road_index", "step", "candidate", "a2_deg", "l2_m", "rws_m", "distance_m", "squat_ratio", "slack_m", "fitness_m",
     "chain_length_m", "status", "reason", "wall_s", "cached", "cache_key", "cache_hash", "transient",
     *DIAGNOSTICS)
 ROAD, STEP, CANDIDATE, FITNESS, STATUS, CACHED = (ROW_COLUMNS.index(c) for c in (
@@ -125,10 +125,11 @@ def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequen
     _update_best(session, job_id, rows)
     if generations:
         now = _bound_now(session, Generation)
-        columns = ("job_id", "run", "generation", "population", "fitness", "state", "best_f", "n_evals", "created_at")
+        columns = ("job_id", "run", "generation", "population", "fitness_m", "state", "best_fitness_m", "n_evals",
+                   "created_at")
         _insert_many(session, "generations", columns, [
-            (job_id, g["run"], g["generation"], json.dumps(g["population"]), json.dumps(g["fitness"]),
-             json.dumps(g["state"]), g["best_f"], g["n_evals"], now) for g in generations],
+            (job_id, g["run"], g["generation"], json.dumps(g["population"]), json.dumps(g["fitness_m"]),
+             json.dumps(g["state"]), g["best_fitness_m"], g["n_evals"], now) for g in generations],
             ("job_id", "run", "generation"))
     return inserted
 
@@ -174,8 +175,8 @@ def _update_best(session: Session, job_id: int, rows: Sequence[Row]) -> None:
     roads = session.scalars(select(JobRoad).where(JobRoad.job_id == job_id, JobRoad.road_index.in_(list(best))))
     for road in roads:
         row = best[road.road_index]
-        if road.best_fitness is None or _better(row[FITNESS], road.best_fitness):
-            road.best_fitness = row[FITNESS]
+        if road.best_fitness_m is None or _better(row[FITNESS], road.best_fitness_m):
+            road.best_fitness_m = row[FITNESS]
             road.best_evaluation_id = session.execute(select(Evaluation.id).where(
                 Evaluation.job_id == job_id, Evaluation.road_index == row[ROAD], Evaluation.step == row[STEP],
                 Evaluation.candidate == row[CANDIDATE])).scalar_one()

@@ -14,6 +14,7 @@ from dataclasses import fields
 import numpy as np
 
 from finaldrive.engine import Road, SimSettings, Vehicle, default_vehicle
+from finaldrive.service.profiles import content_hash
 
 #: SimSettings fields that change what is returned or when a run is given up, never a result that
 #: finishes: the series and its stride (interpolated; the steps do not land on it) and the
@@ -23,11 +24,10 @@ DESIGN_DECIMALS = 12
 
 
 def road_key(road: Road) -> str:
-    """``Road.spec``, or for a user profile a hash of its points (the spec names only the label)."""
+    """``Road.spec``, or for a user profile the hash of its points (the spec names only the label or id)."""
     if road.kind != "profile":
         return road.spec
-    points = json.dumps([road.xs, road.ys], separators=(",", ":"))
-    return "profile:" + hashlib.sha256(points.encode()).hexdigest()
+    return "profile:" + content_hash(road)
 
 
 def settings_key(settings: SimSettings) -> dict[str, object]:

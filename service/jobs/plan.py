@@ -8,6 +8,7 @@ from finaldrive.engine import (
     Bounds,
     DESettings,
     PlanError,
+    ProfileResolver,
     SimSettings,
     SpaceError,
     StudyPlan,
@@ -32,27 +33,29 @@ class JobPlan:
         return self.study.total()
 
 
-def build_plan(spec: JobSpec, *, max_simulation_s: float | None = None) -> JobPlan:
+def build_plan(spec: JobSpec, *, profiles: ProfileResolver | None = None,
+               max_simulation_s: float | None = None) -> JobPlan:
     """Resolve a normalised spec; raises :class:`PlanError` naming the offending field.
 
-    ``max_simulation_s``: the wall-time limit of each simulation (a service setting, not the job's).
+    ``profiles`` resolves ``profile:ID`` roads (from the store); ``max_simulation_s``: the wall-time
+    limit of each simulation (a service setting, not the job's).
     """
+    vehicle = None
+    if spec.vehicle is not None:
+        try:
+            vehicle = load_vehicle_dict(spec.vehicle.model_dump())
+        except ValueError as exc:
+            raise PlanError(("vehicle",), str(exc)) from None
     try:
         bounds = None if spec.bounds is None else Bounds(**spec.bounds.model_dump())
         de = None if spec.de is None else DESettings(**spec.de.model_dump())
     except SpaceError as exc:
         raise PlanError(("bounds" if exc.field in Bounds.__dataclass_fields__ else "de", exc.field), exc.msg) from None
     study = plan_study(spec.kind, spec.roads, grid=spec.grid, bounds=bounds, de=de, objective=spec.aggregate,
-                       seed=spec.seed)
+                       seed=spec.seed, profiles=profiles, vehicle=vehicle)
     try:
         settings = SimSettings(duration=spec.settings.duration, dt=spec.settings.dt, method=spec.settings.method,
                                max_wall_s=max_simulation_s)
     except ValueError as exc:
         raise PlanError(("settings",), str(exc)) from None
-    vehicle = None
-    if spec.vehicle is not None:
-        try:
-            vehicle = load_vehicle_dict(spec.vehicle)
-        except ValueError as exc:
-            raise PlanError(("vehicle",), str(exc)) from None
     return JobPlan(study, settings, vehicle)

@@ -1,7 +1,7 @@
 """The recording producer: a thread of a scheduler process that makes requested .rrd files.
 
-A recording's spec is concrete when stored (the job's best already resolved to a design), so
-producing it needs no other table. The finished file is stored in the database with the
+A recording's spec is concrete when stored (the job's best resolved to a design, a measured
+road to its points), so producing it needs no other table. The finished file is stored in the database with the
 recording (about 1 MB for two geometries over 3.5 s), so a scheduler on any machine can produce
 it and the API serves it from the store. Rerun is imported inside the thread, never at import
 time, and the process never forks after it (the process executor spawns its workers).
@@ -26,11 +26,15 @@ log = logging.getLogger(__name__)
 
 def produce(spec: dict[str, Any], path: Path) -> None:
     """Simulate the spec's designs and write the recording to ``path``."""
-    from finaldrive.engine import Design, SimSettings, load_vehicle_dict, resolve_roads
+    from finaldrive.engine import Design, Road, SimSettings, load_vehicle_dict, resolve_roads
     from finaldrive.service.recording import record
 
-    road = resolve_roads(spec["road"])[0].road
-    designs = [(d["label"], Design.from_deg(d["a2_deg"], d["l2"], d["rws"])) for d in spec["designs"]]
+    if spec.get("profile"):  # a measured road: its points are in the spec
+        xs, ys = spec["profile"]
+        road = Road.from_points(xs, ys, name=spec["road"].split(":", 1)[1].strip())
+    else:
+        road = resolve_roads(spec["road"])[0].road
+    designs = [(d["label"], Design.from_deg(d["a2_deg"], d["l2_m"], d["rws_m"])) for d in spec["designs"]]
     base = SimSettings(method=spec["method"], dt=spec["dt"])
     vehicle = load_vehicle_dict(spec["vehicle"]) if spec.get("vehicle") else None
     record(path, designs, road, duration=spec["duration"], fps=spec["fps"], base=base, vehicle=vehicle,

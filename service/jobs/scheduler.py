@@ -44,6 +44,7 @@ from finaldrive.engine import (
     DERun,
     PlanError,
     Request,
+    Road,
     Run,
     fitness_values,
 )
@@ -51,6 +52,7 @@ from finaldrive.service.config import Settings
 from finaldrive.service.db.engine import Database
 from finaldrive.service.db.leases import beat, claim_jobs, finish_job, register_scheduler, stop_scheduler
 from finaldrive.service.db.models import EvalStatus, Evaluation, Job, JobState
+from finaldrive.service.db.repository import profile_roads
 from finaldrive.service.db.results import (
     FITNESS,
     ROW_COLUMNS,
@@ -65,6 +67,7 @@ from finaldrive.service.jobs.cache import context_prefix, design_keys
 from finaldrive.service.jobs.plan import JobPlan, build_plan
 from finaldrive.service.jobs.recordings import RecordingProducer
 from finaldrive.service.jobs.writer import Guard, Writer, Writes
+from finaldrive.service.profiles import profile_ids, resolver
 from finaldrive.service.schemas import JobSpec
 from finaldrive.workers import Executor
 from finaldrive.workers.dispatch import Dispatcher, Task, Work
@@ -198,9 +201,10 @@ class Scheduler:
         loaded = self._db(lambda s: _load(s, job_id), f"open job {job_id}", write=False)
         if loaded is None:
             return  # retried at the next heartbeat: the job stays claimed by us
-        spec, resumed, sweep_done, de_states = loaded
+        spec, profiles, resumed, sweep_done, de_states = loaded
         try:
-            plan = build_plan(JobSpec.model_validate(spec), max_simulation_s=self.config.max_simulation_s)
+            plan = build_plan(JobSpec.model_validate(spec), profiles=resolver(profiles),
+                              max_simulation_s=self.config.max_simulation_s)
         except (PlanError, ValueError) as exc:
             message = f"invalid job: {exc}"
             self._db(lambda s: finish_job(s, self.id, job_id, JobState.failed, error=message), f"fail job {job_id}")
@@ -301,8 +305,8 @@ class Scheduler:
             de = run.de
             job.writes.generations.append({
                 "run": run.index, "generation": run.generation, "state": de.state(),
-                "population": de.population.tolist(), "fitness": _nullable(de.fitness),
-                "best_f": _nullable([de.best_f])[0], "n_evals": de.n_evals,
+                "population": de.population.tolist(), "fitness_m": _nullable(de.fitness),
+                "best_fitness_m": _nullable([de.best_f])[0], "n_evals": de.n_evals,
             })
 
     def _finish_ready(self) -> None:
@@ -325,16 +329,20 @@ class Scheduler:
             self._drop(job_id)
 
 
-def _load(session: Any, job_id: int) -> tuple[dict[str, Any], bool, set[tuple[int, int]], dict[int, Any]]:
-    """A claimed job's spec and, when it has stored results, what it needs to resume."""
+def _load(session: Any, job_id: int
+          ) -> tuple[dict[str, Any], dict[int, Road], bool, set[tuple[int, int]], dict[int, Any]]:
+    """A claimed job's spec, the stored road profiles it names and, when it has stored results, what
+    it needs to resume."""
     job = session.get(Job, job_id)
     assert job is not None
+    ids = sorted(profile_ids(job.spec.get("roads", [])))
+    profiles = profile_roads(session, ids) if ids else {}
     resumed = job.n_done + job.n_failed > 0
     if not resumed:
-        return dict(job.spec), False, set(), {}
+        return dict(job.spec), profiles, False, set(), {}
     sweep_step = PAPER_SWEEP_STEP if job.kind == "paper-study" else 0
     de_states = {i: (g.state, g.generation) for i, g in last_generations(session, job_id).items()}
-    return dict(job.spec), True, stored_slots(session, job_id, sweep_step), de_states
+    return dict(job.spec), profiles, True, stored_slots(session, job_id, sweep_step), de_states
 
 
 def _lookup(session: Any, job: ActiveJob, requests: list[Request]
@@ -364,7 +372,7 @@ def _rows_from_result(part: Request, batch: BatchResult, fitness: np.ndarray, ke
     failed_for_now = [transient or (batch.status[j] != STATUS_OK and reasons[j].startswith(TIME_LIMIT))
                       for j in range(n)]
     columns = [
-        [part.road] * n, [part.step] * n, part.candidates.tolist(), *(_nullable(c) for c in part.designs.T),
+        [part.road] * n, [part.step] * n, part.candidates.tolist(), *_design_columns(part.designs),
         _nullable(batch.distance_m), _nullable(batch.squat_ratio), _nullable(batch.slack_m), _nullable(fitness),
         _nullable(batch.chain_length_m),
         [EvalStatus.ok.value if good else EvalStatus.failed.value for good in ok.tolist()], reasons,
@@ -377,7 +385,12 @@ def _rows_from_result(part: Request, batch: BatchResult, fitness: np.ndarray, ke
 def _row_from_cache(hit: Evaluation, road: int, step: int, candidate: int, design: np.ndarray, key: str) -> Row:
     values = {name: getattr(hit, name) for name in ROW_COLUMNS[6:]}
     values.update(wall_s=0.0, cached=True, cache_key=key, cache_hash=key_hash(key), transient=False)
-    return (road, step, candidate, *_nullable(design), *values.values())
+    return (road, step, candidate, *(c[0] for c in _design_columns(design[None, :])), *values.values())
+
+
+def _design_columns(designs: np.ndarray) -> list[list[float | None]]:
+    """The stored columns a2_deg, l2_m, rws_m of designs given as rows (a2 [rad], L2 [m], R_WS [m])."""
+    return [_nullable(np.degrees(designs[:, 0])), _nullable(designs[:, 1]), _nullable(designs[:, 2])]
 
 
 def _nullable(values: Sequence[float] | np.ndarray) -> list[float | None]:

@@ -10,8 +10,9 @@ from sqlalchemy.exc import IntegrityError
 from finaldrive.engine import estimate_cost
 from finaldrive.service.db.engine import Database
 from finaldrive.service.db.models import Job
-from finaldrive.service.db.repository import create_job, job_by_idempotency_key
+from finaldrive.service.db.repository import create_job, job_by_idempotency_key, profile_roads
 from finaldrive.service.jobs.plan import PlanError, build_plan
+from finaldrive.service.profiles import profile_ids, resolver
 from finaldrive.service.schemas import JobSpec
 
 
@@ -34,7 +35,10 @@ def submit_job(
         existing = _replay(db, idempotency_key, digest)
         if existing is not None:
             return existing, False
-    plan = build_plan(spec)
+    ids = sorted(profile_ids(spec.roads))
+    with db.read() as session:
+        stored = profile_roads(session, ids) if ids else {}
+    plan = build_plan(spec, profiles=resolver(stored))
     total = plan.total()
     if total > max_evaluations:
         raise PlanError(

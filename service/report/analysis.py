@@ -77,9 +77,9 @@ def road_slope(spec: str) -> float:
 
 def _design(e: dict[str, np.ndarray], i: int) -> dict[str, Any]:
     return {
-        "a2_deg": _r(wrap_deg(math.degrees(e["a2"][i])), 3), "L2_m": _r(e["l2"][i], 5),
-        "R_WS_m": _r(e["rws"][i], 5), "slack_mm": _r(1000 * e["slack_m"][i], 4),
-        "SR": _r(e["squat_ratio"][i], 4), "fitness_m": _r(e["fitness_m"][i], 4),
+        "a2_deg": _r(wrap_deg(e["a2_deg"][i]), 3), "l2_m": _r(e["l2_m"][i], 5),
+        "rws_m": _r(e["rws_m"][i], 5), "slack_m": _r(e["slack_m"][i], 7),
+        "squat_ratio": _r(e["squat_ratio"][i], 4), "fitness_m": _r(e["fitness_m"][i], 4),
         "distance_m": _r(e["distance_m"][i], 4),
     }
 
@@ -99,7 +99,7 @@ def sweep_table(data: StudyData) -> tuple[np.ndarray, np.ndarray]:
     fitness = np.full((len(data.roads), n), np.nan)
     for i in np.flatnonzero(sweep):
         c = e["candidate"][i]
-        designs[c] = (e["a2"][i], e["l2"][i], e["rws"][i])
+        designs[c] = (e["a2"][i], e["l2_m"][i], e["rws_m"][i])
         if e["ok"][i]:
             fitness[e["road_index"][i], c] = e["fitness_m"][i]
     return designs, fitness
@@ -116,8 +116,8 @@ def de_history(data: StudyData, road: int, np_size: int) -> list[dict[str, Any]]
         upto = on_road & (e["step"] <= g)
         f = np.sort(e["fitness_m"][upto & e["ok"]])[::-1][:np_size]
         out.append({"generation": int(g) + 1, "n_evals": int(upto.sum()),
-                    "best_f": _r(float(f[0]) if f.size else None, 6),
-                    "mean_f": _r(float(f.mean()) if f.size else None, 6)})
+                    "best_fitness_m": _r(float(f[0]) if f.size else None, 6),
+                    "mean_fitness_m": _r(float(f.mean()) if f.size else None, 6)})
     return out
 
 
@@ -127,7 +127,7 @@ def de_population(data: StudyData, road: int, np_size: int) -> np.ndarray:
     e = data.evals
     idx = np.flatnonzero((e["road_index"] == road) & (e["step"] >= 0) & e["ok"])
     order = idx[np.lexsort((idx, -e["fitness_m"][idx]))][:np_size]
-    return np.stack([e["a2"][order], e["l2"][order], e["rws"][order], e["fitness_m"][order]], axis=1)
+    return np.stack([e["a2"][order], e["l2_m"][order], e["rws_m"][order], e["fitness_m"][order]], axis=1)
 
 
 def per_road(data: StudyData) -> list[dict[str, Any]]:
@@ -177,7 +177,7 @@ def robust(data: StudyData, roads: list[dict[str, Any]]) -> dict[str, Any] | Non
     a2, l2, rws = designs[c]
     return {
         "method": "best mean fitness over the stored Table 9 sweep grid (no extra simulations)",
-        "candidate": c, "a2_deg": _r(wrap_deg(math.degrees(a2)), 3), "L2_m": _r(l2, 5), "R_WS_m": _r(rws, 5),
+        "candidate": c, "a2_deg": _r(wrap_deg(math.degrees(a2)), 3), "l2_m": _r(l2, 5), "rws_m": _r(rws, 5),
         "mean_fitness_m": _r(score[c], 4), "n_valid_designs": int(np.isfinite(score).sum()),
         "per_road": [
             {"name": r["name"], "fitness_m": _r(fitness[i, c], 4), "optimum_m": _r(optimum[i], 4),
@@ -220,16 +220,16 @@ def conclusions(
     def position(rows: list[dict[str, Any]]) -> dict[str, Any] | None:
         if not rows:
             return None
-        l2 = np.array([x["L2_m"] for x in rows])
+        l2 = np.array([x["l2_m"] for x in rows])
         a2 = [x["a2_deg"] for x in rows]
         dev = np.array([alignment_deg(a) for a in a2])
         off = np.array([offset_mm(a, l) for a, l in zip(a2, l2, strict=True)])
         return {
-            "n": len(rows), "median_L2_m": _r(np.median(l2), 4), "max_L2_m": _r(l2.max(), 4),
-            "share_L2_le_0.04_m": _r(float(np.mean(l2 <= 0.04)), 3),
+            "n": len(rows), "median_l2_m": _r(np.median(l2), 4), "max_l2_m": _r(l2.max(), 4),
+            "share_l2_le_0.04_m": _r(float(np.mean(l2 <= 0.04)), 3),
             "median_angle_to_swingarm_deg": _r(np.median(dev), 2),
             "share_within_20_deg": _r(float(np.mean(dev <= ALIGNED_DEG)), 3),
-            "median_offset_from_swingarm_line_mm": _r(np.median(off), 2),
+            "median_offset_from_swingarm_line_m": _r(np.median(off) / 1000.0, 5),
         }
 
     ours = position([r["de_best"] for r in roads if r["de_best"]])
@@ -238,9 +238,9 @@ def conclusions(
     c2 = {
         "ours": ours,
         "paper": paper,
-        "L2_range_m": [l2_range[0], l2_range[1]],
+        "l2_range_m": [l2_range[0], l2_range[1]],
         "phi0_deg": _r(PHI0_DEG, 3),
-        "close_holds": None if ours is None else bool(ours["median_L2_m"] <= l2_range[0] + CLOSE_L2_FRACTION * span),
+        "close_holds": None if ours is None else bool(ours["median_l2_m"] <= l2_range[0] + CLOSE_L2_FRACTION * span),
         "aligned_holds": None if ours is None else bool(ours["median_angle_to_swingarm_deg"] <= ALIGNED_DEG),
     }
     c3: dict[str, Any] = {"holds": None}

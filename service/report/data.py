@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     import httpx
 
 #: Evaluation columns kept for the report (float arrays; ``ok`` and ``cached`` as bool).
-COLUMNS = ("road_index", "step", "candidate", "a2", "l2", "rws", "distance_m", "squat_ratio",
+COLUMNS = ("road_index", "step", "candidate", "a2_deg", "l2_m", "rws_m", "distance_m", "squat_ratio",
            "slack_m", "fitness_m", "wall_s")
 
 
@@ -38,7 +38,7 @@ class StudyData:
     started_at: datetime | None
     finished_at: datetime | None
     roads: list[tuple[str, str]]            # (name, spec) in road-index order
-    evals: dict[str, np.ndarray]           # COLUMNS + "ok", "cached"
+    evals: dict[str, np.ndarray]           # COLUMNS + "ok", "cached", "a2" (a2_deg in rad)
 
     @property
     def wall_s(self) -> float | None:
@@ -57,6 +57,7 @@ def _arrays(rows: list[tuple[Any, ...]]) -> dict[str, np.ndarray]:
     }
     for name in ("road_index", "step", "candidate"):
         out[name] = out[name].astype(int)
+    out["a2"] = np.radians(out["a2_deg"])  # designs as the engine takes them
     out["ok"] = np.array([r[n_num] == "ok" for r in rows], dtype=bool)
     out["cached"] = np.array([bool(r[n_num + 1]) for r in rows], dtype=bool)
     return out

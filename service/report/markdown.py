@@ -95,22 +95,23 @@ def _conclusions(rep: dict[str, Any]) -> list[str]:
     if ours:
         out += [
             "**(2) The optimum puts the engine sprocket close to the swingarm pivot, aligned with the swingarm.** "
-            f"Over the {ours['n']} DE optima: median L2 = {ours['median_L2_m']:.3f} m (range "
-            f"{c2['L2_range_m'][0]:g}-{c2['L2_range_m'][1]:g} m; max {ours['max_L2_m']:.3f} m; "
-            f"{100 * ours['share_L2_le_0.04_m']:.0f} % have L2 <= 0.04 m); close if the median is in the lowest "
+            f"Over the {ours['n']} DE optima: median L2 = {ours['median_l2_m']:.3f} m (range "
+            f"{c2['l2_range_m'][0]:g}-{c2['l2_range_m'][1]:g} m; max {ours['max_l2_m']:.3f} m; "
+            f"{100 * ours['share_l2_le_0.04_m']:.0f} % have L2 <= 0.04 m); close if the median is in the lowest "
             f"{100 * A.CLOSE_L2_FRACTION:.0f} % of the range: {_yes(c2['close_holds'])}. "
             f"Angle between r_1->2 (a2) and the swingarm line (phi0 = {c2['phi0_deg']:.1f} deg, or its opposite "
             f"{c2['phi0_deg'] - 180:.1f} deg): median {ours['median_angle_to_swingarm_deg']:.1f} deg, "
             f"{100 * ours['share_within_20_deg']:.0f} % within {A.ALIGNED_DEG:g} deg; the sprocket axis lies a "
-            f"median {ours['median_offset_from_swingarm_line_mm']:.1f} mm off the swingarm line. Aligned if the "
+            f"median {1000 * ours['median_offset_from_swingarm_line_m']:.1f} mm off the swingarm line. Aligned if the "
             f"median angle is <= {A.ALIGNED_DEG:g} deg: {_yes(c2['aligned_holds'])}.", ""]
     if paper:
         out += [
             f"The same measures on the paper's own {paper['n']} rows (Tables 11-13): "
-            f"median L2 = {paper['median_L2_m']:.3f} m, "
+            f"median L2 = {paper['median_l2_m']:.3f} m, "
             f"median angle to the swingarm line {paper['median_angle_to_swingarm_deg']:.1f} deg "
             f"({100 * paper['share_within_20_deg']:.0f} % within {A.ALIGNED_DEG:g} deg), median offset "
-            f"{paper['median_offset_from_swingarm_line_mm']:.1f} mm. With L2 this small the angle matters little: "
+            f"{1000 * paper['median_offset_from_swingarm_line_m']:.1f} mm. "
+            "With L2 this small the angle matters little: "
             'the offset from the line is the better measure of "aligned and close".',
             "",
         ]
@@ -139,20 +140,21 @@ def _disagreements(rep: dict[str, Any]) -> list[str]:
     if pos["ours"] and pos["paper"]:
         o, p = pos["ours"], pos["paper"]
         out.append(
-            f"- Optimum position: median L2 {o['median_L2_m']:.3f} m here against {p['median_L2_m']:.3f} m in the "
-            f"paper's rows; median offset from the swingarm line {o['median_offset_from_swingarm_line_mm']:.1f} "
-            f"against {p['median_offset_from_swingarm_line_mm']:.1f} mm. Where L2 is a few millimetres the "
+            f"- Optimum position: median L2 {o['median_l2_m']:.3f} m here against {p['median_l2_m']:.3f} m in the "
+            f"paper's rows; median offset from the swingarm line "
+            f"{1000 * o['median_offset_from_swingarm_line_m']:.1f} against "
+            f"{1000 * p['median_offset_from_swingarm_line_m']:.1f} mm. Where L2 is a few millimetres the "
             "angle a2 hardly moves the sprocket, so the DE's a2 is close to arbitrary there and the angle "
             "check is weak evidence either way."
         )
     g1, g2 = t14["ours"]["geometry1"], t14["ours"]["geometry2"]
     p1, p2 = t14["paper"]["geometry1"], t14["paper"]["geometry2"]
     if g1["distance_m"] is not None and g2["distance_m"] is not None:
+        d1, d2 = p1["distance_m"], p2["distance_m"]
         out.append(f"- Table 14: distances {g1['distance_m']:.3f} / {g2['distance_m']:.3f} m against the paper's "
-                   f"{p1['d_m']:.3f} / {p2['d_m']:.3f} m ({g1['distance_m'] - p1['d_m']:+.3f} / "
-                   f"{g2['distance_m'] - p2['d_m']:+.3f} m); geometry 2's slack {_f(g2['slack_mm'], '.1f')} mm against "
-                   f"{p2['slack_mm']:.1f} mm. Geometry 2 is simulated with R_WS = 0.050 m (the text; Table 14 prints "
-                   "0.150 m)." + _gap_cause(t14))
+                   f"{d1:.3f} / {d2:.3f} m ({g1['distance_m'] - d1:+.3f} / {g2['distance_m'] - d2:+.3f} m); "
+                   f"geometry 2's slack {_f(_mm(g2['slack_m']), '.1f')} mm against {_mm(p2['slack_m']):.1f} mm. "
+                   "Geometry 2 is simulated with R_WS = 0.050 m (the text; Table 14 prints 0.150 m)." + _gap_cause(t14))
     if rep["job"]["spec"]["grid"] == "table9":
         out.append("- The sweep uses R_WS = 0.093 m (the paper does not say which R_WS its sweep used; 93 mm is "
                    "the mean of its 23 DE optima, section 5.3).")
@@ -178,11 +180,16 @@ def _gap_cause(t14: dict[str, Any]) -> str:
             "eq. 41 closed by choice), and the drive torque calibrated on the flat road only.")
 
 
+def _mm(metres: float | None) -> float | None:
+    """Slack is stored in m (docs/fields.md) and read in mm in the tables."""
+    return None if metres is None else 1000.0 * metres
+
+
 def _design_cells(d: dict[str, Any] | None) -> list[str]:
     if d is None:
         return ["–"] * 6
-    return [_f(d["a2_deg"], ".1f"), _f(d["L2_m"], ".3f"), _f(d["R_WS_m"], ".3f"), _f(d["slack_mm"], ".3f"),
-            _f(d["SR"], ".3f"), _f(d["fitness_m"], ".3f")]
+    return [_f(d["a2_deg"], ".1f"), _f(d["l2_m"], ".3f"), _f(d["rws_m"], ".3f"), _f(_mm(d["slack_m"]), ".3f"),
+            _f(d["squat_ratio"], ".3f"), _f(d["fitness_m"], ".3f")]
 
 
 def _roads(roads: list[dict[str, Any]], fp: dict[str, Any] | None) -> list[str]:
@@ -192,8 +199,7 @@ def _roads(roads: list[dict[str, Any]], fp: dict[str, Any] | None) -> list[str]:
     rows = []
     for r in roads:
         d, p = r["de_best"], r["paper"]
-        paper = ["–"] * 6 if p is None else [_f(p["a2_deg"], ".1f"), _f(p["L2_m"], ".3f"), _f(p["R_WS_m"], ".3f"),
-                                             _f(p["slack_mm"], ".3f"), _f(p["SR"], ".3f"), _f(p["fitness_m"], ".3f")]
+        paper = _design_cells(p)
         delta = "–" if d is None or p is None else _signed(d["fitness_m"] - p["fitness_m"])
         rows.append([f"`{r['name']}`", *_design_cells(d), _f(d and d["distance_m"]), *paper, delta,
                      f"{r['de_failed']}/{r['de_evals']}"])
@@ -209,7 +215,7 @@ def _sweep(roads: list[dict[str, Any]], figs: dict[str, str]) -> list[str]:
     for r in roads:
         b, d = r["sweep_best"], r["sweep_distance"]
         rows.append([f"`{r['name']}`", _f(r["height_m"], ".2f"), f"{r['sweep_failed']}/{r['sweep_evals']}",
-                     "–" if b is None else f"{b['a2_deg']:.0f}, {b['L2_m']:.2f}", _f(b and b["fitness_m"]),
+                     "–" if b is None else f"{b['a2_deg']:.0f}, {b['l2_m']:.2f}", _f(b and b["fitness_m"]),
                      *(["–"] * 4 if d is None else [_f(d["min_m"]), _f(d["max_m"]), _f(d["spread_m"]),
                                                    _f(d["spread_p5_p95_m"])])])
     out = ["## Sweep (Table 9; maps as Figs. 9-11)", "", *_table(header, rows)]
@@ -223,9 +229,9 @@ def _table14(t: dict[str, Any], figs: dict[str, str]) -> list[str]:
     rows = []
     for g in ("geometry1", "geometry2"):
         o, p = t["ours"][g], t["paper"][g]
-        rows.append([g, f"{o['a2_deg']:g}", f"{o['L2_m']:g}", f"{o['R_WS_m']:g} (paper table: {p['R_WS_m']:g})",
-                     _f(o["SR"]), f"{p['SR']:.3f}", _f(o["slack_mm"], ".2f"), f"{p['slack_mm']:.2f}",
-                     _f(o["distance_m"]), f"{p['d_m']:.3f}", o["status"]])
+        rows.append([g, f"{o['a2_deg']:g}", f"{o['l2_m']:g}", f"{o['rws_m']:g} (paper table: {p['rws_m']:g})",
+                     _f(o["squat_ratio"]), f"{p['squat_ratio']:.3f}", _f(_mm(o["slack_m"]), ".2f"),
+                     f"{_mm(p['slack_m']):.2f}", _f(o["distance_m"]), f"{p['distance_m']:.3f}", o["status"]])
     header = [
         "",
         "a2 [deg]",
@@ -261,7 +267,7 @@ def _robust(rb: dict[str, Any] | None) -> list[str]:
     return [
         "## Robust design over all roads",
         "",
-        f"Method: {rb['method']}: a2 = {rb['a2_deg']:.1f} deg, L2 = {rb['L2_m']:.3f} m, R_WS = {rb['R_WS_m']:.3f} m, "
+        f"Method: {rb['method']}: a2 = {rb['a2_deg']:.1f} deg, L2 = {rb['l2_m']:.3f} m, R_WS = {rb['rws_m']:.3f} m, "
         f"mean fitness {rb['mean_fitness_m']:.3f} m ({rb['n_valid_designs']} grid designs succeeded on every road). "
         f"What it costs on each road against that road's own optimum (the best of its DE and sweep): mean "
         f"{rb['mean_regret_pct']:.2f} %, at most {rb['max_regret_pct']:.2f} %.",

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from finaldrive.engine import Design, Road, SimSettings, load_vehicle_dict, paper_tables, simulate
+from finaldrive.engine import Design, Road, SimSettings, load_vehicle_dict, paper_row, paper_tables, simulate
 
 ROAD_SPEC = "sine:0.04:3"
 #: (a2 [deg], L2 [m], R_WS [m]) as simulated here.
@@ -38,15 +38,16 @@ def run_table14(spec: dict[str, Any]) -> tuple[dict[str, Any], dict[str, dict[st
         res = simulate(Design.from_deg(a2_deg, l2, rws), road, settings, vehicle)
         ok = res.ok and math.isfinite(res.distance_m)
         ours[name] = {
-            "a2_deg": a2_deg, "L2_m": l2, "R_WS_m": rws, "status": res.status, "reason": res.reason,
+            "a2_deg": a2_deg, "l2_m": l2, "rws_m": rws, "status": res.status, "reason": res.reason,
             "distance_m": round(res.distance_m, 4) if ok else None,
-            "SR": round(res.squat_ratio, 4) if math.isfinite(res.squat_ratio) else None,
-            "slack_mm": round(res.slack_mm, 4) if ok else None,
+            "squat_ratio": round(res.squat_ratio, 4) if math.isfinite(res.squat_ratio) else None,
+            "slack_m": round(res.slack_m, 7) if ok else None,
             "fitness_m": round(res.fitness_m, 4) if ok else None,
         }
         if res.series is not None:
             series[name] = {k: v for k, v in res.series.items() if k != "q"}
     ours["gain_pct"] = _gain(ours["geometry1"]["distance_m"], ours["geometry2"]["distance_m"])
-    paper = {k: v for k, v in paper_tables()["table14_geometries"].items() if k.startswith("geometry")}
-    paper["gain_pct"] = _gain(paper["geometry1"]["d_m"], paper["geometry2"]["d_m"])
+    paper: dict[str, Any] = {k: paper_row(v) for k, v in paper_tables()["table14_geometries"].items()
+                             if k.startswith("geometry")}
+    paper["gain_pct"] = _gain(paper["geometry1"]["distance_m"], paper["geometry2"]["distance_m"])
     return {"road": ROAD_SPEC, "ours": ours, "paper": paper}, series

@@ -64,10 +64,10 @@ def test_series_stride_and_series_change_nothing_of_the_fast_run(vehicle):
 
 def test_dense_output_rows_sit_on_their_times_and_end_at_the_run(vehicle):
     r = simulate(TABLE11, Road.parse("sine:0.04:3"), SimSettings(series=True, series_stride=7), vehicle)
-    t = r.series["t"]
+    t = r.series["t_s"]
     np.testing.assert_allclose(np.diff(t), 3.5 / (len(t) - 1), rtol=1e-12)
     assert t[-1] == 3.5
-    assert r.series["distance"][-1] == r.distance_m
+    assert r.series["distance_m"][-1] == r.distance_m
 
 
 def test_time_limit_and_cancel_end_the_run_as_failed(vehicle):
@@ -99,16 +99,16 @@ def test_extremes_are_those_of_every_step(vehicle):
     r = simulate(GEOMETRY2, Road.parse("sine:0.04:3"), SimSettings(method="reference", series=True,
                                                                       series_stride=1), vehicle)
     s = r.series
-    assert r.chain_tension_max_n == s["chain_tension"].max()
-    assert r.chain_tension_min_n == s["chain_tension"].min()
-    assert r.fz_rear_max_n == s["fz_rear"].max() and r.fz_rear_min_n == s["fz_rear"].min()
-    assert r.fz_front_max_n == s["fz_front"].max() and r.fz_front_min_n == s["fz_front"].min()
+    assert r.chain_tension_max_n == s["chain_tension_n"].max()
+    assert r.chain_tension_min_n == s["chain_tension_n"].min()
+    assert r.fz_rear_max_n == s["fz_rear_n"].max() and r.fz_rear_min_n == s["fz_rear_n"].min()
+    assert r.fz_front_max_n == s["fz_front_n"].max() and r.fz_front_min_n == s["fz_front_n"].min()
     assert r.slip_max == np.abs(s["kappa"]).max()
     rt = s["q"][:, 32]
     assert r.tyre_compression_rear_max_m == pytest.approx(0.3 - rt.min(), abs=1e-15)
     dt = 1e-3
-    assert r.chain_compression_s == pytest.approx(dt * np.sum(s["chain_tension"][:-1] < 0), abs=1e-9)
-    assert r.airborne_rear_s == pytest.approx(dt * np.sum(s["fz_rear"][:-1] <= 0), abs=1e-9)
+    assert r.chain_compression_s == pytest.approx(dt * np.sum(s["chain_tension_n"][:-1] < 0), abs=1e-9)
+    assert r.airborne_rear_s == pytest.approx(dt * np.sum(s["fz_rear_n"][:-1] <= 0), abs=1e-9)
 
 
 def test_fast_extremes_do_not_depend_on_the_series_stride(vehicle):
@@ -117,8 +117,8 @@ def test_fast_extremes_do_not_depend_on_the_series_stride(vehicle):
     fine = simulate(GEOMETRY1, road, SimSettings(series=True, series_stride=1), vehicle)
     coarse = simulate(GEOMETRY1, road, SimSettings(series=True, series_stride=20), vehicle)
     assert fine.chain_tension_max_n == coarse.chain_tension_max_n
-    assert fine.chain_tension_max_n >= fine.series["chain_tension"].max() - 1.0  # N: the steps see the peak
-    assert coarse.series["chain_tension"].max() <= coarse.chain_tension_max_n + 1.0
+    assert fine.chain_tension_max_n >= fine.series["chain_tension_n"].max() - 1.0  # N: the steps see the peak
+    assert coarse.series["chain_tension_n"].max() <= coarse.chain_tension_max_n + 1.0
 
 
 def _as_printed(vehicle):

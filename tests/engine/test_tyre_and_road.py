@@ -89,6 +89,32 @@ def test_profile_needs_increasing_x():
     assert math.isfinite(Road.from_points([0, 1], [0, 0]).height_at(0.5))
 
 
+@pytest.mark.parametrize("spec, fragment", [
+    ("sine:1e308:1e-308", "height H must be within"),
+    ("sine:0.01:0.01", "wavelength LAMBDA must be in"),
+    ("sine:0.01:1e6", "wavelength LAMBDA must be in"),
+    ("bump:0.01:1e-6", "width SIGMA must be in"),
+    ("bump:0.01:0.2:1e9", "bump centre MU"),
+])
+def test_roads_beyond_the_limits_are_refused(spec, fragment):
+    with pytest.raises(RoadError, match=fragment):
+        Road.parse(spec)
+
+
+@pytest.mark.parametrize("xs, ys, row, fragment", [
+    ([0, 1, 1], [0, 0, 0], 2, "strictly increasing"),
+    ([0, 1, 2], [0, math.nan, 0], 1, "y must be a finite number"),
+    ([0, math.inf], [0, 0], 1, "x must be a finite number"),
+    ([0, 2e4], [0, 0], 1, "within \\+-10000 m"),
+    ([0], [0], None, "2 to 100000 points"),
+    (range(100_001), [0] * 100_001, None, "2 to 100000 points"),
+])
+def test_a_bad_profile_names_its_row(xs, ys, row, fragment):
+    with pytest.raises(RoadError, match=fragment) as info:
+        Road.from_points(xs, ys)
+    assert info.value.row == row
+
+
 def test_load_dependence_is_held_beyond_the_load_range(p):
     """Beyond Fz_max, eqs. (47)-(52) see the load held at the bound (MF 6.1's FZMAX): slip stiffness
     and force stay those of the bound, and the slope test above holds there too."""

@@ -14,7 +14,7 @@ from finaldrive.engine.vehicle import PARAMETERS
 def test_every_default_value_has_a_unit_and_a_source():
     d = default_vehicle().to_dict()
     entries = [e for group in d["parameters"].values() for e in group.values()]
-    assert len(entries) == 73
+    assert len(entries) == 75
     assert all(e["source"] and e["unit"] for e in entries)
 
 
@@ -35,6 +35,11 @@ def _with(change):
     (lambda p: p["tyre"]["Fz_max"].update(value=1000.0), "Fz_max"),            # below Fz0
     (lambda p: p["tyre"]["fx_lever_loaded"].update(value=1.5), "fx_lever_loaded"),
     (lambda p: p["suspension"]["rt_bottoming"].update(value=0.3), "rt_bottoming"),  # the whole radius
+    (lambda p: p["geometry"]["L3"].update(value=10**400), "L3.*must be finite, got an integer beyond"),
+    (lambda p: p["inertia"]["m_chassis"].update(value=1e300), "m_chassis.*magnitude must be <= 1e\\+10"),
+    (lambda p: p["inertia"]["I_sprocket"].update(value=1e-300), "I_sprocket.*must be >= 1e-09"),
+    (lambda p: p["design_limits"].pop("l2_max"), "l2_max.*missing"),
+    (lambda p: p["design_limits"]["rws_tyre_margin"].update(value=0.3), "rws_tyre_margin"),
 ])
 def test_bad_values_name_the_key(change, key):
     with pytest.raises(VehicleError, match=key):
@@ -74,10 +79,29 @@ def test_every_key_of_the_vehicle_file_maps_to_exactly_one_slot() -> None:
     data = json.loads(resources.files("finaldrive.engine").joinpath("data/vehicle.json").read_text())
     keys = [key for group in data["parameters"].values() for key in group]
     assert len(keys) == len(set(keys))
-    model_keys = [k for k in keys if not k.startswith(("target_", "calibration_"))]
+    limits = set(data["parameters"]["design_limits"])
+    model_keys = [k for k in keys if not k.startswith(("target_", "calibration_")) and k not in limits]
     slots = [getattr(P, key.upper()) for key in model_keys]
     assert sorted(slots) == list(range(P.N_VEHICLE))
     vehicle = default_vehicle()
     packed = vehicle.packed()
     for key, slot in zip(model_keys, slots, strict=True):
         assert packed[slot] == vehicle[key]
+
+
+def test_designs_are_held_to_the_vehicles_limits() -> None:
+    from finaldrive.engine import Design, DesignError, Road, simulate, static_geometry
+
+    v = default_vehicle()
+    assert v.design_limits() == {"l2_m": 0.2, "rws_m": 0.2}
+    v.check_design(Design.from_deg(0, 0.2, 0.2))
+    for design, fragment in ((Design.from_deg(0, 0.21, 0.09), "l2 = 0.21 m: must be <= l2_max = 0.2 m"),
+                             (Design.from_deg(0, 0.1, 0.25), "rws = 0.25 m: must be <= 0.2 m")):
+        with pytest.raises(DesignError, match=fragment):
+            v.check_design(design)
+        with pytest.raises(DesignError, match=fragment):
+            static_geometry(design, v)
+        result = simulate(design, Road())
+        assert result.status == "failed" and result.reason.startswith("invalid design")
+    roomy = v.replace(l2_max=0.5, rws_tyre_margin=0.0)
+    assert roomy.design_limits() == {"l2_m": 0.5, "rws_m": 0.3}

@@ -95,5 +95,5 @@ def wait_done(client: Any, job_id: int, timeout: float = 30.0, poll: float = 0.0
     raise AssertionError(f"job {job_id} did not finish: {job}")
 
 
-SWEEP = {"kind": "sweep", "roads": ["flat", "sine:0.025:3"], "grid": "a2_deg=0:90:30,l2=0.05|0.1|0.15,rws=0.09"}
+SWEEP = {"kind": "sweep", "roads": ["flat", "sine:0.025:3"], "grid": "a2_deg=0:90:30,l2_m=0.05|0.1|0.15,rws_m=0.09"}
 DE = {"kind": "de", "roads": ["flat"], "de": {"np": 6, "iters": 4}, "seed": 3}

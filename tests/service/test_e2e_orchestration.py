@@ -25,7 +25,7 @@ pytestmark = pytest.mark.slow
 SIM = {"duration": 0.3}
 DE = {"kind": "de", "roads": ["flat,sine:0.02:3"], "de": {"np": 8, "iters": 5}, "seed": 5, "settings": SIM}
 #: A paper-study in small: the sweep and a DE on each of three roads.
-STUDY = {"kind": "paper-study", "roads": ["flat,sine:0.02:3,bump:0.02:0.5"], "grid": "a2_deg=0:300:60,l2=0.02|0.1",
+STUDY = {"kind": "paper-study", "roads": ["flat,sine:0.02:3,bump:0.02:0.5"], "grid": "a2_deg=0:300:60,l2_m=0.02|0.1",
          "de": {"np": 8, "iters": 6}, "seed": 2, "settings": SIM}
 #: Fast leases, so a killed scheduler's job is taken over in seconds.
 LEASES = {"FINALDRIVE_LEASE_SECONDS": "2", "FINALDRIVE_HEARTBEAT_SECONDS": "0.2"}
@@ -165,7 +165,7 @@ def _busy(procs: list[psutil.Process], window: float = 0.5) -> list[int]:
 
 
 #: Simulations of 30 s or more each (the paper's method at a fine step: 600,000 steps).
-LONG = {"kind": "sweep", "roads": ["flat"], "grid": "a2_deg=0:90:30,l2=0.05,rws=0.09",
+LONG = {"kind": "sweep", "roads": ["flat"], "grid": "a2_deg=0:90:30,l2_m=0.05,rws_m=0.09",
         "settings": {"method": "reference", "duration": 60.0, "dt": 0.0001}}
 
 

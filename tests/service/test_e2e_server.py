@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sqlite3
 import time
 from collections.abc import Iterator
@@ -22,7 +23,7 @@ from tests.service.svc_helpers import wait_done
 pytestmark = pytest.mark.slow  # starts servers or subprocesses
 
 SIM = {"duration": 0.3}
-SWEEP = {"kind": "sweep", "roads": ["flat"], "grid": "a2_deg=0:270:90,l2=0.05|0.15,rws=0.09", "settings": SIM}
+SWEEP = {"kind": "sweep", "roads": ["flat"], "grid": "a2_deg=0:270:90,l2_m=0.05|0.15,rws_m=0.09", "settings": SIM}
 DE = {"kind": "de", "roads": ["sine:0.02:3"], "de": {"np": 6, "iters": 3}, "seed": 7, "settings": SIM}
 # the paper's method, so the job runs long enough (about 2 s) to be killed three times
 LONG_DE = {"kind": "de", "roads": ["flat"], "de": {"np": 8, "iters": 14}, "seed": 11,
@@ -101,7 +102,8 @@ def test_sweep_and_de_over_http_match_in_process(server: Any) -> None:
     assert de_job["done"] + de_job["failed"] == reference.n_evals
     best = client.get(f"/v1/jobs/{de_job['id']}/best").json()["roads"][0]["best"]
     assert best["fitness_m"] == pytest.approx(reference.best_f, rel=1e-12)
-    assert [best["a2"], best["l2"], best["rws"]] == pytest.approx(reference.best_x.tolist(), rel=1e-12)
+    assert [math.radians(best["a2_deg"]), best["l2_m"], best["rws_m"]] == pytest.approx(reference.best_x.tolist(),
+                                                                                          rel=1e-12)
 
 
 def test_de_survives_three_sigkills(server: Any, tmp_path: Path) -> None:
@@ -133,4 +135,5 @@ def test_de_survives_three_sigkills(server: Any, tmp_path: Path) -> None:
     assert np.array_equal(np.array(json.loads(population)), reference.population)
     best = job["roads"][0]["best"]
     assert best["fitness_m"] == reference.best_f
-    assert [best["a2"], best["l2"], best["rws"]] == reference.best_x.tolist()
+    assert best["a2_deg"] == pytest.approx(math.degrees(reference.best_x[0]), rel=1e-15)  # stored in degrees
+    assert [best["l2_m"], best["rws_m"]] == reference.best_x[1:].tolist()

@@ -20,7 +20,7 @@ def is_png(data: bytes) -> bool:
 
 
 def test_sweep_map_grid_and_scatter(tmp_path: Path) -> None:
-    grid = parse_grid("a2_deg=0:350:10,l2=0:0.2:0.02,rws=0.093")
+    grid = parse_grid("a2_deg=0:350:10,l2_m=0:0.2:0.02,rws_m=0.093")
     values = 20 + np.cos(grid[:, 0] - 3.3) * grid[:, 1]
     values[5] = math.nan  # a failed design stays blank
     plots.sweep_map_png(tmp_path / "grid.png", grid, values, title="grid", best=(3.3, 0.2))
@@ -29,11 +29,11 @@ def test_sweep_map_grid_and_scatter(tmp_path: Path) -> None:
 
 
 def test_de_history_and_series(tmp_path: Path) -> None:
-    history = [{"generation": g, "best_f": 20 + 0.1 * g, "mean_f": 19 + 0.2 * g} for g in range(1, 6)]
+    history = [{"generation": g, "best_fitness_m": 20 + 0.1 * g, "mean_fitness_m": 19 + 0.2 * g} for g in range(1, 6)]
     population = np.column_stack([np.linspace(0, 6, 8), np.linspace(0, 0.2, 8), np.full(8, 0.09), np.arange(8.0)])
     plots.de_history_png(tmp_path / "de.png", history, population, title="de")
     t = np.linspace(0, 1, 50)
-    series = {key: np.sin(t * k) for k, (key, _) in enumerate(plots.SERIES_PANELS, start=1)} | {"t": t}
+    series = {key: np.sin(t * k) for k, (key, _) in enumerate(plots.SERIES_PANELS, start=1)} | {"t_s": t}
     plots.series_png(tmp_path / "s.png", [("one", series), ("two", {k: v * 2 for k, v in series.items()})], title="s")
     assert is_png((tmp_path / "de.png").read_bytes()) and is_png((tmp_path / "s.png").read_bytes())
 

@@ -12,10 +12,18 @@ import pytest
 from fastapi.testclient import TestClient
 from rerun.chunk import RrdReader
 
-from finaldrive.engine import Design, Road, SimSettings, simulate
+from finaldrive.engine import DIAGNOSTICS, Design, Road, SimSettings, simulate
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
-from finaldrive.service.recording import PARTS, PLOTS, frame_count, record, scalars_of, series_settings
+from finaldrive.service.recording import (
+    PARTS,
+    PLOTS,
+    frame_count,
+    properties_of,
+    record,
+    scalars_of,
+    series_settings,
+)
 from tests.service.processes import console_script
 from tests.service.svc_helpers import ToyTask, running_scheduler, wait_done
 
@@ -54,13 +62,24 @@ def test_two_geometries_every_part_every_frame(rrd: Path) -> None:
     verify(rrd)
 
 
+def test_each_geometry_carries_its_outcome_and_exact_extremes(rrd: Path) -> None:
+    for i, (label, design) in enumerate(DESIGNS):
+        result = simulate(design, ROAD, series_settings(DURATION, FPS))
+        props = properties_of(rrd, f"g{i + 1}")
+        assert props["label"] == label and props["a2_deg"] == design.a2_deg and props["rws_m"] == design.rws
+        for name in ("distance_m", "fitness_m", "slack_m", *DIAGNOSTICS):
+            assert props[name] == pytest.approx(getattr(result, name), rel=1e-12, abs=1e-12), name
+        # the extremes are the integrator's, not the 50 fps series': at least as wide as what is drawn
+        assert props["chain_tension_max_n"] >= scalars_of(rrd, f"/plots/chain_tension_n/g{i + 1}")[1].max()
+
+
 def test_series_equal_the_engines(rrd: Path) -> None:
     for i, (_, design) in enumerate(DESIGNS):
         series = simulate(design, ROAD, series_settings(DURATION, FPS)).series
         assert series is not None
         for key, name, _ in PLOTS:
             t, values = scalars_of(rrd, f"/plots/{name}/g{i + 1}")
-            np.testing.assert_allclose(t, series["t"], atol=1e-9)
+            np.testing.assert_allclose(t, series["t_s"], atol=1e-9)
             np.testing.assert_allclose(values, series[key], rtol=1e-12, atol=1e-12)
 
 
@@ -89,14 +108,15 @@ def wait_recording(client: TestClient, rid: int, timeout: float = 60) -> dict:
 
 def test_api_records_a_jobs_best_beside_a_design(client: TestClient, tmp_path: Path) -> None:
     job = client.post("/v1/jobs", json={"kind": "sweep", "roads": ["sine:0.04:3"],
-                                        "grid": "a2_deg=0:90:90,l2=0.05,rws=0.09"}).json()
+                                        "grid": "a2_deg=0:90:90,l2_m=0.05,rws_m=0.09"}).json()
     wait_done(client, job["id"])
     r = client.post("/v1/recordings", json={"job_id": job["id"], "duration": 0.2, "fps": 25,
-                                            "designs": [{"a2_deg": 270, "l2": 0.15, "rws": 0.15}]})
+                                            "designs": [{"a2_deg": 270, "l2_m": 0.15, "rws_m": 0.15}]})
     assert r.status_code == 202 and r.headers["Location"] == f"/v1/recordings/{r.json()['id']}"
     body = wait_recording(client, r.json()["id"])
     assert body["status"] == "succeeded", body
-    assert [d["label"] for d in body["designs"]] == [f"job {job['id']} best", "a2=270 L2=0.15 Rws=0.15"]
+    labels = [f"job {job['id']} best", "a2 = 270 deg, L2 = 0.150 m, R_WS = 0.150 m"]
+    assert [d["label"] for d in body["designs"]] == labels
     assert body["road"] == "sine:0.04:3" and body["frames"] == 6 and "path" not in body
     download = client.get(body["file"])
     assert download.status_code == 200
@@ -110,15 +130,19 @@ def test_api_records_a_jobs_best_beside_a_design(client: TestClient, tmp_path: P
 def test_api_errors(client: TestClient) -> None:
     assert client.get("/v1/recordings/99").status_code == 404
     assert client.get("/v1/recordings/99/file").status_code == 404
-    no_road = client.post("/v1/recordings", json={"designs": [{"a2_deg": 0, "l2": 0, "rws": 0.09}]})
+    no_road = client.post("/v1/recordings", json={"designs": [{"a2_deg": 0, "l2_m": 0, "rws_m": 0.09}]})
     assert no_road.status_code == 422 and "road" in no_road.json()["detail"]
-    bad_road = client.post("/v1/recordings", json={"road": "moon", "designs": [{"a2_deg": 0, "l2": 0, "rws": 0.09}]})
+    bad_road = client.post("/v1/recordings",
+                           json={"road": "moon", "designs": [{"a2_deg": 0, "l2_m": 0, "rws_m": 0.09}]})
     assert bad_road.status_code == 422 and bad_road.json()["detail"].startswith("body.road: unknown road")
     assert client.post("/v1/recordings", json={"job_id": 42}).status_code == 404
-    failing = client.post("/v1/recordings", json={"road": "flat", "duration": 0.2,
-                                                   "designs": [{"a2_deg": 190, "l2": 0.5, "rws": 0.5}]}).json()
-    body = wait_recording(client, failing["id"])  # sprockets too close for a chain: fails, the service goes on
-    assert body["status"] == "failed" and "cannot carry a chain" in body["error"]
+    too_big = client.post("/v1/recordings",
+                          json={"road": "flat", "designs": [{"a2_deg": 190, "l2_m": 0.5, "rws_m": 0.5}]})
+    assert too_big.status_code == 422 and "l2_max" in too_big.json()["detail"]  # refused, never a failed recording
+    failing = client.post("/v1/recordings", json={"road": "bump:0.5:0.01:0", "duration": 0.2,
+                                                   "designs": [{"a2_deg": 190, "l2_m": 0.05, "rws_m": 0.09}]}).json()
+    body = wait_recording(client, failing["id"])  # a kerb under the tyre: no equilibrium; the service goes on
+    assert body["status"] == "failed" and "static equilibrium not found" in body["error"]
     assert client.get(f"/v1/recordings/{body['id']}/file").status_code == 409
 
 

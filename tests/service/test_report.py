@@ -23,7 +23,7 @@ def study(tmp_path_factory: pytest.TempPathFactory) -> str:
     """A finished tiny paper-study (2 roads, 12-design grid, NP 4, 1 iteration, 0.2 s simulations)."""
     url = f"sqlite:///{tmp_path_factory.mktemp('study') / 'study.db'}"
     assert main(["study", "paper", "--local", "--db", url, "--executor", "serial", "--roads", ",".join(ROADS),
-                 "--grid", "a2_deg=0:300:60,l2=0.02|0.12", "--np", "4", "--iters", "1", "--duration", "0.2",
+                 "--grid", "a2_deg=0:300:60,l2_m=0.02|0.12", "--np", "4", "--iters", "1", "--duration", "0.2",
                  "--interval", "60"]) == 0
     return url
 
@@ -52,7 +52,7 @@ def test_report_is_complete_and_byte_identical_when_rerun(study: str, tmp_path: 
     assert report["run"]["stored"] == report["run"]["total_planned"] == 2 * 12 + 2 * 8
     assert report["roads"][0]["paper"]["fitness_m"] == 20.708
     assert report["robust"]["method"].startswith("best mean fitness over the stored Table 9 sweep grid")
-    assert report["table14"]["ours"]["geometry2"]["R_WS_m"] == 0.05
+    assert report["table14"]["ours"]["geometry2"]["rws_m"] == 0.05
 
 
 def test_the_server_and_the_database_give_the_same_study(study: str, tmp_path: Path) -> None:

@@ -58,3 +58,27 @@ def test_sizer_ignores_negative_overhead_from_clock_noise() -> None:
     sizer = BatchSizer(num_workers=1)
     sizer.observe(4, round_trip_s=0.99, busy_s=1.0, compute_s=1.0)
     assert sizer.overhead_s == 0.0
+
+
+@pytest.mark.parametrize(("num_workers", "driver_s"), [(256, 5e-4), (64, 7e-4), (1000, 2e-4)])
+def test_batches_large_enough_for_the_dispatcher_to_keep_up(num_workers: int, driver_s: float) -> None:
+    # a DE generation (50 designs) on a big cluster: waves alone would send one design a task
+    per_design_s = 0.05
+    b = batch_size(remaining=50, num_workers=num_workers, per_design_s=per_design_s, overhead_s=0.0,
+                   driver_s=driver_s)
+
+    def load(size: int) -> float:  # share of the dispatching thread's time the task traffic takes
+        return num_workers * driver_s / (size * per_design_s)
+
+    assert load(b) <= 0.5 + 1e-12
+    assert b == 1 or load(b - 1) > 0.5
+
+
+def test_keeping_up_never_makes_tasks_longer_than_half_a_second() -> None:
+    b = batch_size(remaining=10**6, num_workers=256, per_design_s=0.25, overhead_s=0.0, driver_s=0.01)
+    assert b == 2
+
+
+def test_an_idle_dispatcher_changes_nothing() -> None:
+    args = {"remaining": 400, "num_workers": 2, "per_design_s": 0.01, "overhead_s": 0.002}
+    assert batch_size(**args, driver_s=3e-4) == batch_size(**args) == 4

@@ -30,9 +30,9 @@ def _check(services: Services) -> HealthOut:
             session.execute(text("UPDATE jobs SET id = id WHERE id = -1"))
             active = count_active(session)
             rows = schedulers(session)
-        store = StoreOut(writable=True, latency_ms=round(1000 * (time.perf_counter() - start), 1))
+        store = StoreOut(writable=True, latency_s=round(time.perf_counter() - start, 4))
     except SQLAlchemyError:
-        store = StoreOut(writable=False, latency_ms=round(1000 * (time.perf_counter() - start), 1))
+        store = StoreOut(writable=False, latency_s=round(time.perf_counter() - start, 4))
         active, rows = None, []
     found = [SchedulerOut(id=row.id, host=row.host, pid=row.pid, executor=row.executor, capacity=row.capacity,
                           heartbeat_age_s=round(age, 3), alive=age <= alive_within) for row, age in rows]

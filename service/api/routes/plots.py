@@ -11,6 +11,7 @@ import numpy as np
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
+from finaldrive.engine import history_record
 from finaldrive.service.api.deps import JobId, ServicesDep
 from finaldrive.service.api.lookups import find_road
 from finaldrive.service.api.problems import ApiProblem, documented
@@ -50,7 +51,7 @@ def plot(
         chosen: JobRoad = roads[index]
         if name == "sweep-map":
             rows = list_evaluations(session, job_id, road_index=index, after_id=None, limit=10**7)
-            designs = np.array([[e.a2, e.l2, e.rws] for e in rows]).reshape(-1, 3)
+            designs = np.array([[math.radians(e.a2_deg), e.l2_m, e.rws_m] for e in rows]).reshape(-1, 3)
             column = "fitness_m" if value == "fitness" else "distance_m"
             values = np.array([math.nan if getattr(e, column) is None else getattr(e, column) for e in rows])
             generation = None
@@ -70,9 +71,10 @@ def plot(
     else:
         if generation is None:
             raise ApiProblem(409, f"job {job_id} has no stored DE generation yet", slug="no-results")
-        fitness = [math.nan if f is None else f for f in generation.fitness]
+        fitness = [math.nan if f is None else f for f in generation.fitness_m]
         population = np.column_stack([np.array(generation.population, float), fitness])
-        history = [{k: (math.nan if v is None else v) for k, v in h.items()} for h in generation.state["history"]]
+        history = [{k: (math.nan if v is None else v) for k, v in history_record(h).items()}
+                   for h in generation.state["history"]]
         where = "all roads" if job.kind == "robust-de" else chosen.name
         body = _png(plots.de_history_png, history, population, title=f"job {job_id} ({job.kind}) on {where}")
     return Response(body, media_type="image/png")

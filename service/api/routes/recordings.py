@@ -9,12 +9,14 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Path, Response
 from sqlalchemy.orm import undefer
 
+from finaldrive.engine import design_label
 from finaldrive.service.api.deps import MAX_ID, ServicesDep
 from finaldrive.service.api.lookups import load_job
 from finaldrive.service.api.problems import ApiProblem, documented, validation_problem
 from finaldrive.service.api.security import MutationAuth
 from finaldrive.service.db.models import Job, Recording
-from finaldrive.service.db.repository import create_recording
+from finaldrive.service.db.repository import create_recording, profile_roads
+from finaldrive.service.profiles import profile_ids, resolver
 from finaldrive.service.schemas import JobOut, RecordingDesign, RecordingOut, RecordingRequest
 from finaldrive.service.services import Services
 
@@ -32,17 +34,18 @@ def _job_best(job: JobOut, road: str | None) -> tuple[str, RecordingDesign]:
         raise validation_problem(("body", "road"), f"job {job.id} has no road {road!r} (its roads: {names})")
     rb = job.robust_best
     if rb is not None:
-        return chosen.spec, RecordingDesign(a2_deg=rb.a2_deg, l2=rb.l2, rws=rb.rws, label=f"job {job.id} best")
+        return chosen.spec, RecordingDesign(a2_deg=rb.a2_deg, l2_m=rb.l2_m, rws_m=rb.rws_m, label=f"job {job.id} best")
     if chosen.best is None:
         raise ApiProblem(409, f"job {job.id} has no successful evaluation on road {chosen.name!r} yet",
                          slug="no-best-design")
     b = chosen.best
-    return chosen.spec, RecordingDesign(a2_deg=b.a2_deg, l2=b.l2, rws=b.rws, label=f"job {job.id} best")
+    return chosen.spec, RecordingDesign(a2_deg=b.a2_deg, l2_m=b.l2_m, rws_m=b.rws_m, label=f"job {job.id} best")
 
 
 def _spec(request: RecordingRequest, services: Any) -> dict[str, Any]:
-    """The concrete spec stored and produced: road, designs with labels, timing, method."""
-    from finaldrive.engine import resolve_roads
+    """The concrete spec stored and produced: road (a measured one with its points), designs with labels,
+    timing, method."""
+    from finaldrive.engine import Design, DesignError, default_vehicle, load_vehicle_dict, resolve_roads
 
     designs = list(request.designs)
     method, dt, vehicle, road = "fast", 1.0e-3, None, request.road
@@ -50,20 +53,32 @@ def _spec(request: RecordingRequest, services: Any) -> dict[str, Any]:
         job = load_job(services, request.job_id)
         road, best = _job_best(job, request.road)
         designs.insert(0, best)
-        method, dt, vehicle = job.spec.settings.method, job.spec.settings.dt, job.spec.vehicle
+        method, dt = job.spec.settings.method, job.spec.settings.dt
+        vehicle = None if job.spec.vehicle is None else job.spec.vehicle.model_dump()
+    limits = default_vehicle() if vehicle is None else load_vehicle_dict(vehicle)
+    for i, d in enumerate(request.designs):
+        try:
+            limits.check_design(Design.from_deg(d.a2_deg, d.l2_m, d.rws_m))
+        except DesignError as exc:
+            raise validation_problem(("body", "designs", i), str(exc)) from None
     assert road is not None
+    ids = sorted(profile_ids([road]))
+    with services.db.read() as session:
+        stored = profile_roads(session, ids) if ids else {}
     try:
-        items = resolve_roads(road)
+        items = resolve_roads(road, resolver(stored))
     except ValueError as exc:
         raise validation_problem(("body", "road"), str(exc)) from None
     if len(items) != 1:
         raise validation_problem(("body", "road"), f"{road!r} names {len(items)} roads; give one")
     if abs(round(1.0 / (request.fps * dt)) * request.fps * dt - 1.0) > 1e-9:
         raise validation_problem(("body", "fps"), f"fps must divide 1/dt = {1 / dt:g} Hz")
-    labelled = [d.model_copy(update={"label": d.label or f"a2={d.a2_deg:g} L2={d.l2:g} Rws={d.rws:g}"})
+    labelled = [d.model_copy(update={"label": d.label or design_label(d.a2_deg, d.l2_m, d.rws_m)})
                 for d in designs]
+    profile = items[0].road if items[0].road.kind == "profile" else None
     return {"road": road, "designs": [d.model_dump() for d in labelled], "duration": request.duration,
-            "fps": request.fps, "method": method, "dt": dt, "vehicle": vehicle}
+            "fps": request.fps, "method": method, "dt": dt, "vehicle": vehicle,
+            "profile": None if profile is None else [list(profile.xs), list(profile.ys)]}
 
 
 def _out(r: Recording) -> RecordingOut:

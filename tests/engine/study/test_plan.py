@@ -15,6 +15,7 @@ from finaldrive.engine import (
     PlanError,
     SpaceError,
     SweepRun,
+    default_vehicle,
     plan_study,
 )
 
@@ -63,13 +64,24 @@ def test_defaults_are_the_papers_tables() -> None:
     ("de", ["flat", "mars"], {}, "roads.1"),
     ("de", ["flat"], {"grid": "table9"}, "grid"),
     ("sweep", ["flat"], {"de": DESettings()}, "de"),
-    ("sweep", ["flat"], {"grid": "l2=0:oops"}, "grid"),
+    ("sweep", ["flat"], {"grid": "l2_m=0:oops"}, "grid"),
     ("de", ["flat"], {"objective": "mean"}, "objective"),
+    ("sweep", ["flat"], {"grid": "a2_deg=0,l2_m=0.1|0.25,rws_m=0.09"}, "grid"),      # beyond l2_max
+    ("de", ["flat"], {"bounds": Bounds(rws_m=(0.05, 0.21))}, "bounds.rws_m"),    # beyond rt0 - margin
+    ("de", ["flat"], {"bounds": Bounds(l2_m=(0.0, 0.3))}, "bounds.l2_m"),
+    ("sweep", ["sine:0.6:3"], {}, "roads.0"),                                  # higher than the limit
 ])
 def test_plan_errors_name_the_field(kind: str, roads: list[str], parts: dict, field: str) -> None:
     with pytest.raises(PlanError) as info:
         plan_study(kind, roads, **parts)
     assert ".".join(map(str, info.value.loc)) == field
+
+
+def test_the_vehicle_sets_the_design_limits() -> None:
+    roomy = default_vehicle().replace(l2_max=0.3)
+    assert plan_study("de", ["flat"], bounds=Bounds(l2_m=(0.0, 0.3)), vehicle=roomy).bounds == Bounds(l2_m=(0.0, 0.3))
+    with pytest.raises(PlanError, match=r"limit of 0\.15 m"):
+        plan_study("de", ["flat"], vehicle=default_vehicle().replace(l2_max=0.15))
 
 
 @pytest.mark.parametrize(("make", "field"), [
@@ -120,7 +132,7 @@ def test_a_resumed_de_continues_exactly() -> None:
 
 
 def test_a_resumed_sweep_hands_out_only_what_is_missing() -> None:
-    plan = plan_study("sweep", ["flat,sine:0.04:3"], grid="a2_deg=0:90:30,l2=0|0.1,rws=0.093")
+    plan = plan_study("sweep", ["flat,sine:0.04:3"], grid="a2_deg=0:90:30,l2_m=0|0.1,rws_m=0.093")
     assert plan.sweep_total() == 2 * 8
     run = plan.runs(sweep_done={(0, 0), (0, 1), (1, 7)})[0]
     requests = run.take()

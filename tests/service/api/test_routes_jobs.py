@@ -21,7 +21,7 @@ def test_sweep_runs_and_streams_results(client: TestClient) -> None:
     assert (done["done"], done["failed"]) == (24, 0)
     assert [road["name"] for road in done["roads"]] == ["flat", "sine:0.025:3"]
     best_flat = done["roads"][0]["best"]
-    assert best_flat["l2"] == 0.1 and round(best_flat["a2_deg"]) == 60
+    assert best_flat["l2_m"] == 0.1 and round(best_flat["a2_deg"]) == 60
 
     page = client.get(f"/v1/jobs/{job['id']}/evaluations", params={"limit": 10}).json()
     assert len(page["items"]) == 10 and page["next_cursor"]
@@ -57,7 +57,7 @@ def test_de_job_and_best_is_never_a_failure(client: TestClient, fake: ToyTask) -
     failed = [e for e in client.get(f"/v1/jobs/{job['id']}/evaluations").json()["items"] if e["status"] == "failed"]
     assert failed and all(e["reason"] == "fake divergence" and e["fitness_m"] is None for e in failed)
     best = job["roads"][0]["best"]
-    assert best["status"] == "ok" and best["l2"] <= 0.1
+    assert best["status"] == "ok" and best["l2_m"] <= 0.1
 
 
 def test_robust_de_scores_every_road(client: TestClient) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from typing import Any
 
@@ -18,7 +19,7 @@ BAD_SPECS = [
     ({**DE, "bounds": {"l2_m": [0.2, 0.1]}}, "bounds", "lower bound 0.2 is above upper bound 0.1"),
     ({**DE, "de": {"np": 3}}, "de.np", "greater than or equal to 4"),
     ({**SWEEP, "settings": {"duration": -1}}, "settings.duration", "greater than 0"),
-    ({**SWEEP, "grid": "l2=0:oops"}, "grid", ""),
+    ({**SWEEP, "grid": "l2_m=0:oops"}, "grid", ""),
     ({**SWEEP, "vehicle": {"parameters": {}}}, "vehicle", "missing"),
     ({**SWEEP, "bounds": {}}, "body", "bounds: not allowed for a sweep"),
     ({**SWEEP, "kind": "grid-search"}, "kind", ""),
@@ -79,3 +80,73 @@ def test_token_guards_mutations(settings: Settings, fake: ToyTask) -> None:
         job_id = ok.json()["id"]
         assert_problem(c.post(f"/v1/jobs/{job_id}/cancel"), 401)
         assert c.get(f"/v1/jobs/{job_id}").json()["state"] != "cancelled"
+
+
+def _vehicle(key: str, value: Any) -> dict[str, Any]:
+    from finaldrive.engine import default_vehicle
+
+    d = default_vehicle().to_dict()
+    next(group for group in d["parameters"].values() if key in group)[key]["value"] = value
+    return d
+
+
+def _nested(depth: int) -> str:
+    return '{"a": ' * depth + "1" + "}" * depth
+
+
+#: What gave a 500, or was accepted though meaningless (issue 14, item 5): each a 422 naming the field and limit.
+LIMITS = [
+    ({**SWEEP, "vehicle": _vehicle("L3", 10**400)}, "vehicle.parameters.geometry.L3.value", "<= 1e+10"),
+    ({**SWEEP, "vehicle": _vehicle("m_chassis", 1e300)}, "vehicle.parameters.inertia.m_chassis.value", "10000000000"),
+    ({**SWEEP, "vehicle": _vehicle("l2_max", 1e-12)}, "vehicle", "'l2_max': must be >= 1e-09"),
+    ({**SWEEP, "vehicle": _vehicle("rws_tyre_margin", 0.3)}, "vehicle", "'rws_tyre_margin': must be less than"),
+    ({**DE, "bounds": {"rws_m": [0.05, 1e308]}}, "bounds.rws_m", "more than the vehicle's limit of 0.2 m"),
+    ({**DE, "bounds": {"l2_m": [0, 5]}}, "bounds.l2_m", "more than the vehicle's limit of 0.2 m (l2_max)"),
+    ({**DE, "vehicle": _vehicle("l2_max", 0.1)}, "bounds.l2_m", "upper bound 0.2 m is more than the vehicle's limit"),
+    ({**SWEEP, "grid": "a2_deg=0,l2_m=5,rws_m=0.09"}, "grid", "l2_m = 5 m, more than the vehicle's limit of 0.2 m"),
+    ({**SWEEP, "grid": "a2_deg=0,l2_m=0.1,rws_m=0.5"}, "grid", "rws_m = 0.5 m, more than the vehicle's limit of 0.2 m"),
+    ({**SWEEP, "roads": ["sine:1e308:1e-308"]}, "roads.0", "within +-0.5 m"),
+    ({**SWEEP, "roads": ["sine:0.01:1e-308"]}, "roads.0", "wavelength LAMBDA must be in [0.05, 10000] m"),
+    ({**SWEEP, "roads": ["bump:0.01:1e-9"]}, "roads.0", "width SIGMA must be in [0.01, 10000] m"),
+    ({**DE, "de": {"np": "10"}}, "de.np", "valid integer"),
+    ({**DE, "de": {"np": 10.0}}, "de.np", "valid integer"),
+    ({**DE, "de": {"f": "0.5"}}, "de.f", "valid number"),
+    ({**SWEEP, "seed": True}, "seed", "valid integer"),
+    ({**SWEEP, "settings": {"duration": "3"}}, "settings.duration", "valid number"),
+    ({**SWEEP, "settings": {"dt": 1e-300}}, "settings.dt", "greater than or equal to 0.000001"),
+]
+
+
+@pytest.mark.parametrize(("spec", "field", "reason"), LIMITS)
+def test_each_limit_is_422_naming_the_field_and_the_limit(
+    client: TestClient, spec: dict[str, Any], field: str, reason: str
+) -> None:
+    r = client.post("/v1/jobs", content=json.dumps(spec), headers={"content-type": "application/json"})
+    body = assert_problem(r, 422)
+    assert field in body["detail"] and reason in body["detail"], body["detail"]
+    assert client.get("/v1/jobs").json()["items"] == []
+
+
+def test_infinite_bounds_deep_vehicles_and_odd_cursors_are_422(client: TestClient) -> None:
+    raw = {"content-type": "application/json"}
+    body = assert_problem(client.post("/v1/jobs", headers=raw, content=(
+        '{"kind": "de", "roads": ["flat"], "bounds": {"l2_m": [0, Infinity]}}')), 422)
+    assert "bounds.l2_m.1" in body["detail"] and "finite number" in body["detail"]
+    for depth in (900, 5000):
+        deep = f'{{"kind": "sweep", "roads": ["flat"], "vehicle": {_nested(depth)}}}'
+        r = client.post("/v1/jobs", headers=raw, content=deep)
+        assert r.status_code in (400, 422), (depth, r.status_code)
+        assert r.headers["content-type"] == "application/problem+json"
+    job = client.post("/v1/jobs", json=SWEEP).json()
+    for path in ("/v1/jobs", f"/v1/jobs/{job['id']}/evaluations", "/v1/roads/profiles"):
+        body = assert_problem(client.get(path + "?cursor=%C2%B2"), 422)
+        assert "query.cursor" in body["detail"]
+    assert [j["id"] for j in client.get("/v1/jobs").json()["items"]] == [job["id"]]
+
+
+def test_recorded_designs_are_held_to_the_vehicle(client: TestClient) -> None:
+    body = assert_problem(client.post("/v1/recordings", json={
+        "road": "flat",
+        "designs": [{"a2_deg": 0, "l2_m": 0.1, "rws_m": 0.09}, {"a2_deg": 0, "l2_m": 0.1, "rws_m": 0.25}]}),
+        422)
+    assert "designs.1" in body["detail"] and "rws = 0.25 m: must be <= 0.2 m" in body["detail"]

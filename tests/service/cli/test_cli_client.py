@@ -15,7 +15,7 @@ from finaldrive.service.client import ServiceClient
 
 
 def job(state: str = "running", done: int = 3, **extra: Any) -> dict[str, Any]:
-    best = {"a2_deg": 190.0, "l2": 0.03, "rws": 0.09, "fitness_m": 20.5, "distance_m": 20.6}
+    best = {"a2_deg": 190.0, "l2_m": 0.03, "rws_m": 0.09, "fitness_m": 20.5, "distance_m": 20.6}
     return {"id": 7, "kind": "de", "state": state, "total": 12, "done": done, "failed": 1, "eta_s": 42.0,
             "error": None, "created_at": "2026-01-01T00:00:00Z",
             "roads": [{"index": 0, "name": "flat", "spec": "flat", "best": best}], **extra}

@@ -53,7 +53,7 @@ def test_submit_follow_results_record_plot(server: str, tmp_path: Path, monkeypa
                                            capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setenv("FINALDRIVE_API_TOKEN", TOKEN)
     s = ["--server", server]
-    assert main(["submit", "sweep", "--road", "sine:0.04:3", "--grid", "a2_deg=0:270:90,l2=0.02|0.15,rws=0.093",
+    assert main(["submit", "sweep", "--road", "sine:0.04:3", "--grid", "a2_deg=0:270:90,l2_m=0.02|0.15,rws_m=0.093",
                  "--duration", "0.5", "--follow", *s]) == 0
     out = capsys.readouterr()
     assert "job 1: sweep on 1 road(s), 8 evaluations, succeeded" in out.out

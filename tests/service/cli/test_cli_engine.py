@@ -22,7 +22,7 @@ def test_geometry_json(capsys):
     g = json.loads(out)
     assert code == 0
     assert g["squat_ratio"] == pytest.approx(1.092, abs=0.01)     # Table 14, geometry 1
-    assert g["res"] == pytest.approx(0.0465)
+    assert g["res_m"] == pytest.approx(0.0465)
     assert g["sprocket_centre_m"] == [0.0, 0.0]
     assert g["chain_length_m"] > g["taut_length_m"] > 0.5
 
@@ -33,23 +33,26 @@ def test_simulate_json_keys_and_series(tmp_path, capsys):
                         "--duration", "0.5", "--json", "--series", str(series)], capsys)
     r = json.loads(out)
     assert code == 0
-    for key in ("distance_m", "squat_ratio", "slack_mm", "fitness_m", "chain_length_m", "status", "reason", "wall_s"):
+    for key in ("distance_m", "squat_ratio", "slack_m", "fitness_m", "chain_length_m", "status", "reason", "wall_s"):
         assert key in r
     assert r["status"] == "ok" and r["distance_m"] > 0
     lines = series.read_text().splitlines()
-    assert lines[0].startswith("t,distance,pitch,chain_tension")
+    assert lines[0].startswith("t_s,distance_m,pitch_deg,chain_tension_n")
     assert len(lines) == 1 + 51  # header, t = 0 and every 10th of 500 steps
 
 
 def test_evaluate_keeps_input_order(tmp_path, capsys):
     designs = tmp_path / "d.csv"
-    designs.write_text("a2_deg,l2,rws\n0,0,0.093\n270,0.15,0.05\n195.3,0.037,0.088\n")
+    designs.write_text("a2_deg,l2_m,rws_m\n0,0,0.093\n270,0.15,0.05\n195.3,0.037,0.088\n")
     code, out, _ = run(["evaluate", "--designs", str(designs), "--road", "flat", "--duration", "0.3", "--json"], capsys)
     rows = json.loads(out)
     assert code == 0
-    got = [v for r in rows for v in (r["a2_deg"], r["l2"], r["rws"])]
+    got = [v for r in rows for v in (r["a2_deg"], r["l2_m"], r["rws_m"])]
     assert got == pytest.approx([0, 0, 0.093, 270, 0.15, 0.05, 195.3, 0.037, 0.088])
     assert all(r["status"] == "ok" for r in rows)
+    designs.write_text("a2_deg,l2_m,rws_m\n0,0,0.093\n0,0.1,0.3\n")
+    code, _, err = run(["evaluate", "--designs", str(designs), "--road", "flat", "--json"], capsys)
+    assert code == 2 and "line 3: rws = 0.3 m: must be <= 0.2 m" in err
 
 
 @pytest.mark.parametrize("argv, fragment", [
@@ -58,6 +61,13 @@ def test_evaluate_keeps_input_order(tmp_path, capsys):
     (["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0", "--road", "flat"], "rws"),
     (["geometry", "--a2-deg", "abc", "--l2", "0", "--rws", "0.09"], "a2-deg"),
     (["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0.09", "--road", "flat", "--duration", "-1"], "duration"),
+    # the vehicle's design limits (issue 14): L2 <= l2_max, R_WS inside the rear tyre
+    (["geometry", "--a2-deg", "0", "--l2", "5", "--rws", "0.09"], "--l2: l2 = 5 m: must be <= l2_max = 0.2 m"),
+    (["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0.5", "--road", "flat"],
+     "--rws: rws = 0.5 m: must be <= 0.2 m, the rear tyre's radius rt0 = 0.3 m less rws_tyre_margin = 0.1 m"),
+    (["sweep", "--road", "flat", "--grid", "a2_deg=0,l2_m=0.3,rws_m=0.09"], "grid: design 0 has l2_m = 0.3 m"),
+    (["optimize", "--road", "flat", "--bounds", "rws_m=0.05:0.25"], "bounds.rws_m: upper bound 0.25 m"),
+    (["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0.09", "--road", "sine:1e308:1e-308"], "within +-0.5 m"),
 ])
 def test_bad_arguments_exit_2_with_one_line(argv, fragment, capsys):
     code, _, err = run(argv, capsys)

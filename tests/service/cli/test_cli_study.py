@@ -40,8 +40,8 @@ def test_optimize_toy_budget_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert r["evaluations"] == r["designs_evaluated"] == 6 * (2 + 1)
     assert r["failed"] == 0 and r["generations"] == 2 and len(r["history"]) == 3
     best = r["best"]
-    assert 0 <= best["a2_deg"] < 360 and 0 <= best["l2"] <= 0.2 and 0.05 <= best["rws"] <= 0.15
-    assert best["fitness_m"] == pytest.approx(r["history"][-1]["best_f"]) and best["distance_m"] > 0
+    assert 0 <= best["a2_deg"] < 360 and 0 <= best["l2_m"] <= 0.2 and 0.05 <= best["rws_m"] <= 0.15
+    assert best["fitness_m"] == pytest.approx(r["history"][-1]["best_fitness_m"]) and best["distance_m"] > 0
     assert r["per_road"][0]["paper"]["a2_deg"] == pytest.approx(192.2)
 
 
@@ -56,7 +56,7 @@ def test_robust_optimize_over_roads(capsys: pytest.CaptureFixture[str]) -> None:
     r = run_json(["optimize", "--roads", "flat,sine:0.04:3", "--objective", "worst", *TOY,
                   "--executor", "serial", "--bounds", "a2_deg=90:270,rws_m=0.08:0.1"], capsys)
     assert r["objective"] == "worst" and r["evaluations"] == 2 * 18 and r["designs_evaluated"] == 18
-    assert 90 <= r["best"]["a2_deg"] <= 270 and 0.08 <= r["best"]["rws"] <= 0.1
+    assert 90 <= r["best"]["a2_deg"] <= 270 and 0.08 <= r["best"]["rws_m"] <= 0.1
     on_roads = [road["best_design"]["fitness_m"] for road in r["per_road"]]
     assert r["best"]["fitness_m"] == pytest.approx(min(on_roads))
     assert all(road["best_seen"]["fitness_m"] >= road["best_design"]["fitness_m"] for road in r["per_road"])
@@ -74,21 +74,21 @@ def test_failed_simulations_are_counted_and_never_best(
     monkeypatch.setattr(evaluate, "run_engine", fake)
     r = run_json(["optimize", "--road", "flat", *TOY, "--executor", "serial"], capsys)
     assert r["failed"] == sum(h["n_failed"] for h in r["history"]) > 0
-    assert r["best"]["l2"] <= 0.1 and r["best"]["fitness_m"] == pytest.approx(r["best"]["l2"])
+    assert r["best"]["l2_m"] <= 0.1 and r["best"]["fitness_m"] == pytest.approx(r["best"]["l2_m"])
 
 
 def test_sweep_grid_writes_one_csv_row_per_design(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "results.csv"
-    r = run_json(["sweep", "--road", "flat", "--grid", "a2_deg=0:300:60,l2=0|0.1", "--rws", "0.09",
+    r = run_json(["sweep", "--road", "flat", "--grid", "a2_deg=0:300:60,l2_m=0|0.1", "--rws", "0.09",
                   "--duration", "0.2", "--executor", "serial", "--out", str(out)], capsys)
     rows = list(csv.DictReader(out.open()))
     assert len(rows) == r["designs"] == r["evaluations"] == 6 * 2
-    assert {row["road"] for row in rows} == {"flat"} and {float(row["rws"]) for row in rows} == {0.09}
+    assert {row["road"] for row in rows} == {"flat"} and {float(row["rws_m"]) for row in rows} == {0.09}
     assert max(float(row["fitness_m"]) for row in rows) == pytest.approx(r["best"]["fitness_m"])
 
 
 def test_sweep_several_roads_reports_each_road(capsys: pytest.CaptureFixture[str]) -> None:
-    r = run_json(["sweep", "--roads", "flat,sine-h2cm-l3m", "--grid", "a2_deg=0|180,l2=0.05,rws=0.093",
+    r = run_json(["sweep", "--roads", "flat,sine-h2cm-l3m", "--grid", "a2_deg=0|180,l2_m=0.05,rws_m=0.093",
                   "--duration", "0.2", "--executor", "serial"], capsys)
     assert r["evaluations"] == 4 and [p["road"] for p in r["per_road"]] == ["flat", "sine-h2cm-l3m"]
     assert r["objective"] == "mean" and r["best"]["a2_deg"] in (0.0, 180.0)
@@ -114,7 +114,7 @@ def test_roads_json_lists_the_23_presets(capsys: pytest.CaptureFixture[str]) -> 
     (["optimize", "--road", "flat", "--bounds", "l2_m=0.2:0.1"], "l2_m"),
     (["optimize", "--road", "flat", "--max-evals", "10"], "--max-evals"),
     (["optimize", "--road", "paper"], "--roads"),
-    (["sweep", "--road", "flat", "--grid", "l2=0:0.1:-1"], "step"),
+    (["sweep", "--road", "flat", "--grid", "l2_m=0:0.1:-1"], "step"),
     (["sweep", "--roads", "flat,nowhere"], "nowhere"),
     (["sweep", "--road", "flat", "--executor", "threads"], "executor"),
 ])

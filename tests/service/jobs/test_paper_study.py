@@ -19,7 +19,7 @@ from finaldrive.service.main import create_app
 from finaldrive.service.schemas import JobSpec
 from tests.service.svc_helpers import ToyTask, running_scheduler, wait_done
 
-TINY = {"kind": "paper-study", "roads": ["flat", "sine:0.04:3"], "grid": "a2_deg=0:300:60,l2=0.05|0.15",
+TINY = {"kind": "paper-study", "roads": ["flat", "sine:0.04:3"], "grid": "a2_deg=0:300:60,l2_m=0.05|0.15",
         "de": {"np": 4, "iters": 3}, "seed": 1}
 TINY_TOTAL = 2 * 12 + 2 * 4 * 4
 
@@ -47,7 +47,7 @@ def test_paper_study_rejects_an_aggregate() -> None:
 
 
 def _slots(items: list[dict[str, Any]]) -> list[tuple[int, int, int, float, float, float]]:
-    return sorted((e["road_index"], e["step"], e["candidate"], e["a2"], e["l2"], e["rws"]) for e in items)
+    return sorted((e["road_index"], e["step"], e["candidate"], e["a2_deg"], e["l2_m"], e["rws_m"]) for e in items)
 
 
 def test_one_job_with_one_progress_view(client: TestClient) -> None:
@@ -87,7 +87,7 @@ def test_a_paper_study_resumes_in_both_parts(settings: Settings, tmp_path: Path)
 
 def test_study_paper_local_runs_and_resumes_the_same_job(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     args = ["study", "paper", "--local", "--db", f"sqlite:///{tmp_path / 'cli.db'}", "--executor", "serial",
-            "--roads", "flat", "--grid", "a2_deg=0:180:90,l2=0.1", "--np", "4", "--iters", "1",
+            "--roads", "flat", "--grid", "a2_deg=0:180:90,l2_m=0.1", "--np", "4", "--iters", "1",
             "--duration", "0.2", "--interval", "0.1"]
     assert main(args) == 0
     first = capsys.readouterr().out

@@ -111,7 +111,7 @@ def test_a_failed_simulation_is_stored_and_the_sweep_succeeds(client: TestClient
     assert job["state"] == "succeeded" and (job["done"], job["failed"]) == (16, 8)
     items = client.get(f"/v1/jobs/{job['id']}/evaluations", params={"limit": 100}).json()["items"]
     failed = [e for e in items if e["status"] == "failed"]
-    assert {(e["l2"], e["reason"], e["fitness_m"]) for e in failed} == {(0.15, "fake divergence", None)}
+    assert {(e["l2_m"], e["reason"], e["fitness_m"]) for e in failed} == {(0.15, "fake divergence", None)}
     assert all(road["best"]["status"] == "ok" for road in job["roads"])
 
 
@@ -156,7 +156,7 @@ def test_a_dead_schedulers_job_is_taken_over_and_it_can_no_longer_write(settings
 def test_cancel_is_obeyed_by_the_owner_within_two_seconds(settings: Settings) -> None:
     slow = ToyTask(delay=0.05)
     with TestClient(create_app(settings)) as c, running_scheduler(settings, slow):
-        job_id = c.post("/v1/jobs", json={**SWEEP, "grid": "a2_deg=0:358:2,l2=0.1,rws=0.09"}).json()["id"]
+        job_id = c.post("/v1/jobs", json={**SWEEP, "grid": "a2_deg=0:358:2,l2_m=0.1,rws_m=0.09"}).json()["id"]
         while c.get(f"/v1/jobs/{job_id}").json()["done"] < 2:
             time.sleep(0.01)
         start = time.monotonic()

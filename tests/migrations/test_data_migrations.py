@@ -1,0 +1,99 @@
+"""Migrations that rewrite data: stored rows come out right on SQLite and on a real PostgreSQL.
+
+v0.2.0.b derives the indexed cache hash from each stored key; v0.2.0.c renames the design columns
+with their units (a2 converted from radians to degrees) and rewrites stored grid specs and
+recording requests in the new names. Downgrading restores the earlier rows.
+"""
+
+from __future__ import annotations
+
+import math
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import sqlalchemy as sa
+from alembic import command
+
+from finaldrive.engine import parse_grid
+from finaldrive.service.db.migrate import alembic_config
+from finaldrive.service.db.results import key_hash
+
+KEY = "ab" * 32
+A2_RAD = 1.2345
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'm.db'}"
+    return str(request.getfixturevalue("postgres").new_database())
+
+
+def _filler(column: sa.Column[Any]) -> Any:
+    """A value for a NOT NULL column the test does not care about."""
+    kind = column.type
+    if isinstance(kind, sa.Boolean):
+        return False
+    if isinstance(kind, sa.Integer):
+        return 0
+    if isinstance(kind, sa.Float):
+        return 0.0
+    if isinstance(kind, sa.DateTime):
+        return datetime(2026, 1, 1)
+    if isinstance(kind, sa.JSON):
+        return {}
+    return "x"
+
+
+def _insert(conn: sa.Connection, table: str, **values: Any) -> None:
+    t = sa.Table(table, sa.MetaData(), autoload_with=conn)
+    row = {c.name: _filler(c) for c in t.columns
+           if not c.nullable and not c.primary_key and c.server_default is None}
+    conn.execute(t.insert().values({**row, **values}))
+
+
+def _rows(conn: sa.Connection, table: str) -> list[dict[str, Any]]:
+    t = sa.Table(table, sa.MetaData(), autoload_with=conn)
+    return [dict(r._mapping) for r in conn.execute(sa.select(t))]
+
+
+def test_cache_hash_and_units_rewrite_stored_rows(url: str) -> None:
+    config = alembic_config(url)
+    command.upgrade(config, "v0.2.0.a")
+    engine = sa.create_engine(url)
+    spec = {"kind": "sweep", "roads": ["flat"], "grid": f"a2={A2_RAD}|0.5,l2=0:0.1:0.05,rws=0.09"}
+    with engine.begin() as conn:
+        _insert(conn, "jobs", id=1, kind="sweep", state="succeeded", spec=spec)
+        _insert(conn, "evaluations", job_id=1, a2=A2_RAD, l2=0.05, rws=0.09, cache_key=KEY, status="ok")
+        _insert(conn, "recordings", job_id=1, status="succeeded",
+                spec={"road": "flat", "designs": [{"a2_deg": 10.0, "l2": 0.05, "rws": 0.09, "label": "a"}]})
+    engine.dispose()
+
+    command.upgrade(config, "head")
+    engine = sa.create_engine(url)
+    with engine.connect() as conn:
+        (evaluation,) = _rows(conn, "evaluations")
+        (job,) = _rows(conn, "jobs")
+        (recording,) = _rows(conn, "recordings")
+    engine.dispose()
+    assert evaluation["cache_hash"] == key_hash(KEY)
+    assert evaluation["a2_deg"] == pytest.approx(math.degrees(A2_RAD), rel=1e-14)
+    assert (evaluation["l2_m"], evaluation["rws_m"]) == (0.05, 0.09)
+    assert "a2" not in evaluation and "l2" not in evaluation
+    assert job["spec"]["grid"].startswith("a2_deg=")
+    old = [[A2_RAD, l2, 0.09] for l2 in (0.0, 0.05, 0.1)] + [[0.5, l2, 0.09] for l2 in (0.0, 0.05, 0.1)]
+    np.testing.assert_allclose(parse_grid(job["spec"]["grid"]), old, rtol=1e-14, atol=0)
+    assert recording["spec"]["designs"] == [{"a2_deg": 10.0, "l2_m": 0.05, "rws_m": 0.09, "label": "a"}]
+
+    command.downgrade(config, "v0.2.0.a")
+    engine = sa.create_engine(url)
+    with engine.connect() as conn:
+        (evaluation,) = _rows(conn, "evaluations")
+        (recording,) = _rows(conn, "recordings")
+    engine.dispose()
+    assert evaluation["a2"] == pytest.approx(A2_RAD, rel=1e-14)
+    assert "cache_hash" not in evaluation
+    assert recording["spec"]["designs"][0]["l2"] == 0.05
