@@ -108,7 +108,7 @@ class SimSettings:
     dt: float = 1.0e-3               # reference: time step [s] (paper: not given);
                                      # fast: series rows every series_stride * dt
     fast_tolerance: float = 5.0e-5   # fast: local error tolerance (m, rad; 10x for rates)
-    fast_max_step: float = 8.0e-3    # fast: largest step [s]
+    fast_max_step: float = 4.0e-3    # fast: largest step [s]
     trapezoidal_steps: int = 4       # paper section 3.3, step 3
     under_relaxation: float = 0.7    # nu of eq. (65) (paper: 0.7)
     penalty_alpha: float = 1.0e5     # alpha of eqs. (57)-(58) (paper: 1e5)
