@@ -1,11 +1,15 @@
 """Engine speed on one core: real-time ratio (simulated s per wall s) of one 3.5 s run,
-median of N runs after a warm-up, per road and method; batch throughput; first-call latency
-in fresh processes (cold: empty numba cache; cached); and 2-process throughput.
+median of N runs after a warm-up, per road and method, for the Table 11 design and as a
+distribution over random designs (a2 uniform 0-360 deg, L2 0-0.2 m, R_WS 0.05-0.15 m: median,
+p90 and max of the wall time, failures); batch throughput; the cold start (compiling the engine
+once, loading it in a fresh process, `finaldrive geometry`); 2-process throughput.
 
-    python bench/bench_engine.py [--repeat 5] [--methods reference,fast] [--quick]
+    taskset -c 1 python bench/bench_engine.py [--repeat 5] [--methods fast,reference] [--designs 401]
+        [--roads sine:0.04:3,sine:0.04:2] [--compare fast_tolerance=1e-4] [--quick]
 
-Prints the machine it ran on. The machine is shared and noisy: compare methods by the ratio
-measured in the same run.
+Prints the machine it ran on and its load average. The machine is shared and noisy: compare
+methods (or, with --compare, the default settings and changed ones) by the ratio measured in the
+same run, the designs interleaved.
 """
 
 from __future__ import annotations
@@ -59,6 +63,34 @@ def random_designs(n: int, seed: int = 1) -> np.ndarray:
     return np.column_stack([rng.uniform(0, 2 * np.pi, n), rng.uniform(0, 0.2, n), rng.uniform(0.05, 0.15, n)])
 
 
+def distributions(variants: list[SimSettings], road: str, n: int) -> list[dict[str, float]]:
+    """Per settings: the wall time of each of n random designs' runs (simulate's own wall_s), the
+    variants interleaved design by design so that the machine's noise hits them alike; median real-
+    time ratio, median / p90 / max wall [ms], failures."""
+    r = Road.parse(road)
+    designs = [Design(*row) for row in random_designs(n)]
+    for s in variants:
+        simulate(designs[0], r, s)
+    walls: list[list[float]] = [[] for _ in variants]
+    failures = [0] * len(variants)
+    for d in designs:
+        for i, s in enumerate(variants):
+            res = simulate(d, r, s)
+            walls[i].append(res.wall_s)
+            failures[i] += not res.ok
+    out = []
+    for s, w, f in zip(variants, walls, failures, strict=True):
+        a = np.array(w)
+        out.append({"ratio median": s.duration / float(np.median(a)), "ms median": 1e3 * float(np.median(a)),
+                    "ms p90": 1e3 * float(np.percentile(a, 90)), "ms max": 1e3 * float(a.max()), "failures": f})
+    return out
+
+
+def parse_settings(spec: str) -> dict[str, float]:
+    """``key=value,key=value`` -> SimSettings fields (numbers)."""
+    return {k: float(v) for k, v in (item.split("=") for item in spec.split(",") if item)}
+
+
 def batch_throughput(method: str, n: int, repeat: int) -> float:
     designs = random_designs(n)
     road = Road.parse("sine:0.04:3")
@@ -92,6 +124,15 @@ def two_process_throughput(method: str, n: int) -> tuple[float, float]:
     return out[0], out[1]
 
 
+_COMPILE = """
+import time, sys
+t0 = time.perf_counter()
+sys.path.insert(0, {repo!r})
+from finaldrive.engine import compile_engine
+print(compile_engine(now=("fast",), later=())(), compile_engine(now=("reference",), later=())())
+print(time.perf_counter() - t0)
+"""
+
 _FIRST_CALL = """
 import time, sys
 t0 = time.perf_counter()
@@ -103,21 +144,40 @@ print(time.perf_counter() - t0)
 """
 
 
-def first_call_latency(method: str) -> tuple[float, float]:
-    """(cold, cached) seconds from interpreter start to a first result, in fresh processes.
+def finaldrive_command() -> str:
+    """The `finaldrive` script of this interpreter's environment (else the one on PATH)."""
+    beside = Path(sys.executable).parent / "finaldrive"
+    return str(beside) if beside.exists() else shutil.which("finaldrive") or "finaldrive"
 
-    Cold uses an empty numba cache directory (NUMBA_CACHE_DIR), so it includes compilation.
-    """
-    code = _FIRST_CALL.format(repo=str(REPO), method=method)
+
+def cold_start(repeat: int) -> dict[str, float]:
+    """Seconds: compile_engine into an empty cache directory (once per method); a fresh process's first
+    result with that cache, median of `repeat` per method; `finaldrive geometry`, median."""
+    out: dict[str, float] = {}
     with tempfile.TemporaryDirectory() as cache:
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
-        times = []
-        for _ in range(2):
-            t0 = time.perf_counter()
-            subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True)
-            times.append(time.perf_counter() - t0)
-        shutil.rmtree(cache, ignore_errors=True)
-    return times[0], times[1]
+        done = subprocess.run([sys.executable, "-c", _COMPILE.format(repo=str(REPO))], env=env, check=True,
+                              capture_output=True, text=True)
+        fast, reference = (float(v) for v in done.stdout.split()[-2:])
+        out["compile_engine, empty cache: fast method"] = fast
+        out["compile_engine, empty cache: reference method"] = reference
+        for method in ("fast", "reference"):
+            code = _FIRST_CALL.format(repo=str(REPO), method=method)
+            walls = []
+            for _ in range(repeat):
+                t0 = time.perf_counter()
+                subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True)
+                walls.append(time.perf_counter() - t0)
+            out[f"first {method} result, fresh process, cached"] = statistics.median(walls)
+    exe = finaldrive_command()
+    walls = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        subprocess.run([exe, "geometry", "--a2-deg", "195.3", "--l2", "0.037", "--rws", "0.088"], check=True,
+                       capture_output=True)
+        walls.append(time.perf_counter() - t0)
+    out["finaldrive geometry"] = statistics.median(walls)
+    return out
 
 
 def cli_evaluate_cost(n_extra: int = 100, repeat: int = 3) -> tuple[float, float]:
@@ -127,7 +187,7 @@ def cli_evaluate_cost(n_extra: int = 100, repeat: int = 3) -> tuple[float, float
     rows += [
         f"{rng.uniform(0, 360):.3f},{rng.uniform(0, 0.2):.4f},{rng.uniform(0.05, 0.15):.4f}" for _ in range(n_extra)
     ]
-    exe = shutil.which("finaldrive") or "finaldrive"
+    exe = finaldrive_command()
     with tempfile.TemporaryDirectory() as tmp:
         one, many = Path(tmp) / "one.csv", Path(tmp) / "many.csv"
         one.write_text("\n".join(rows[:2]) + "\n")
@@ -148,12 +208,43 @@ def main() -> None:
     ap.add_argument("--methods", default="reference")
     ap.add_argument("--batch", type=int, default=200, help="designs in the batch throughput test")
     ap.add_argument("--quick", action="store_true", help="fewer designs, for a smoke run")
+    ap.add_argument("--designs", type=int, default=401, help="random designs per road (fast method)")
+    ap.add_argument("--reference-designs", type=int, default=21, help="random designs per road (reference)")
+    ap.add_argument("--roads", default="sine:0.04:3,sine:0.04:2", help="roads of the random-design distributions")
+    ap.add_argument("--compare", default="", help="fast settings to compare with the default, e.g. fast_tolerance=1e-4")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     n_batch = 20 if args.quick else args.batch
+    n_designs = 21 if args.quick else args.designs
     report: dict[str, object] = {"machine": describe(), "methods": {}}
     print(f"machine: {report['machine']}")
-    for method in args.methods.split(","):
+    print(f"\n== random designs ({n_designs} fast, {args.reference_designs} reference), wall time a run, 1 core")
+    methods = args.methods.split(",")
+    for road in args.roads.split(","):
+        variants = [settings_for(m) for m in methods]
+        names = list(methods)
+        if args.compare:
+            variants.append(settings_for("fast", **parse_settings(args.compare)))
+            names.append(f"fast {args.compare}")
+        fast = [i for i, s in enumerate(variants) if s.method == "fast"]
+        slow = [i for i, s in enumerate(variants) if s.method != "fast"]
+        stats: dict[int, dict[str, float]] = {}
+        for group, n in ((fast, n_designs), (slow, args.reference_designs)):
+            if group:
+                stats.update(zip(group, distributions([variants[i] for i in group], road, n), strict=True))
+        for i, name in enumerate(names):
+            d = stats[i]
+            report[f"random {road} {name}"] = d
+            print(f"{road:>12} {name:>28}: real-time ratio {d['ratio median']:7.1f} (median); wall ms median "
+                  f"{d['ms median']:.2f}, p90 {d['ms p90']:.2f}, max {d['ms max']:.2f}; failures {d['failures']}")
+        for i in range(1, len(names)):
+            print(f"{road:>12} median ratio {names[i]} / {names[0]}: "
+                  f"{stats[i]['ratio median'] / stats[0]['ratio median']:.3f}")
+    print(f"load average now: {os.getloadavg()[0]:.2f}")
+    for key, value in cold_start(3 if args.quick else args.repeat).items():
+        report[key] = value
+        print(f"cold start: {key}: {value:.2f} s")
+    for method in methods:
         m: dict[str, object] = {}
         print(f"\n== method {method}")
         for road in ROADS:
@@ -166,12 +257,12 @@ def main() -> None:
         rate = batch_throughput(method, n_batch, max(1, args.repeat // 2))
         m["batch sims/s"] = rate
         print(f"batch throughput, {n_batch} random designs on sine:0.04:3, 1 core: {rate:.1f} sims/s")
-        cold, cached = first_call_latency(method)
-        m["first call cold s"], m["first call cached s"] = cold, cached
-        print(f"first call in a fresh process: cold {cold:.2f} s, cached {cached:.2f} s")
-        one, two = two_process_throughput(method, n_batch)
-        m["1 process sims/s"], m["2 processes sims/s"] = one, two
-        print(f"throughput: 1 process {one:.1f} sims/s, 2 processes {two:.1f} sims/s (x{two / one:.2f})")
+        if len(os.sched_getaffinity(0)) < 2:
+            print("throughput of 1 and 2 processes: skipped (pinned to one core)")
+        else:
+            one, two = two_process_throughput(method, n_batch)
+            m["1 process sims/s"], m["2 processes sims/s"] = one, two
+            print(f"throughput: 1 process {one:.1f} sims/s, 2 processes {two:.1f} sims/s (x{two / one:.2f})")
         report["methods"][method] = m  # type: ignore[index]
     one, many = cli_evaluate_cost()
     report["cli evaluate 1 / 101 s"] = [one, many]

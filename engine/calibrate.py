@@ -21,7 +21,8 @@ from finaldrive.engine.model import params as P
 from finaldrive.engine.model.coordinates import FT, RT, THETA, X14, X15
 from finaldrive.engine.model.mass import centre_of_mass
 from finaldrive.engine.model.road import Road
-from finaldrive.engine.simulation import pack_parameters, simulate
+from finaldrive.engine.setup import pack_parameters
+from finaldrive.engine.simulation import simulate
 from finaldrive.engine.vehicle import Vehicle
 
 

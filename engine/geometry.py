@@ -7,16 +7,21 @@ from typing import Any
 
 from finaldrive.engine.api import Design, SimSettings
 from finaldrive.engine.model import params as P
+from finaldrive.engine.model.jit import interpreted
 from finaldrive.engine.model.kinematics import taut_length
 from finaldrive.engine.model.road import Road
-from finaldrive.engine.simulation import prepare
+from finaldrive.engine.setup import prepare
 from finaldrive.engine.vehicle import Vehicle
 
 
 def static_geometry(design: Design, vehicle: Vehicle) -> dict[str, Any]:
     """SR at the design pose, chain length L (69) and taut run at static equilibrium on flat
-    ground, R_ES, and the engine sprocket centre relative to the swingarm pivot (chassis frame)."""
-    setup = prepare(design, Road(), SimSettings(), vehicle)
+    ground, R_ES, and the engine sprocket centre relative to the swingarm pivot (chassis frame).
+
+    Runs the compiled model as plain Python unless it is compiled already in this process: one
+    equilibrium does not repay loading numba (about a second)."""
+    with interpreted():
+        setup = prepare(design, Road(), SimSettings(), vehicle)
     return {
         "a2_deg": design.a2_deg,
         "l2_m": design.l2,

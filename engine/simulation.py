@@ -8,7 +8,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -24,29 +23,23 @@ from finaldrive.engine.api import (
     SimResult,
     SimSettings,
 )
-from finaldrive.engine.fast import minimal
-from finaldrive.engine.fast.equilibrium import EquilibriumError, static_equilibrium
+from finaldrive.engine.fast import bodies, minimal
+from finaldrive.engine.fast.equilibrium import EquilibriumError
 from finaldrive.engine.fast.rosenbrock import N_ST as FAST_N_ST, S_ROW, S_T, run_fast
 from finaldrive.engine.fitness import fitness, slack
 from finaldrive.engine.model import diagnostics as D, params as P
-from finaldrive.engine.model.coordinates import BETA, FS, N_CONSTRAINTS, N_COORDS, PHI, THETA, X1, X14, Y1, Y14
+from finaldrive.engine.model.coordinates import N_CONSTRAINTS, N_COORDS, X1, X14, Y14
 from finaldrive.engine.model.elements import N_AUX
-from finaldrive.engine.model.kinematics import (
-    GeometryError,
-    assemble,
-    chain_length,
-    design_squat_ratio,
-    pose_from_minimal,
-    squat_ratio_at,
-)
+from finaldrive.engine.model.kinematics import GeometryError, assemble, pose_from_minimal, squat_ratio_at
 from finaldrive.engine.model.mass import gravity_forces, mass_matrix, potential_energy
 from finaldrive.engine.model.road import Road
+from finaldrive.engine.setup import MINIMAL_COORDS, Setup, pack_parameters, prepare
 from finaldrive.engine.solver import reference
-from finaldrive.engine.solver.equilibrium import ReferenceEquilibriumError, reference_equilibrium
+from finaldrive.engine.solver.equilibrium import ReferenceEquilibriumError
 from finaldrive.engine.vehicle import Vehicle, default_vehicle
 
-#: The natural coordinates that are the fast path's minimal coordinates z, in order.
-MINIMAL_COORDS = (X1, Y1, THETA, PHI, FS, BETA)
+__all__ = ["MINIMAL_COORDS", "Setup", "evaluate", "pack_parameters", "prepare", "simulate"]
+
 #: Steps of a compiled loop between two looks at the wall clock and at should_stop: about
 #: 5-20 ms of work on one core (fast path ~2 us a step, reference ~60 us a step).
 FAST_CHUNK_STEPS = 4096
@@ -60,37 +53,6 @@ _REASONS = {
     outcome.FRONT_AIRBORNE: "front wheel off the road for longer than the limit",
 }
 REASON_CANCELLED = "cancelled"
-
-
-def pack_parameters(vehicle: Vehicle, design: Design, settings: SimSettings) -> np.ndarray:
-    """The model's parameter vector P (engine.model.params); the chain length is filled later."""
-    p = np.zeros(P.N_PARAMS)
-    p[:P.N_VEHICLE] = vehicle.packed()
-    p[P.A2], p[P.L2], p[P.R_WS] = design.a2, design.l2, design.rws
-    p[P.R_ES] = design.rws / vehicle["sprocket_ratio"]   # section 4: R_WS / R_ES fixed
-    p[P.AL_ALPHA], p[P.AL_XI], p[P.AL_OMEGA] = (
-        settings.penalty_alpha, settings.baumgarte_xi, settings.baumgarte_omega)
-    return p
-
-
-@dataclass(frozen=True)
-class Setup:
-    """Everything a run needs that does not change with time."""
-
-    p: np.ndarray       # parameters incl. the chain length L (69)
-    q0: np.ndarray      # static equilibrium on the road
-    squat_ratio: float  # at the design pose
-
-
-def prepare(design: Design, road: Road, settings: SimSettings, vehicle: Vehicle) -> Setup:
-    """Parameters, static equilibrium and the chain length L of eq. (69) at t = 0. Each method
-    finds the equilibrium of its own model (the reference in its 39 natural coordinates).
-    Raises DesignError for a design beyond the vehicle's limits (Vehicle.check_design)."""
-    vehicle.check_design(design)
-    p = pack_parameters(vehicle, design, settings)
-    q0 = reference_equilibrium(p, road) if settings.method == "reference" else static_equilibrium(p, road)
-    p[P.L_CHAIN] = chain_length(q0, p)
-    return Setup(p=p, q0=q0, squat_ratio=float(design_squat_ratio(p)))
 
 
 def _failed(reason: str, sr: float, chain: float, start: float) -> SimResult:
@@ -148,10 +110,10 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
         n_out = max(1, math.ceil(settings.duration / (settings.dt * settings.series_stride) - 1e-9))
         n_rows = n_out + 1 if settings.series else 0
         series = np.zeros((n_rows, outcome.N_SERIES))
-        states = np.zeros((n_rows, 2 * minimal.N_DOF))
+        states = np.zeros((n_rows, 2 * bodies.N_DOF))
         st = np.zeros(FAST_N_ST)
         y = np.zeros(minimal.N_STATE)
-        y[:minimal.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
+        y[:bodies.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
 
         def chunk() -> int:
             return int(run_fast(y, p, kind, rp, settings.tyre_longitudinal, settings.duration,
@@ -191,9 +153,9 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
     if code != outcome.OK:
         return _failed(f"{_REASONS[code]} at t = {reached:.4f} s", setup.squat_ratio, chain, start)
     if settings.method == "fast":
-        x1_end = float(y[minimal.ZX1])
+        x1_end = float(y[bodies.ZX1])
         kinetic = float(minimal.kinetic_energy(y, p, kind, rp))
-        x1, y1, theta, phi, fs = (float(c) for c in y[:minimal.ZBETA])
+        x1, y1, theta, phi, fs = (float(c) for c in y[:bodies.ZBETA])
         q_end = assemble(p, road, x1, y1, theta, phi, fs, 0.0, 0.0)  # the pose, but for alpha and beta
         rows = int(st[S_ROW])
     else:

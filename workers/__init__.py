@@ -53,12 +53,21 @@ def make_executor(
     simulations. ``address``: Ray cluster to join (else ``RAY_ADDRESS``, else a local Ray);
     ignored by serial and process. ``niceness``: added to the worker processes' OS niceness
     (``os.nice``, once per process), so the calling process keeps its core; ignored by serial.
+
+    For a process or Ray pool, the engine's compiled code is built once on this machine if it is
+    not yet (``engine.compile_engine``, while the pool starts), so the workers only load it.
     """
     if kind == "serial":
         return SerialExecutor()
+    if kind not in ("process", "ray"):
+        raise ValueError(f"unknown executor kind {kind!r}: expected 'serial', 'process' or 'ray'")
+    from finaldrive.engine import compile_engine
+
+    compiled = compile_engine()   # while the pool starts
+    executor: Executor
     if kind == "process":
-        return ProcessExecutor(num_workers=num_workers, max_retries=max_retries, niceness=niceness)
-    if kind == "ray":
+        executor = ProcessExecutor(num_workers=num_workers, max_retries=max_retries, niceness=niceness)
+    else:
         try:
             from finaldrive.workers.ray_executor import RayExecutor
         except ImportError as error:
@@ -66,5 +75,10 @@ def make_executor(
                 "make_executor('ray') needs Ray: pip install ray "
                 f"(import failed: {error})"
             ) from error
-        return RayExecutor(num_workers=num_workers, max_retries=max_retries, address=address, niceness=niceness)
-    raise ValueError(f"unknown executor kind {kind!r}: expected 'serial', 'process' or 'ray'")
+        executor = RayExecutor(num_workers=num_workers, max_retries=max_retries, address=address, niceness=niceness)
+    try:
+        compiled()
+    except BaseException:
+        executor.close()
+        raise
+    return executor

@@ -16,18 +16,8 @@ import math
 
 import numpy as np
 
-from finaldrive.engine.fast.minimal import (
-    N_DOF,
-    N_STATE,
-    ZFS,
-    ZPHI,
-    ZTHETA,
-    ZU,
-    ZX1,
-    ZY1,
-    design_constants,
-    fast_rhs,
-)
+from finaldrive.engine.fast.bodies import N_WS, W_Q, ZFS, ZPHI, ZTHETA, ZX1, ZY1, design_constants
+from finaldrive.engine.fast.minimal import N_STATE, fast_rhs
 from finaldrive.engine.model import params as P
 from finaldrive.engine.model.coordinates import FT, GAMMA, RT
 from finaldrive.engine.model.elements import N_AUX
@@ -54,12 +44,9 @@ def _rest_forces(free, p0, geo, kind, rp, out):
     y[ZX1] = -p0[P.L_SA] * math.cos(free[2])
     ydot = np.zeros(N_STATE)
     aux = np.zeros(N_AUX)
-    L = np.zeros((N_DOF, N_DOF))
-    b = np.zeros(N_DOF)
-    c = np.zeros(N_DOF)
-    ws = np.zeros((6, N_DOF))
-    fast_rhs(y, p0, geo, kind, rp, p0[P.SIGMA_K0], False, False, ydot, aux, L, b, c, ws)
-    F = L @ (L.T @ ydot[N_DOF:ZU])  # M z'' = F at rest (no velocity products)
+    ws = np.zeros(N_WS)
+    fast_rhs(y, p0, geo, kind, rp, p0[P.SIGMA_K0], False, ydot, aux, ws)
+    F = ws[W_Q:]  # the generalized forces (no velocity products at rest)
     w = p0[P.M_CHASSIS] * p0[P.GRAVITY]
     out[0] = F[ZY1] / w
     out[1] = F[ZTHETA] / w
@@ -93,13 +80,14 @@ def _newton(free, p0, kind, rp, xtol, max_iter, fd):
     return free, False
 
 
-def static_equilibrium(p: np.ndarray, road: Road) -> np.ndarray:
-    """The equilibrium pose q (sprocket reference points opposite the tangent points)."""
+def static_equilibrium(p: np.ndarray, road: Road, pose: np.ndarray | None = None) -> np.ndarray:
+    """The equilibrium pose q (sprocket reference points opposite the tangent points); pose: the
+    design pose (kinematics.design_pose) if known."""
     p0 = p.copy()
     p0[P.TORQUE] = 0.0
     kind, rp = road.packed()
     try:
-        free, ok = _newton(first_guess(p, road), p0, kind, rp, _XTOL, _MAX_NEWTON, _FD_STEP)
+        free, ok = _newton(first_guess(p, road, pose), p0, kind, rp, _XTOL, _MAX_NEWTON, _FD_STEP)
     except np.linalg.LinAlgError:
         raise EquilibriumError("static equilibrium not found: singular stiffness") from None
     if not ok:

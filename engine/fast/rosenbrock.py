@@ -19,7 +19,8 @@ import math
 
 import numpy as np
 
-from finaldrive.engine.fast.minimal import N_DOF, N_STATE, ZBETA, ZTHETA, ZU, ZX1, design_constants, fast_rhs
+from finaldrive.engine.fast.bodies import N_DOF, N_WS, W_B, W_C, ZBETA, ZTHETA, ZX1, design_constants, mass_solve
+from finaldrive.engine.fast.minimal import N_STATE, ZU, fast_rhs
 from finaldrive.engine.model.diagnostics import (
     E_TAUT_MAX,
     E_TAUT_MIN,
@@ -47,7 +48,6 @@ from finaldrive.engine.model.elements import (
     N_AUX,
 )
 from finaldrive.engine.model.jit import jit
-from finaldrive.engine.model.linalg import cholesky_solve
 from finaldrive.engine.model.tyre import relaxation_length
 from finaldrive.engine.outcome import FRONT_AIRBORNE, NONFINITE, OK, PAUSED, REAR_AIRBORNE
 
@@ -110,6 +110,31 @@ def _error_norm(e, scale):
 
 
 @jit
+def _taut_extremes(ext, l0, r0, l1, r1, h):
+    """Extremes of L_taut inside a step, from its values l and rates r at both ends: the stationary
+    points of their cubic Hermite interpolant l(s), s in (0, 1) (l'(s) = a s^2 + b s + c)."""
+    a = 6.0 * (l0 - l1) + 3.0 * h * (r0 + r1)
+    b = -6.0 * (l0 - l1) - h * (4.0 * r0 + 2.0 * r1)
+    c = h * r0
+    if a == 0.0:
+        if b == 0.0:
+            return
+        roots = (-c / b, -1.0)
+    else:
+        disc = b * b - 4.0 * a * c
+        if disc < 0.0:
+            return
+        q = -0.5 * (b + math.copysign(math.sqrt(disc), b))  # the stable pair of roots
+        roots = (q / a, c / q if q != 0.0 else -1.0)
+    for s in roots:
+        if 0.0 < s < 1.0:
+            extreme = ((1.0 + 2.0 * s) * (1.0 - s) ** 2 * l0 + s * (1.0 - s) ** 2 * h * r0
+                       + s * s * (3.0 - 2.0 * s) * l1 + s * s * (s - 1.0) * h * r1)
+            ext[E_TAUT_MIN] = min(ext[E_TAUT_MIN], extreme)
+            ext[E_TAUT_MAX] = max(ext[E_TAUT_MAX], extreme)
+
+
+@jit
 def _hermite(y0, f0, y1, f1, h, s, out):
     """Cubic Hermite interpolation inside a step at the fraction s (dense output, 3rd order)."""
     h00 = (1.0 + 2.0 * s) * (1.0 - s) * (1.0 - s)
@@ -138,9 +163,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
     FRONT_AIRBORNE; st[S_T] is the time reached.
     """
     geo = design_constants(p)
-    L = np.zeros((N_DOF, N_DOF))
-    ws = np.zeros((6, N_DOF))
-    b = np.zeros(N_DOF)
+    ws = np.zeros(N_WS)
     c_row = np.zeros(N_DOF)
     v = np.zeros(N_DOF)
     aux = np.zeros(N_AUX)
@@ -159,10 +182,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
     yi = np.zeros(N_STATE)
     fi = np.zeros(N_STATE)
     auxi = np.zeros(N_AUX)
-    Li = np.zeros((N_DOF, N_DOF))
-    wsi = np.zeros((6, N_DOF))
-    bi = np.zeros(N_DOF)
-    ci = np.zeros(N_DOF)
+    wsi = np.zeros(N_WS)
     scale = np.full(N_STATE, tol)
     for i in range(N_DOF, ZU):
         scale[i] = 10.0 * tol
@@ -172,7 +192,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
         st[S_SIGMA] = relaxation_length(0.0, 0.0, 1.0, p)
         st[S_H] = min(h_max, FIRST_STEP)
         start_records(ext, led)
-        if fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, True, f1, aux, L, b, c_row, ws) != OK:
+        if fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, f1, aux, ws) != OK:
             return NONFINITE
         track_state(ext, aux, p)
         st[S_PREV_TAUT], st[S_PREV_RATE] = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
@@ -181,7 +201,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
             states[0] = y[:2 * N_DOF]
             st[S_ROW] = 1.0
         st[S_STARTED] = 1.0
-    elif fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, True, f1, aux, L, b, c_row, ws) != OK:
+    elif fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, f1, aux, ws) != OK:
         return NONFINITE  # not reached: the same evaluation succeeded before the pause
     t, h, sigma = st[S_T], st[S_H], st[S_SIGMA]
     row = int(st[S_ROW])
@@ -192,7 +212,8 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
             return PAUSED
         # eq. (41) closed with this state's values; f1 and the tyre's outputs moved to the new sigma*
         new_sigma = relaxation_length(aux[AUX_FX], aux[AUX_KAPPA], aux[AUX_FZ_REAR], p)
-        cholesky_solve(L, b, v)                     # M^-1 b
+        mass_solve(geo, ws, ws[W_B:W_B + N_DOF], v)   # M^-1 b
+        c_row[:] = ws[W_C:W_C + N_DOF]
         if new_sigma != sigma:
             dfx = retune_sigma(aux, y[ZU], sigma, new_sigma, p, longitudinal)
             for i in range(N_DOF):
@@ -211,7 +232,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
             _w_solve(f1, gh, v, c_row, a_uu, k1)
             for i in range(N_STATE):
                 y2[i] = y[i] + h * k1[i]
-            if fast_rhs(y2, p, geo, kind, rp, sigma, longitudinal, False, f2, aux, L, b, c_row, ws) != OK:
+            if fast_rhs(y2, p, geo, kind, rp, sigma, longitudinal, f2, aux, ws) != OK:
                 st[S_T] = t
                 return NONFINITE
             for i in range(N_STATE):
@@ -233,22 +254,16 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
         y_old[:] = y
         f_old[:] = f1
         y[:] = ynew
-        if fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, True, f1, aux, L, b, c_row, ws) != OK:
+        if fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, f1, aux, ws) != OK:
             st[S_T] = t
             return NONFINITE
         # records at the new state and over the step
         track_state(ext, aux, p)
-        track_interval(ext, fz_rear, fz_front, tension, h_done)
+        track_interval(ext, fz_rear, fz_front, tension, aux[AUX_TENSION], h_done)
         powers(aux, p, pw1)
         integrate_powers(led, pw0, pw1, h_done)
-        taut, rate = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
-        prev_taut, prev_rate = st[S_PREV_TAUT], st[S_PREV_RATE]
-        if (prev_rate > 0.0) != (rate > 0.0):
-            # an extreme of L_taut inside the step: derivative linear in time
-            extreme = prev_taut + 0.5 * prev_rate * h_done * prev_rate / (prev_rate - rate)
-            ext[E_TAUT_MIN] = min(ext[E_TAUT_MIN], extreme)
-            ext[E_TAUT_MAX] = max(ext[E_TAUT_MAX], extreme)
-        st[S_PREV_TAUT], st[S_PREV_RATE] = taut, rate
+        _taut_extremes(ext, st[S_PREV_TAUT], st[S_PREV_RATE], aux[AUX_TAUT], aux[AUX_TAUT_RATE], h_done)
+        st[S_PREV_TAUT], st[S_PREV_RATE] = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
         # dense output: the series rows inside (t_old, t]
         while row < n_rows and (row * dt_out <= t + 1e-9 * dt_out or (row == n_rows - 1 and t >= t_end)):
             t_row = min(row * dt_out, t_end)
@@ -257,7 +272,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
                 states[row] = y[:2 * N_DOF]
             else:
                 _hermite(y_old, f_old, y, f1, h_done, (t_row - t_old) / h_done, yi)
-                fast_rhs(yi, p, geo, kind, rp, sigma, longitudinal, False, fi, auxi, Li, bi, ci, wsi)
+                fast_rhs(yi, p, geo, kind, rp, sigma, longitudinal, fi, auxi, wsi)
                 _record(row, t_row, yi, auxi, sigma, series)
                 states[row] = yi[:2 * N_DOF]
             row += 1

@@ -85,15 +85,20 @@ def track_state(ext: np.ndarray, aux: np.ndarray, p: np.ndarray) -> None:
 
 
 @jit
-def track_interval(ext: np.ndarray, fz_rear: float, fz_front: float, tension: float, h: float) -> None:
-    """Durations over a step of length h, judged at its start: a wheel off the road (F_z <= 0),
-    the upper chain run in compression (tension < 0)."""
+def track_interval(ext: np.ndarray, fz_rear: float, fz_front: float, tension: float, tension_end: float,
+                   h: float) -> None:
+    """Durations over a step of length h: a wheel off the road (F_z <= 0), judged at the step's start;
+    the upper chain run in compression (tension < 0), with the tension linear between its values at
+    the start and the end (tension_end = tension: judged at the start)."""
     if fz_rear <= 0.0:
         ext[E_AIRBORNE_REAR] += h
     if fz_front <= 0.0:
         ext[E_AIRBORNE_FRONT] += h
-    if tension < 0.0:
+    if tension < 0.0 and tension_end < 0.0:
         ext[E_CHAIN_COMPRESSION] += h
+    elif tension < 0.0 or tension_end < 0.0:
+        below = tension / (tension - tension_end)        # where the tension crosses zero
+        ext[E_CHAIN_COMPRESSION] += h * (below if tension < 0.0 else 1.0 - below)
 
 
 @jit

@@ -1,4 +1,5 @@
-"""The one place that configures numba for the engine (on-disk cache, no Python fallback).
+"""The one place that configures numba for the engine: compiled at first use, cached on disk, no
+Python fallback.
 
 numba's on-disk cache checks only the timestamp of the file that defines a compiled function,
 yet a compiled function carries copies of every compiled function it calls, from any module (and
@@ -7,18 +8,32 @@ they close over). Editing engine/model/tyre.py alone would leave the cached righ
 both solvers running the old tyre. So the cache lives in a directory named after a hash of the
 engine's source files: any change to any of them compiles everything afresh. A NUMBA_CACHE_DIR
 set by the user is respected as it is.
+
+``@jit`` makes a :class:`Kernel`: numba is imported, and the function compiled (or loaded from the
+cache), at its first call, not when the engine is imported. Inside :func:`interpreted`, kernels not
+compiled yet run as plain Python: the static geometry (one equilibrium, tens of milliseconds) needs
+neither numba nor its cache.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import hashlib
 import os
 import tempfile
+import threading
+from collections.abc import Callable, Iterator
 from pathlib import Path
-
-from numba import config, njit
+from typing import Any
 
 _ENGINE = Path(__file__).resolve().parents[1]
+_lock = threading.Lock()
+_local = threading.local()
+#: numba's options for the kernels: cached on disk; fast math off so the results are bit-reproducible
+#: across runs on one machine; numpy's error model (a division by zero gives inf or nan, which the
+#: loops report as NONFINITE) spares a zero test per division.
+_OPTIONS: dict[str, Any] = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 
 def _source_fingerprint() -> str:
@@ -30,10 +45,73 @@ def _source_fingerprint() -> str:
     return digest.hexdigest()[:16]
 
 
-if not os.environ.get("NUMBA_CACHE_DIR"):
-    _base = _ENGINE / "__pycache__" if os.access(_ENGINE, os.W_OK) else Path(tempfile.gettempdir()) / "finaldrive"
-    config.CACHE_DIR = str(_base / f"numba-{_source_fingerprint()}")  # type: ignore[attr-defined]
+def cache_dir() -> Path:
+    """Where the compiled code is cached: NUMBA_CACHE_DIR if set, else engine/__pycache__/numba-<hash of
+    the engine's sources> (in the temporary directory if the engine's folder is read-only)."""
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return Path(os.environ["NUMBA_CACHE_DIR"])
+    base = _ENGINE / "__pycache__" if os.access(_ENGINE, os.W_OK) else Path(tempfile.gettempdir()) / "finaldrive"
+    return base / f"numba-{_source_fingerprint()}"
 
-#: Decorator for compiled model and solver functions: cached on disk, fast math off so the
-#: results are bit-reproducible across runs on one machine.
-jit = njit(cache=True, nogil=True)
+
+@functools.cache
+def _configure() -> None:
+    """Import numba and point its cache at cache_dir() (once)."""
+    from numba import config
+
+    if not os.environ.get("NUMBA_CACHE_DIR"):
+        config.CACHE_DIR = str(cache_dir())  # type: ignore[attr-defined]
+
+
+def njit(**options: Any) -> Callable[[Callable[..., Any]], Any]:
+    """numba's njit with the engine's cache directory (for functions built at run time)."""
+    import numba
+
+    _configure()
+    return numba.njit(**options)
+
+
+class Kernel:
+    """A compiled model or solver function: numba's dispatcher, made at the first call.
+
+    Kernels call each other in compiled code as dispatchers do (numba reads ``_numba_type_``).
+    """
+
+    def __init__(self, fn: Callable[..., Any]) -> None:
+        functools.update_wrapper(self, fn)
+        self.py_func = fn
+        self._dispatcher: Any = None
+
+    @property
+    def dispatcher(self) -> Any:
+        """numba's dispatcher of the function (imports and configures numba the first time)."""
+        if self._dispatcher is None:
+            with _lock:
+                if self._dispatcher is None:
+                    self._dispatcher = njit(**_OPTIONS)(self.py_func)
+        return self._dispatcher
+
+    @property
+    def _numba_type_(self) -> Any:
+        return self.dispatcher._numba_type_
+
+    def __call__(self, *args: Any) -> Any:
+        if self._dispatcher is None and getattr(_local, "interpreted", False):
+            return self.py_func(*args)
+        return self.dispatcher(*args)
+
+
+def jit(fn: Callable[..., Any]) -> Kernel:
+    """Decorator for compiled model and solver functions (see the module's docstring)."""
+    return Kernel(fn)
+
+
+@contextlib.contextmanager
+def interpreted() -> Iterator[None]:
+    """In this thread, run kernels that are not compiled yet as plain Python (no numba)."""
+    before = getattr(_local, "interpreted", False)
+    _local.interpreted = True
+    try:
+        yield
+    finally:
+        _local.interpreted = before

@@ -55,7 +55,9 @@ from finaldrive.engine.model.coordinates import (
     Y14,
     Y15,
 )
+from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.road import Road
+from finaldrive.engine.model.road_height import road_height
 
 #: The first guess of an equilibrium presses both tyres this far into the road [m] so both springs act.
 GUESS_PRELOAD = 0.005
@@ -65,8 +67,10 @@ class GeometryError(ValueError):
     """A design whose final drive cannot be assembled (e.g. sprockets overlapping)."""
 
 
-def chain_tangent_angle(x2: float, y2: float, x6: float, y6: float, res: float, rws: float) -> float:
-    """gamma: angle of the radii to the upper run's tangent points (eqs. 24-29, 31).
+@jit
+def _tangent_angle(x2: float, y2: float, x6: float, y6: float, res: float, rws: float) -> float:
+    """gamma: angle of the radii to the upper run's tangent points (eqs. 24-29, 31); NaN when the
+    sprockets' centres are too close to carry a chain.
 
     Eq. (31) with points 10, 11 at angle gamma gives |r_2->6| cos(gamma - delta) = R_ES - R_WS,
     delta the direction of r_2->6; the upper run is the root gamma = delta - acos(.).
@@ -74,11 +78,41 @@ def chain_tangent_angle(x2: float, y2: float, x6: float, y6: float, res: float, 
     dx, dy = x6 - x2, y6 - y2
     dist = math.hypot(dx, dy)
     if dist <= abs(rws - res):
-        raise GeometryError(
-            f"sprocket centres {dist:.4f} m apart cannot carry a chain between radii "
-            f"{res:.4f} m and {rws:.4f} m")
+        return math.nan
     gamma = math.atan2(dy, dx) - math.acos((res - rws) / dist)
     return math.atan2(math.sin(gamma), math.cos(gamma))
+
+
+@jit
+def fill_pose(p: np.ndarray, kind: int, rp: np.ndarray, x1: float, y1: float, theta: float, phi: float,
+              fs: float, beta: float, alpha: float, q: np.ndarray) -> bool:
+    """assemble's body, compiled (the road packed); False if no chain fits between the sprockets."""
+    q[X1], q[Y1], q[THETA], q[PHI], q[FS], q[BETA], q[ALPHA] = x1, y1, theta, phi, fs, beta, alpha
+    q[X2], q[Y2] = x1 + p[P.L2] * math.cos(theta + p[P.A2]), y1 + p[P.L2] * math.sin(theta + p[P.A2])  # (1)-(8)
+    q[X3], q[Y3] = x1 + p[P.L3] * math.cos(theta + p[P.A3]), y1 + p[P.L3] * math.sin(theta + p[P.A3])
+    q[X4], q[Y4] = x1 + p[P.L4] * math.cos(theta + p[P.A4]), y1 + p[P.L4] * math.sin(theta + p[P.A4])
+    q[X5], q[Y5] = x1 + p[P.L5] * math.cos(theta + p[P.A5]), y1 + p[P.L5] * math.sin(theta + p[P.A5])
+    cp, sp = math.cos(phi), math.sin(phi)
+    q[X6], q[Y6] = x1 + p[P.L_SA] * cp, y1 + p[P.L_SA] * sp            # (9)-(12)
+    q[X7], q[Y7] = x1 + p[P.L7] * cp, y1 + p[P.L7] * sp
+    q[RS] = math.hypot(q[X3] - q[X7], q[Y3] - q[Y7])                    # (13)
+    ux, uy = q[X5] - q[X4], q[Y5] - q[Y4]
+    n = math.hypot(ux, uy)
+    ux, uy = ux / n, uy / n
+    q[X12], q[Y12] = q[X4] + fs * ux, q[Y4] + fs * uy                   # (14), (17)
+    q[X13], q[Y13] = q[X12] + p[P.L8] * ux, q[Y12] + p[P.L8] * uy       # (15), (16)
+    q[X14], q[Y14] = q[X6], road_height(kind, rp, q[X6])[0]             # (18), (32)
+    q[X15], q[Y15] = q[X13], road_height(kind, rp, q[X13])[0]           # (19), (33)
+    q[RT] = q[Y6] - q[Y14]                                              # (20)
+    q[FT] = q[Y13] - q[Y15]                                             # (21)
+    gamma = _tangent_angle(q[X2], q[Y2], q[X6], q[Y6], p[P.R_ES], p[P.R_WS])
+    q[GAMMA] = gamma
+    res, rws = p[P.R_ES], p[P.R_WS]
+    q[X8], q[Y8] = q[X2] + res * math.cos(alpha), q[Y2] + res * math.sin(alpha)    # (22)-(29)
+    q[X10], q[Y10] = q[X2] + res * math.cos(gamma), q[Y2] + res * math.sin(gamma)
+    q[X9], q[Y9] = q[X6] + rws * math.cos(beta), q[Y6] + rws * math.sin(beta)
+    q[X11], q[Y11] = q[X6] + rws * math.cos(gamma), q[Y6] + rws * math.sin(gamma)
+    return not math.isnan(gamma)
 
 
 def assemble(p: np.ndarray, road: Road, x1: float, y1: float, theta: float, phi: float,
@@ -86,31 +120,12 @@ def assemble(p: np.ndarray, road: Road, x1: float, y1: float, theta: float, phi:
     """All 39 coordinates from the independent ones (satisfies eqs. 1-29, 31-33; eq. 30
     holds when alpha is consistent with the chain length P[L_CHAIN])."""
     q = np.zeros(N_COORDS)
-    q[X1], q[Y1], q[THETA], q[PHI], q[FS], q[BETA], q[ALPHA] = x1, y1, theta, phi, fs, beta, alpha
-    for (ix, iy), length, offset in (((X2, Y2), p[P.L2], p[P.A2]), ((X3, Y3), p[P.L3], p[P.A3]),
-                                     ((X4, Y4), p[P.L4], p[P.A4]), ((X5, Y5), p[P.L5], p[P.A5])):
-        q[ix] = x1 + length * math.cos(theta + offset)                  # (1)-(8)
-        q[iy] = y1 + length * math.sin(theta + offset)
-    for (ix, iy), length in (((X6, Y6), p[P.L_SA]), ((X7, Y7), p[P.L7])):
-        q[ix] = x1 + length * math.cos(phi)                             # (9)-(12)
-        q[iy] = y1 + length * math.sin(phi)
-    q[RS] = math.hypot(q[X3] - q[X7], q[Y3] - q[Y7])                    # (13)
-    ux, uy = q[X5] - q[X4], q[Y5] - q[Y4]
-    n = math.hypot(ux, uy)
-    ux, uy = ux / n, uy / n
-    q[X12], q[Y12] = q[X4] + fs * ux, q[Y4] + fs * uy                   # (14), (17)
-    q[X13], q[Y13] = q[X12] + p[P.L8] * ux, q[Y12] + p[P.L8] * uy       # (15), (16)
-    q[X14], q[Y14] = q[X6], float(road.height_at(q[X6]))                # (18), (32)
-    q[X15], q[Y15] = q[X13], float(road.height_at(q[X13]))              # (19), (33)
-    q[RT] = q[Y6] - q[Y14]                                              # (20)
-    q[FT] = q[Y13] - q[Y15]                                             # (21)
-    gamma = chain_tangent_angle(q[X2], q[Y2], q[X6], q[Y6], p[P.R_ES], p[P.R_WS])
-    q[GAMMA] = gamma
-    for (ix, iy), (cx, cy), radius, ang in (
-            ((X8, Y8), (X2, Y2), p[P.R_ES], alpha), ((X10, Y10), (X2, Y2), p[P.R_ES], gamma),
-            ((X9, Y9), (X6, Y6), p[P.R_WS], beta), ((X11, Y11), (X6, Y6), p[P.R_WS], gamma)):
-        q[ix] = q[cx] + radius * math.cos(ang)                          # (22)-(29)
-        q[iy] = q[cy] + radius * math.sin(ang)
+    kind, rp = road.packed()
+    if not fill_pose(p, kind, rp, float(x1), float(y1), float(theta), float(phi), float(fs), float(beta),
+                     float(alpha), q):
+        raise GeometryError(
+            f"sprocket centres {math.hypot(q[X6] - q[X2], q[Y6] - q[Y2]):.4f} m apart cannot carry a chain "
+            f"between radii {p[P.R_ES]:.4f} m and {p[P.R_WS]:.4f} m")
     return q
 
 
@@ -178,16 +193,16 @@ def squat_ratio_at(q: np.ndarray, p: np.ndarray, contact_x: float, contact_y: fl
     return float(p[P.SQUAT_K] * run / rise)
 
 
-def design_squat_ratio(p: np.ndarray) -> float:
-    """Squat ratio at the design pose (theta = 0, phi = phi0, unloaded tyres)."""
-    q = design_pose(p)
+def design_squat_ratio(p: np.ndarray, pose: np.ndarray | None = None) -> float:
+    """Squat ratio at the design pose (theta = 0, phi = phi0, unloaded tyres; pose: design_pose(p))."""
+    q = design_pose(p) if pose is None else pose
     return squat_ratio_at(q, p, q[X6], q[Y6] - p[P.RT0])
 
 
-def first_guess(p: np.ndarray, road: Road) -> np.ndarray:
-    """A start for the static equilibrium, (y1, theta, phi, fs): the design pose pitched onto the
-    road about the rear contact point, both tyres preloaded."""
-    q0 = design_pose(p)
+def first_guess(p: np.ndarray, road: Road, pose: np.ndarray | None = None) -> np.ndarray:
+    """A start for the static equilibrium, (y1, theta, phi, fs): the design pose (pose:
+    design_pose(p)) pitched onto the road about the rear contact point, both tyres preloaded."""
+    q0 = design_pose(p) if pose is None else pose
     wheelbase = q0[X15] - q0[X14]
     h_rear, h_front = float(road.height_at(0.0)), float(road.height_at(wheelbase))
     pitch = math.atan2(h_front - h_rear, wheelbase)

@@ -2,32 +2,9 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from finaldrive.engine.model.jit import jit
-
-
-@jit
-def cholesky_in_place(A: np.ndarray) -> None:
-    """A (symmetric positive definite, upper triangle filled) -> its lower Cholesky factor."""
-    n = A.shape[0]
-    for j in range(n):
-        for i in range(j + 1, n):
-            A[i, j] = A[j, i]
-    for j in range(n):
-        s = A[j, j]
-        for k in range(j):
-            s -= A[j, k] * A[j, k]
-        A[j, j] = math.sqrt(s)
-        for i in range(j + 1, n):
-            s = A[i, j]
-            for k in range(j):
-                s -= A[i, k] * A[j, k]
-            A[i, j] = s / A[j, j]
-        for i in range(j):
-            A[i, j] = 0.0
 
 
 @jit

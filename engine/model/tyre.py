@@ -134,7 +134,9 @@ def transient_slip(u: float, sigma: float, vsx: float, vx: float, fz: float, p: 
     """kappa' = u / sigma* - K_vlow V_sx / K_xk, eq. (43) as corrected."""
     kappa = u / sigma
     if fz > FZ_CONTACT_MIN:
-        kappa -= low_speed_damping(vx, p) * vsx / slip_stiffness(fz, p)
+        k_vlow = low_speed_damping(vx, p)
+        if k_vlow != 0.0:  # zero above V_low
+            kappa -= k_vlow * vsx / slip_stiffness(fz, p)
     return kappa
 
 
@@ -159,6 +161,7 @@ def deformation_rate(u: float, sigma: float, vsx: float, vx: float) -> float:
 def low_speed_factor(vx: float, fz: float, p: np.ndarray) -> float:
     """a = |V_x| K_vlow / K_xk >= 0: how much eq. (43)'s low-speed damping adds to the slip
     (docs/engine.md#the-tyres-energy-ledger); 0 off the road and above V_low."""
-    if fz <= FZ_CONTACT_MIN:
+    k_vlow = low_speed_damping(vx, p) if fz > FZ_CONTACT_MIN else 0.0
+    if k_vlow == 0.0:
         return 0.0
-    return abs(vx) * low_speed_damping(vx, p) / slip_stiffness(fz, p)
+    return abs(vx) * k_vlow / slip_stiffness(fz, p)

@@ -69,9 +69,10 @@ def rest_forces(free: np.ndarray, p: np.ndarray, road: Road) -> np.ndarray:
     return np.asarray(Q @ V / (p[P.M_CHASSIS] * p[P.GRAVITY]))
 
 
-def reference_equilibrium(p: np.ndarray, road: Road) -> np.ndarray:
-    """The equilibrium pose q (sprocket reference points opposite the tangent points)."""
-    free = first_guess(p, road)
+def reference_equilibrium(p: np.ndarray, road: Road, pose: np.ndarray | None = None) -> np.ndarray:
+    """The equilibrium pose q (sprocket reference points opposite the tangent points); pose: the
+    design pose (kinematics.design_pose) if known."""
+    free = first_guess(p, road, pose)
     for _ in range(_MAX_NEWTON):
         g = rest_forces(free, p, road)
         K = np.empty((4, 4))

@@ -19,9 +19,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
-from finaldrive.engine.model.jit import jit
+from finaldrive.engine.model.jit import jit, njit
 
 # Adams-Bashforth (63) and Adams-Moulton (64) coefficients, over 24.
 AB4 = (55.0, -59.0, 37.0, -9.0)

@@ -170,7 +170,7 @@ def run_reference(y, p, kind, rp, M, qg, longitudinal, dt, n_steps, n_trap, nu, 
         step += 1
         done += 1
         track_state(ext, aux, p)
-        track_interval(ext, aux0[AUX_FZ_REAR], aux0[AUX_FZ_FRONT], aux0[AUX_TENSION], dt)
+        track_interval(ext, aux0[AUX_FZ_REAR], aux0[AUX_FZ_FRONT], aux0[AUX_TENSION], aux0[AUX_TENSION], dt)
         powers(aux, p, pw1)
         integrate_powers(led, pw0, pw1, dt)
         # eq. (41) closed with the accepted step's values

@@ -12,14 +12,15 @@ import importlib
 import os
 import sys
 from collections.abc import Sequence
-from importlib.metadata import PackageNotFoundError, version
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from finaldrive.service.cli.common import UsageError, parser_options
 
 #: Modules that add commands, in the order their commands appear in ``--help``.
 COMMAND_MODULES: tuple[str, ...] = tuple(f"finaldrive.service.cli.{name}" for name in (
     "engine_cmds", "study_cmds", "server_cmds", "jobs_cmds", "media_cmds", "paper_cmds", "demo_cmds"))
+#: Commands of engine_cmds: their parser is built alone (the others' would import pydantic & co, ~0.3 s).
+ENGINE_COMMANDS = frozenset({"geometry", "simulate", "evaluate", "calibrate"})
 
 __all__ = ["UsageError", "build_parser", "main"]
 
@@ -30,25 +31,37 @@ class _Parser(argparse.ArgumentParser):
 
 
 def package_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
     try:
         return version("finaldrive")
     except PackageNotFoundError:  # running from a tree that was never installed
         return "unknown"
 
 
-def build_parser() -> argparse.ArgumentParser:
+class _Version(argparse.Action):
+    """--version, read from the package's metadata only when asked for."""
+
+    def __call__(self, parser: argparse.ArgumentParser, *_: Any) -> NoReturn:
+        print(f"finaldrive {package_version()}")
+        parser.exit()
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every command, or of engine_cmds' alone when ``command`` is one of them."""
     doc = __doc__ or ""
     parser = _Parser(prog="finaldrive", description=doc.splitlines()[0], **parser_options())
-    parser.add_argument("--version", action="version", version=f"finaldrive {package_version()}",
-                        help="print the version and exit")
+    parser.add_argument("--version", action=_Version, nargs=0, help="print the version and exit")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
-    for name in COMMAND_MODULES:
+    modules = COMMAND_MODULES[:1] if command in ENGINE_COMMANDS else COMMAND_MODULES
+    for name in modules:
         importlib.import_module(name).register(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    words = sys.argv[1:] if argv is None else argv
+    parser = build_parser(next((w for w in words if not w.startswith("-")), None))
     try:
         args = parser.parse_args(argv)
         return int(args.run(args) or 0)

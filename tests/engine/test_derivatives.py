@@ -17,12 +17,11 @@ import numpy as np
 import pytest
 
 from finaldrive.engine import Design, Road, SimSettings
-from finaldrive.engine.fast import minimal
+from finaldrive.engine.fast import bodies, minimal
 from finaldrive.engine.model import params as P
 from finaldrive.engine.model.coordinates import ALPHA
 from finaldrive.engine.model.elements import AUX_FZ_REAR, AUX_SLOPE, AUX_TAUT, AUX_TAUT_RATE, AUX_VX, N_AUX
 from finaldrive.engine.model.kinematics import pose_from_minimal, taut_length
-from finaldrive.engine.model.linalg import cholesky_solve
 from finaldrive.engine.model.tyre import magic_formula, magic_formula_slope, radial_energy, radial_force
 from finaldrive.engine.simulation import MINIMAL_COORDS, pack_parameters, prepare
 
@@ -61,11 +60,10 @@ def _alpha(z, p, road):
 
 
 def _rhs(y, p, kind, rp, sigma=0.05, longitudinal=True):
-    geo = minimal.design_constants(p)
-    out, aux = np.zeros(minimal.N_STATE), np.zeros(N_AUX)
-    L, b, c, ws = np.zeros((6, 6)), np.zeros(6), np.zeros(6), np.zeros((6, 6))
-    minimal.fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, True, out, aux, L, b, c, ws)
-    return out, aux, L, b, c
+    geo = bodies.design_constants(p)
+    out, aux, ws = np.zeros(minimal.N_STATE), np.zeros(N_AUX), np.zeros(bodies.N_WS)
+    minimal.fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws)
+    return out, aux, ws, geo
 
 
 def _state(vehicle, design, spec, seed):
@@ -85,14 +83,16 @@ def _state(vehicle, design, spec, seed):
 @pytest.mark.parametrize("spec", ["flat", "sine:0.04:2"])
 def test_chain_terms_against_the_position_analysis(vehicle, design, spec):
     p, road, y = _state(vehicle, design, spec, 1)
-    geo = minimal.design_constants(p)
+    geo = bodies.design_constants(p)
     z, zd = y[:6], y[6:12]
-    th, ph = z[minimal.ZTHETA], z[minimal.ZPHI]
+    th, ph = z[bodies.ZTHETA], z[bodies.ZPHI]
     ct, st, cp, sp = np.cos(th), np.sin(th), np.cos(ph), np.sin(ph)
-    w2 = (ct * geo[minimal.G_P2_X] - st * geo[minimal.G_P2_Y], st * geo[minimal.G_P2_X] + ct * geo[minimal.G_P2_Y])
+    w2 = (ct * geo[bodies.G_P2_X] - st * geo[bodies.G_P2_Y], st * geo[bodies.G_P2_X] + ct * geo[bodies.G_P2_Y])
     w6 = (p[P.L_SA] * cp, p[P.L_SA] * sp)
+    ja_t, ja_p, alpha_c, taut, taut_rate, alpha_dot = minimal.chain_terms(
+        *w2, *w6, zd[bodies.ZTHETA], zd[bodies.ZPHI], zd[bodies.ZBETA], p)
     jalpha = np.zeros(6)
-    alpha_c, taut, taut_rate, alpha_dot = minimal.chain_terms(*w2, *w6, zd, p, jalpha)
+    jalpha[bodies.ZTHETA], jalpha[bodies.ZPHI], jalpha[bodies.ZBETA] = ja_t, ja_p, p[P.R_WS] / p[P.R_ES]
     h = 1e-6
     fd = np.array([(_alpha(z + h * e, p, road) - _alpha(z - h * e, p, road)) / (2 * h) for e in np.eye(6)])
     np.testing.assert_allclose(jalpha, fd, atol=1e-7)            # rad per (m, rad); FD error ~1e-10
@@ -114,7 +114,8 @@ def test_linearly_implicit_terms(vehicle, design, spec, lever):
     p, road, y = _state(vehicle.replace(fx_lever_loaded=lever), design, spec, 2)
     kind, rp = road.packed()
     sigma = 0.05
-    _, aux, L, b, c_row = _rhs(y, p, kind, rp, sigma)
+    _, aux, ws, geo = _rhs(y, p, kind, rp, sigma)
+    c_row = ws[bodies.W_C:bodies.W_C + 6]
     assert aux[AUX_FZ_REAR] > 0, "the rear tyre is on the road"
     h = 1e-6
     for k in range(6):  # d(u')/dz'_k: u' is linear in z' (eq. 42): central differences exact
@@ -127,7 +128,7 @@ def test_linearly_implicit_terms(vehicle, design, spec, lever):
     plus, minus = _rhs(y + e, p, kind, rp, sigma)[0], _rhs(y - e, p, kind, rp, sigma)[0]
     assert (plus[12] - minus[12]) / (2 * h) == pytest.approx(-abs(aux[AUX_VX]) / sigma, rel=1e-7)
     v = np.zeros(6)
-    cholesky_solve(L, b, v)
+    bodies.mass_solve(geo, ws, ws[bodies.W_B:bodies.W_B + 6].copy(), v)
     expected = v * aux[AUX_SLOPE] / sigma
     fd = (plus[6:12] - minus[6:12]) / (2 * h)
     np.testing.assert_allclose(expected, fd, rtol=1e-5, atol=1e-5 * np.max(np.abs(fd)))

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from finaldrive.engine import Design, Road, SimSettings
-from finaldrive.engine.fast import minimal
+from finaldrive.engine.fast import bodies, minimal
 from finaldrive.engine.model.coordinates import N_COORDS
 from finaldrive.engine.model.elements import AUX_ALPHA_DOT, AUX_FZ_FRONT, AUX_FZ_REAR, AUX_TENSION, N_AUX
 from finaldrive.engine.model.forces import applied_forces
@@ -55,7 +55,7 @@ def test_fast_equations_are_the_reference_model_projected(vehicle, design, spec,
     setup = prepare(design, road, SimSettings(), vehicle.replace(fx_lever_loaded=lever))
     p = setup.p
     kind, rp = road.packed()
-    geo = minimal.design_constants(p)
+    geo = bodies.design_constants(p)
     rng = np.random.default_rng([round(design.a2_deg), len(spec), int(lever)])
     for _ in range(3):
         y = np.zeros(minimal.N_STATE)
@@ -66,8 +66,7 @@ def test_fast_equations_are_the_reference_model_projected(vehicle, design, spec,
         y[11] -= 6.0 / 0.29                              # driving: the wheel turns forward (beta' < 0)
         y[12] = rng.normal(scale=0.01)
         out, aux = np.zeros(minimal.N_STATE), np.zeros(N_AUX)
-        L, b, c, ws = np.zeros((6, 6)), np.zeros(6), np.zeros(6), np.zeros((6, 6))
-        assert minimal.fast_rhs(y, p, geo, kind, rp, SIGMA, True, False, out, aux, L, b, c, ws) == 0
+        assert minimal.fast_rhs(y, p, geo, kind, rp, SIGMA, True, out, aux, np.zeros(bodies.N_WS)) == 0
         expected, aux_ref = _projected_accelerations(y[:6], y[6:12], y[12], p, road)
         assert aux[AUX_FZ_REAR] > 0 and aux[AUX_FZ_FRONT] > 0
         elements = [*range(AUX_TENSION), AUX_ALPHA_DOT]                     # what the elements write
