@@ -101,8 +101,9 @@ def main() -> int:
     with sqlite3.connect(db) as conn:
         engine_s, simulated = conn.execute(
             "SELECT SUM(wall_s), COUNT(*) FROM evaluations WHERE job_id = ? AND NOT cached", (job_id,)).fetchone()
-    if args.keep:
-        shutil.copy(db, args.keep)
+    if args.keep:  # SQLite's backup API: the copy includes what is still in the write-ahead log
+        with sqlite3.connect(db) as source, sqlite3.connect(args.keep) as target:
+            source.backup(target)
     shutil.rmtree(tmp, ignore_errors=True)
     engine_share = engine_s / args.workers
     print(json.dumps({

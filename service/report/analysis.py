@@ -143,7 +143,7 @@ def per_road(data: StudyData) -> list[dict[str, Any]]:
         i_de, i_sw = _best(e, de), _best(e, sweep)
         preset = PRESETS.get(name)
         paper = None if preset is None or preset.paper is None else {
-            k: _r(v, 4) for k, v in sorted(preset.paper.items())}
+            k: _r(v, 7 if k == "slack_m" else 4) for k, v in sorted(preset.paper.items())}  # slack: to the um
         out.append({
             "index": r, "name": name, "spec": spec, "height_m": _r(road_height(spec), 4),
             "max_slope": _r(road_slope(spec), 5), "paper": paper,
