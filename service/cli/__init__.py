@@ -18,7 +18,7 @@ from finaldrive.service.cli.common import UsageError, parser_options
 
 #: Modules that add commands, in the order their commands appear in ``--help``.
 COMMAND_MODULES: tuple[str, ...] = tuple(f"finaldrive.service.cli.{name}" for name in (
-    "engine_cmds", "study_cmds", "server_cmds", "jobs_cmds", "media_cmds", "paper_cmds", "demo_cmds"))
+    "engine_cmds", "study_cmds", "roads_cmds", "server_cmds", "jobs_cmds", "media_cmds", "paper_cmds", "demo_cmds"))
 #: Commands of engine_cmds: their parser is built alone (the others' would import pydantic & co, ~0.3 s).
 ENGINE_COMMANDS = frozenset({"geometry", "simulate", "evaluate", "calibrate"})
 

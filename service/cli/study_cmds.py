@@ -1,4 +1,4 @@
-"""Local study commands: optimize (the paper's DE, or one DE over several roads), sweep, roads.
+"""Local study commands: optimize (the paper's DE, or one DE over several roads) and sweep.
 
 They run in this process and its workers (no service): ``--executor process`` (default on a
 multi-core machine) spawns a pool, ``ray`` starts or joins Ray. Progress goes to stderr,
@@ -29,7 +29,6 @@ from finaldrive.service.cli.common import (
     de_from_args,
     load_vehicle_arg,
     parser_options,
-    print_json,
     road_list,
     settings_from_args,
     writable,
@@ -37,7 +36,7 @@ from finaldrive.service.cli.common import (
 from finaldrive.service.cli.engine_cmds import EVALUATE_COLUMNS, batch_rows
 from finaldrive.service.cli.local_run import Tally, default_executor, design_dict, open_executor, run_study
 from finaldrive.service.cli.progress import Progress
-from finaldrive.service.cli.sharpness_view import sharpness_lines
+from finaldrive.service.cli.study_view import print_result
 
 
 def add_road_args(p: argparse.ArgumentParser) -> None:
@@ -145,7 +144,7 @@ def run_optimize(args: argparse.Namespace) -> int:
         "sharpness": sharp,
         "executor": kind, "workers": n_workers, "duration_s": settings.duration, "wall_s": time.monotonic() - start,
     }
-    _print_result(out, args.json)
+    print_result(out, args.json)
     return 0 if best is not None else 1
 
 
@@ -266,7 +265,7 @@ def run_sweep(args: argparse.Namespace) -> int:
         "evaluations": tally.progress.done, "failed": tally.progress.failed, "out": args.out, "executor": kind,
         "workers": n_workers, "duration_s": settings.duration, "wall_s": time.monotonic() - start,
     }
-    _print_result(out, args.json)
+    print_result(out, args.json)
     return 0 if best is not None else 1
 
 
@@ -274,52 +273,6 @@ def _csv_writer(stream: IO[str]) -> csv.DictWriter[str]:
     writer = csv.DictWriter(stream, fieldnames=("road", *EVALUATE_COLUMNS), lineterminator="\n")
     writer.writeheader()
     return writer
-
-
-# --- output -----------------------------------------------------------------------------------
-
-def _print_result(out: dict[str, Any], as_json: bool) -> None:
-    if as_json:
-        print_json(out)
-        return
-    where = f"  ({out['objective']} over {len(out['roads'])} roads)" if out["objective"] else f"  on {out['roads'][0]}"
-    print(f"best: {_design_text(out['best'])}{where}")
-    if len(out["roads"]) > 1:
-        for road in out["per_road"]:
-            print(f"  {road['road']:<22} {_design_text(road.get('best') or road.get('best_design'))}")
-    extra = f", {out['generations']} generations, stop: {out['stop_reason']}" if out["command"] == "optimize" else ""
-    print(f"evaluations: {out['evaluations']} ({out['failed']} failed){extra}, "
-          f"executor {out['executor']}, {out['wall_s']:.1f} s")
-    if out.get("out"):
-        print(f"results: {out['out']}")
-    print("\n".join(sharpness_lines(out["sharpness"])))
-
-
-def _design_text(d: dict[str, Any] | None) -> str:
-    if d is None:
-        return "none (every simulation failed)"
-    fitness = "failed" if d["fitness_m"] is None else f"{d['fitness_m']:.4f} m"
-    distance = "-" if d.get("distance_m") is None else f"{d['distance_m']:.3f} m"
-    return (f"a2 = {d['a2_deg']:.2f} deg, L2 = {d['l2_m']:.4f} m, R_WS = {d['rws_m']:.4f} m, "
-            f"fitness {fitness}, distance {distance}")
-
-
-# --- roads ------------------------------------------------------------------------------------
-
-def run_roads(args: argparse.Namespace) -> int:
-    from finaldrive.engine import PRESETS
-
-    if args.json:
-        print_json([{"name": p.name, "spec": p.road.spec, "description": p.description, "paper": p.paper}
-                    for p in PRESETS.values()])
-        return 0
-    print(f"{'name':<20} {'spec':<20} {'a2 deg':>7} {'L2 m':>6} {'R_WS m':>7} {'fit m':>7}  description")
-    for p in PRESETS.values():
-        ref = p.paper or {}
-        print(f"{p.name:<20} {p.road.spec:<20} {ref.get('a2_deg', math.nan):7.1f} "
-              f"{ref.get('l2_m', math.nan):6.3f} {ref.get('rws_m', math.nan):7.3f} "
-              f"{ref.get('fitness_m', math.nan):7.3f}  {p.description}")
-    return 0
 
 
 def register(sub: Any) -> None:
@@ -346,7 +299,3 @@ def register(sub: Any) -> None:
     add_tolerance_arg(p)
     add_run_args(p)
     p.set_defaults(run=run_sweep)
-
-    p = sub.add_parser("roads", help="the paper's 23 road presets with its optimum on each", **parser_options())
-    add_json_arg(p, "print a JSON list")
-    p.set_defaults(run=run_roads)

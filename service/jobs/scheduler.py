@@ -399,8 +399,6 @@ def _nullable(values: Sequence[float] | np.ndarray) -> list[float | None]:
     return [v if math.isfinite(v) else None for v in plain]
 
 
-
-
 def run_scheduler(settings: Settings, stop: threading.Event, *, scheduler_id: str | None = None,
                   handle_signals: bool = False) -> None:
     """A scheduler on ``settings.db_url`` with the configured executor, until ``stop`` is set
