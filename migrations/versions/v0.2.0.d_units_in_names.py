@@ -88,27 +88,31 @@ def _recordings(renames: dict[str, str]) -> Callable[[dict[str, Any]], dict[str,
     return fix
 
 
-def upgrade() -> None:
+def _rename_columns(forward: bool) -> None:
+    """The evaluations' design columns and the other tables' renamed columns, old -> new (or back)."""
+    def pair(old: str, new: str) -> tuple[str, str]:
+        return (old, new) if forward else (new, old)
+
     with op.batch_alter_table('evaluations', schema=None) as batch_op:
         for old, new in _COLUMNS:
-            batch_op.alter_column(old, new_column_name=new, existing_type=sa.Float(), existing_nullable=False)
-    op.execute(f'UPDATE evaluations SET a2_deg = a2_deg * {180.0 / math.pi!r}')
+            source, target = pair(old, new)
+            batch_op.alter_column(source, new_column_name=target, existing_type=sa.Float(), existing_nullable=False)
     for table, columns in _RENAMES.items():
         with op.batch_alter_table(table, schema=None) as batch_op:
             for old, new, kind in columns:
-                batch_op.alter_column(old, new_column_name=new, existing_type=kind)
+                source, target = pair(old, new)
+                batch_op.alter_column(source, new_column_name=target, existing_type=kind)
+
+
+def upgrade() -> None:
+    _rename_columns(forward=True)
+    op.execute(f'UPDATE evaluations SET a2_deg = a2_deg * {180.0 / math.pi!r}')
     _rewrite_json('jobs', _jobs(_grid_to_units))
     _rewrite_json('recordings', _recordings({'l2': 'l2_m', 'rws': 'rws_m'}))
 
 
 def downgrade() -> None:
     op.execute(f'UPDATE evaluations SET a2_deg = a2_deg * {math.pi / 180.0!r}')
-    with op.batch_alter_table('evaluations', schema=None) as batch_op:
-        for old, new in _COLUMNS:
-            batch_op.alter_column(new, new_column_name=old, existing_type=sa.Float(), existing_nullable=False)
-    for table, columns in _RENAMES.items():
-        with op.batch_alter_table(table, schema=None) as batch_op:
-            for old, new, kind in columns:
-                batch_op.alter_column(new, new_column_name=old, existing_type=kind)
+    _rename_columns(forward=False)
     _rewrite_json('jobs', _jobs(_grid_from_units))
     _rewrite_json('recordings', _recordings({'l2_m': 'l2', 'rws_m': 'rws'}))

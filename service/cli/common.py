@@ -11,6 +11,8 @@ import csv
 import io
 import json
 import math
+import signal
+import subprocess
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -203,6 +205,17 @@ def read_designs_csv(path: str) -> np.ndarray:
         except (TypeError, ValueError):
             raise UsageError(f"designs file {path!r}, line {n}: a2_deg, l2_m and rws_m must be numbers") from None
     return np.array(rows, dtype=float).reshape(-1, 3)
+
+
+def stop_process(proc: subprocess.Popen[bytes], timeout: float) -> None:
+    """SIGTERM ``proc`` and wait up to ``timeout`` s for it, then kill it."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
 
 
 def writable(path: str, option: str) -> Path:

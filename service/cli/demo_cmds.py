@@ -8,7 +8,6 @@ The server (``finaldrive serve``) runs on a free 127.0.0.1 port with ``--db`` (d
 from __future__ import annotations
 
 import argparse
-import signal
 import socket
 import subprocess
 import sys
@@ -16,7 +15,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from finaldrive.service.cli.common import parser_options, print_json
+from finaldrive.service.cli.common import parser_options, print_json, stop_process
 from finaldrive.service.cli.remote import EXIT_FAILED, EXIT_OK, client_command, follow
 
 LOG = Path("finaldrive-demo.log")
@@ -51,16 +50,6 @@ def wait_healthy(client: Any, proc: subprocess.Popen[bytes], timeout: float = ST
             time.sleep(0.25)
 
 
-def stop_server(proc: subprocess.Popen[bytes], timeout: float = 30.0) -> None:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-
-
 def demo_spec(args: argparse.Namespace) -> dict[str, Any]:
     return {"kind": "de", "roads": [args.road], "de": {"np": args.np, "iters": args.iters}, "seed": 1,
             "settings": {"method": "fast", "duration": 3.5}}
@@ -86,7 +75,7 @@ def run_demo(args: argparse.Namespace) -> int:
             return _run_job(args, client)
     finally:
         print("stopping the service", file=sys.stderr)
-        stop_server(proc)
+        stop_process(proc, 30.0)
 
 
 @client_command

@@ -10,14 +10,13 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import signal
 import subprocess
 import sys
 import threading
 import time
 from typing import TYPE_CHECKING, Any
 
-from finaldrive.service.cli.common import UsageError, parser_options
+from finaldrive.service.cli.common import UsageError, parser_options, stop_process
 
 if TYPE_CHECKING:
     from finaldrive.service.config import Settings
@@ -133,14 +132,8 @@ class SchedulerChild:
 
     def stop(self) -> None:
         self._stopping.set()
-        proc = self._proc
-        if proc is not None and proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(SCHEDULER_STOP_S)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        if self._proc is not None:
+            stop_process(self._proc, SCHEDULER_STOP_S)
         self._thread.join(SCHEDULER_STOP_S)
 
 

@@ -14,7 +14,8 @@ import httpx
 import pytest
 
 from finaldrive.service.cli import main
-from finaldrive.service.cli.demo_cmds import free_port, stop_server
+from finaldrive.service.cli.common import stop_process
+from finaldrive.service.cli.demo_cmds import free_port
 from finaldrive.service.cli.remote import EXIT_HTTP, EXIT_JOB_NOT_SUCCEEDED, EXIT_UNREACHABLE
 from finaldrive.service.recording import frame_count
 from tests.service.processes import console_script
@@ -45,7 +46,7 @@ def server(tmp_path: Path) -> Iterator[str]:
                 time.sleep(0.1)
         yield url
     finally:
-        stop_server(proc, timeout=15)
+        stop_process(proc, 15)
         log.close()
 
 
