@@ -3,9 +3,11 @@
 One recording holds one or more geometries on the same road, one above the other
 (``/world/g1``, ``/world/g2``, ...; the road is drawn under each), and their Fig. 13 time
 series under ``/plots/<quantity>/g<k>``. The timeline ``sim_time`` has one frame per series
-row: ``duration * fps + 1`` frames. Rerun's 2D views draw y downwards, so each ``/world/g<k>``
-carries a transform that flips y (a transform on the view's origin itself would not apply);
-the logged points are the engine's coordinates unchanged.
+row: ``duration * fps + 1`` frames. The logged points are the engine's coordinates unchanged;
+each ``/world/g<k>`` carries a transform per frame that shifts x by minus the reference x
+(scene.reference_x, common to all geometries) and flips y (Rerun's 2D views draw y downwards;
+a transform on the view's origin itself would not apply). The view's visual bounds cover the
+bikes around that reference, so it opens zoomed on them and the road scrolls past.
 """
 
 from __future__ import annotations
@@ -20,7 +22,15 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from finaldrive.engine import Design, Road, SimSettings, Vehicle, default_vehicle, simulate
-from finaldrive.service.scene import ROW_OFFSET_M, Run, frame, road_strip, tyre_forces
+from finaldrive.service.scene import (
+    ROW_OFFSET_M,
+    Run,
+    force_labels,
+    frame,
+    reference_x,
+    road_strip,
+    tyre_forces,
+)
 
 APPLICATION_ID = "finaldrive"
 TIMELINE = "sim_time"
@@ -38,6 +48,17 @@ PARTS = ("chassis", "swingarm", "damper", "fork", "rear_wheel", "front_wheel",
          "engine_sprocket", "wheel_sprocket", "chain")
 _COLOURS = ((31, 119, 180), (214, 39, 40), (44, 160, 44), (148, 103, 189))
 _PART_WIDTH = {"chassis": 0.012, "swingarm": 0.012, "fork": 0.01, "chain": 0.006}
+_FORCE_COLOUR = (230, 120, 0)
+#: The view: at least this far either side of the reference x, and this much beyond the bikes [m].
+_VIEW_HALF_WIDTH_M = 1.5
+_VIEW_MARGIN_M = 0.1
+#: A geometry's label this far above its bikes' highest point [m]; room under the lowest road for
+#: the tyre-force labels [m] (a label is drawn under its anchor, about 25 px tall).
+_LABEL_RISE_M = 0.2
+_FORCE_LABEL_ROOM_M = 0.2
+
+#: One run's parts, frame by frame (scene.frame).
+_Frames = list[dict[str, list[np.ndarray]]]
 
 
 class RecordingError(RuntimeError):
@@ -71,54 +92,84 @@ def simulate_runs(designs: Sequence[tuple[str, Design]], road: Road, settings: S
     return runs
 
 
-def blueprint() -> rrb.Blueprint:
-    """The 2D mechanism on the left, the Fig. 13 plots in a grid on the right."""
+def blueprint(x_range: tuple[float, float], y_range: tuple[float, float]) -> rrb.Blueprint:
+    """The 2D mechanism on the left (opening on the view-space bounds ``x_range``, ``y_range`` [m]),
+    the Fig. 13 plots in a grid on the right."""
     plots = [rrb.TimeSeriesView(origin=f"/plots/{name}", name=f"{name} [{unit}]") for _, name, unit in PLOTS]
-    return rrb.Blueprint(
-        rrb.Horizontal(rrb.Spatial2DView(origin="/world", name="Mechanism"), rrb.Grid(*plots), column_shares=[3, 2]),
-        collapse_panels=True,
-    )
+    bounds = rrb.VisualBounds2D(x_range=x_range, y_range=y_range)
+    mechanism = rrb.Spatial2DView(origin="/world", name="Mechanism", visual_bounds=bounds)
+    return rrb.Blueprint(rrb.Horizontal(mechanism, rrb.Grid(*plots), column_shares=[3, 2]), collapse_panels=True)
+
+
+def _offset(index: int) -> float:
+    return -index * ROW_OFFSET_M
 
 
 def write_recording(path: str | Path, runs: Sequence[Run], road: Road, *, name: str,
                     recording_id: str | None = None, vehicle: Vehicle | None = None) -> None:
     """Write ``runs`` (all on ``road``, same time rows) to ``path``; closes the file."""
     vehicle = vehicle or default_vehicle()
+    ref = reference_x(runs)
+    frames = [[frame(run, k, run.design.rws / vehicle["sprocket_ratio"], _offset(i)) for k in range(len(ref))]
+              for i, run in enumerate(runs)]
+    reach, bottom, top = _extent(frames, ref)
+    label_y = top + _LABEL_RISE_M
+    half = max(_VIEW_HALF_WIDTH_M, reach + _VIEW_MARGIN_M)
+    lowest = _offset(len(runs) - 1) + bottom - _FORCE_LABEL_ROOM_M
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
     try:
-        rec.save(str(path), default_blueprint=blueprint())
+        rec.save(str(path), default_blueprint=blueprint((-half, half), (-(label_y + _VIEW_MARGIN_M), -lowest)))
         rec.send_recording_name(name)
         rec.send_property("road", rr.AnyValues(spec=road.spec))
         for i, run in enumerate(runs):
-            _log_run(rec, run, run_key(i), i, road, vehicle)
+            _log_run(rec, run, run_key(i), i, road, frames[i], ref, label_y)
     finally:
         rec.disconnect()
 
 
-def _log_run(rec: rr.RecordingStream, run: Run, key: str, index: int, road: Road, vehicle: Vehicle) -> None:
+def _extent(frames: list[_Frames], ref: np.ndarray) -> tuple[float, float, float]:
+    """How far the bikes reach from the reference x, and their lowest and highest y above their
+    row's offset, over the whole run [m]."""
+    reach, bottom, top = 0.0, np.inf, -np.inf
+    for i, run_frames in enumerate(frames):
+        for k, parts in enumerate(run_frames):
+            points = np.concatenate([strip for strips in parts.values() for strip in strips])
+            reach = max(reach, float(np.abs(points[:, 0] - ref[k]).max()))
+            bottom = min(bottom, float(points[:, 1].min()) - _offset(i))
+            top = max(top, float(points[:, 1].max()) - _offset(i))
+    return reach, bottom, top
+
+
+def _log_run(rec: rr.RecordingStream, run: Run, key: str, index: int, road: Road, frames: _Frames,
+             ref: np.ndarray, label_y: float) -> None:
     colour = _COLOURS[index % len(_COLOURS)]
     d = run.design
-    offset = -index * ROW_OFFSET_M
+    offset = _offset(index)
     root = f"/world/{key}"
     values: dict[str, Any] = {"label": run.label, "a2_deg": d.a2_deg, "l2_m": d.l2, "rws_m": d.rws, **run.outcome}
     rec.send_property(key, rr.AnyValues(**values))
-    rec.log(root, rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)  # into the view's y-down space
-    rec.log(f"{root}/road", rr.LineStrips2D([road_strip(road, [run], offset)], radii=0.004, colors=(90, 90, 90),
-                                            labels=[run.label], show_labels=True), static=True)
     t = run.series["t_s"]
     times = rr.TimeColumn(TIMELINE, duration=t)
+    zeros = np.zeros_like(ref)
+    rec.send_columns(root, indexes=[times],  # follow the reference, into the view's y-down space
+                     columns=rr.Transform3D.columns(translation=np.column_stack([-ref, zeros, zeros]),
+                                                    scale=np.tile([1.0, -1.0, 1.0], (len(ref), 1))))
+    rec.log(f"{root}/road", rr.LineStrips2D([road_strip(road, [run], offset)], radii=0.004, colors=(90, 90, 90)),
+            static=True)
     for series_key, name, unit in PLOTS:
         path = f"/plots/{name}/{key}"
         rec.log(path, rr.SeriesLines(names=f"{run.label} [{unit}]", colors=colour, widths=2), static=True)
         rec.send_columns(path, indexes=[times], columns=rr.Scalars.columns(scalars=run.series[series_key]))
-    r_es = d.rws / vehicle["sprocket_ratio"]
     for k, tk in enumerate(t):
         rec.set_time(TIMELINE, duration=float(tk))
-        for part, strips in frame(run, k, r_es, offset).items():
+        for part, strips in frames[k].items():
             rec.log(f"{root}/{part}", rr.LineStrips2D(strips, radii=_PART_WIDTH.get(part, 0.006), colors=colour))
         origins, vectors = tyre_forces(run, k, offset)
-        rec.log(f"{root}/tyre_forces", rr.Arrows2D(origins=origins, vectors=vectors, radii=0.008,
-                                                   colors=(230, 120, 0), labels=["Fz", "Fx", "Fz"]))
+        rec.log(f"{root}/tyre_forces", rr.Arrows2D(origins=origins, vectors=vectors, radii=0.008, colors=_FORCE_COLOUR))
+        anchors, texts = force_labels(run, k, offset)
+        rec.log(f"{root}/force_labels", rr.Points2D(anchors, radii=0.0, colors=_FORCE_COLOUR, labels=texts))
+        rec.log(f"{root}/label", rr.Points2D([[ref[k], offset + label_y]], radii=0.0, colors=colour,
+                                             labels=[run.label]))
 
 
 def record(path: str | Path, designs: Sequence[tuple[str, Design]], road: Road, *, duration: float = 3.5,

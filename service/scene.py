@@ -8,6 +8,7 @@ so that several geometries can ride the same road one above the other.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,6 +19,10 @@ from finaldrive.engine import Design, Road, coordinate_index, point_positions
 FORCE_SCALE_M_PER_N = 1.0 / 5000.0
 #: Vertical distance between geometries shown side by side [m].
 ROW_OFFSET_M = 1.6
+#: Road drawn beyond the contact points' travel, either side [m]: more than a zoomed view shows.
+ROAD_MARGIN_M = 3.0
+#: Spacing of the road profile's points [m].
+ROAD_STEP_M = 0.01
 _CIRCLE = np.linspace(0.0, 2.0 * np.pi, 49)
 
 
@@ -80,8 +85,25 @@ def tyre_forces(run: Run, k: int, offset: float = 0.0) -> tuple[np.ndarray, np.n
     return np.array([rear, rear, front]), vectors * FORCE_SCALE_M_PER_N
 
 
-def road_strip(road: Road, runs: list[Run], offset: float = 0.0) -> np.ndarray:
-    """The road profile under every run's travel, with a margin either side."""
+def force_labels(run: Run, k: int, offset: float = 0.0) -> tuple[np.ndarray, list[str]]:
+    """Tyre-force label anchors (the rear and front contact points) and texts, one per wheel:
+    a viewer that draws each label under its anchor keeps them under the road, apart whatever the forces."""
+    s, q = run.series, run.series["q"][k]
+    texts = [f"Fz {s['fz_rear_n'][k] / 1e3:.1f} kN, Fx {s['fx_n'][k] / 1e3:.1f} kN",
+             f"Fz {s['fz_front_n'][k] / 1e3:.1f} kN"]
+    return np.array([_pt(q, 14, offset), _pt(q, 15, offset)]), texts
+
+
+def reference_x(runs: Sequence[Run]) -> np.ndarray:
+    """Per series row, the mean over ``runs`` of the point midway between the axles [m]: a zoomed
+    view follows it, the same for every run, so their relative advance stays visible."""
+    axles = [point_positions(r.series["q"])[:, [5, 12], 0] for r in runs]
+    return np.asarray(np.mean([a.mean(axis=1) for a in axles], axis=0), dtype=float)
+
+
+def road_strip(road: Road, runs: Sequence[Run], offset: float = 0.0) -> np.ndarray:
+    """The road profile under every run's travel, :data:`ROAD_MARGIN_M` either side."""
     xs = np.concatenate([point_positions(r.series["q"])[:, 13:15, 0].ravel() for r in runs])
-    x = np.linspace(xs.min() - 1.0, xs.max() + 1.0, 600)
+    lo, hi = xs.min() - ROAD_MARGIN_M, xs.max() + ROAD_MARGIN_M
+    x = np.linspace(lo, hi, int(np.ceil((hi - lo) / ROAD_STEP_M)) + 1)
     return np.column_stack([x, road.height_at(x) + offset])
