@@ -10,6 +10,7 @@ from typing import Any
 import anyio
 from fastapi import FastAPI
 
+from finaldrive.service import web
 from finaldrive.service.api import problems
 from finaldrive.service.api.limits import BodySizeLimit
 from finaldrive.service.api.main import api_router
@@ -36,10 +37,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         finally:
             await anyio.to_thread.run_sync(services.close)
 
-    app = FastAPI(title="finaldrive", version="1", description=DESCRIPTION, lifespan=lifespan)
+    app = FastAPI(title="finaldrive", version="1", description=DESCRIPTION, lifespan=lifespan, docs_url=None,
+                  redoc_url=None)
     app.add_middleware(BodySizeLimit)
     problems.install(app)
     app.include_router(api_router)
+    web.install(app)  # the dashboard at /, with /docs and /redoc from packaged assets
 
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:

@@ -52,6 +52,10 @@ _FORCE_COLOUR = (230, 120, 0)
 #: The view: at least this far either side of the reference x, and this much beyond the bikes [m].
 _VIEW_HALF_WIDTH_M = 1.5
 _VIEW_MARGIN_M = 0.1
+#: The view's least width per height: rerun fills the panel's width with the bounds' x range (seen in
+#: its web viewer, where the 3:2 split makes the Mechanism panel about 1.6 times as wide as tall), so
+#: bounds narrower than this would crop the lower rows.
+_VIEW_ASPECT = 1.7
 #: A geometry's label this far above its bikes' highest point [m]; room under the lowest road for
 #: the tyre-force labels [m] (a label is drawn under its anchor, about 25 px tall).
 _LABEL_RISE_M = 0.2
@@ -116,6 +120,7 @@ def write_recording(path: str | Path, runs: Sequence[Run], road: Road, *, name: 
     label_y = top + _LABEL_RISE_M
     half = max(_VIEW_HALF_WIDTH_M, reach + _VIEW_MARGIN_M)
     lowest = _offset(len(runs) - 1) + bottom - _FORCE_LABEL_ROOM_M
+    half = max(half, 0.5 * _VIEW_ASPECT * (label_y + _VIEW_MARGIN_M - lowest))
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
     try:
         rec.save(str(path), default_blueprint=blueprint((-half, half), (-(label_y + _VIEW_MARGIN_M), -lowest)))
@@ -248,3 +253,9 @@ def scalars_of(path: str | Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
         v.extend(x[0] for x in batch.column("Scalars:scalars").to_pylist())  # type: ignore[attr-defined]
     order = np.argsort(t, kind="stable")
     return np.asarray(t, dtype=float)[order] * 1e-9, np.asarray(v, dtype=float)[order]
+
+
+def serve_viewer(port: int) -> None:
+    """Serve rerun's own web viewer on 127.0.0.1:``port`` (returns at once; the server lives with
+    the process). :mod:`finaldrive.service.web.viewer` copies the files from it."""
+    rr.serve_web_viewer(web_port=port, open_browser=False)

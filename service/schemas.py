@@ -254,6 +254,26 @@ class JobPage(BaseModel):
     next_cursor: str | None
 
 
+class GenerationRecord(BaseModel):
+    generation: int = Field(description="DE generation (0: the initial population), as evaluations' step")
+    n_evals: int = Field(description="evaluations of the run so far")
+    n_failed: int = Field(description="failed evaluations in this generation")
+    best_fitness_m: float | None = Field(description="best fitness so far [m]")
+    mean_fitness_m: float | None = Field(description="mean fitness of the population [m]")
+
+
+class RunHistory(BaseModel):
+    run: int = Field(description="road index (de, paper-study) or 0 (robust-de)")
+    road: str | None = Field(description="road name; null for robust-de (all roads)")
+    generations: list[GenerationRecord]
+
+
+class HistoryOut(BaseModel):
+    job_id: int
+    kind: JobKind
+    runs: list[RunHistory]
+
+
 class BestOut(BaseModel):
     job_id: int
     roads: list[RoadProgress]
@@ -393,6 +413,23 @@ class RecordingOut(BaseModel):
     error: str | None
     file: str | None = Field(description="download path, once succeeded")
     created_at: datetime
+
+
+class RecordingRun(BaseModel):
+    key: str = Field(description="entity name in the recording: g1, g2, ...")
+    label: str
+    a2_deg: float = Field(description="sprocket angle a2 [deg]")
+    l2_m: float = Field(description="pivot-to-sprocket distance L2 [m]")
+    rws_m: float = Field(description="wheel sprocket radius R_WS [m]")
+    outcome: dict[str, float] = Field(description="the run's outcome (distance_m, fitness_m, exact extremes, "
+                                      "energy ledger), units in the keys")
+    series: dict[str, list[float]] = Field(description="Fig. 13 series, one value per t_s, units in the keys")
+
+
+class RecordingSeriesOut(BaseModel):
+    recording_id: int
+    t_s: list[float] = Field(description="time of each frame [s]")
+    runs: list[RecordingRun]
 
 
 class TravelPointOut(BaseModel):

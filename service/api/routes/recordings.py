@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+import tempfile
 from datetime import UTC
+from pathlib import Path as FilePath
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Response
@@ -17,7 +19,14 @@ from finaldrive.service.api.security import MutationAuth
 from finaldrive.service.db.models import Job, Recording
 from finaldrive.service.db.repository import create_recording, profile_roads
 from finaldrive.service.profiles import profile_ids, resolver
-from finaldrive.service.schemas import JobOut, RecordingDesign, RecordingOut, RecordingRequest
+from finaldrive.service.schemas import (
+    JobOut,
+    RecordingDesign,
+    RecordingOut,
+    RecordingRequest,
+    RecordingRun,
+    RecordingSeriesOut,
+)
 from finaldrive.service.services import Services
 
 router = APIRouter(prefix="/recordings", tags=["recordings"])
@@ -125,15 +134,49 @@ _RRD: dict[int | str, dict[str, Any]] = {
           "description": "the .rrd file"}}
 
 
-@router.get("/{recording_id}/file", response_class=Response, responses={**_RRD, **documented(404, 409, 422)},
-            summary="Download a finished recording (.rrd, open with `rerun FILE`)")
-def file(recording_id: RecordingId, services: ServicesDep) -> Response:
+def _content(services: Services, recording_id: int) -> tuple[bytes, int]:
+    """A finished recording's bytes and how many designs it holds (404 / 409 otherwise)."""
     with services.db.read() as session:
         row = session.get(Recording, recording_id, options=[undefer(Recording.content)])
         if row is None:
             raise ApiProblem(404, f"recording {recording_id} does not exist", slug="not-found")
         if row.status != "succeeded" or row.content is None:
             raise ApiProblem(409, f"recording {recording_id} is {row.status}, not ready", slug="not-ready")
-        content = row.content
+        return row.content, len(row.spec["designs"])
+
+
+@router.get("/{recording_id}/file", response_class=Response, responses={**_RRD, **documented(404, 409, 422)},
+            summary="Download a finished recording (.rrd, open with `rerun FILE`)")
+@router.get("/{recording_id}/recording.rrd", response_class=Response, responses={**_RRD, **documented(404, 409, 422)},
+            summary="The same file under a name ending in .rrd (how rerun's web viewer recognises a recording URL)")
+def file(recording_id: RecordingId, services: ServicesDep) -> Response:
+    content, _ = _content(services, recording_id)
     return Response(content, media_type="application/octet-stream",
                     headers={"Content-Disposition": f'attachment; filename="finaldrive-recording-{recording_id}.rrd"'})
+
+
+@router.get("/{recording_id}/series", response_model=RecordingSeriesOut, responses=documented(404, 409, 422),
+            summary="A finished recording's Fig. 13 time series and each design's outcome, as JSON")
+def series(recording_id: RecordingId, services: ServicesDep) -> RecordingSeriesOut:
+    """Read back from the stored .rrd: one row per frame, the same numbers the viewer plots."""
+    from finaldrive.service.recording import PLOTS, properties_of, run_key, scalars_of
+
+    content, count = _content(services, recording_id)
+    with tempfile.TemporaryDirectory(prefix="finaldrive-series-") as tmp:
+        path = FilePath(tmp) / "recording.rrd"
+        path.write_bytes(content)
+        runs, t_s = [], []
+        for i in range(count):
+            key = run_key(i)
+            props = properties_of(path, key)
+            values: dict[str, list[float]] = {}
+            for _, name, _ in PLOTS:
+                t, v = scalars_of(path, f"/plots/{name}/{key}")
+                t_s = t.tolist()
+                values[name] = v.tolist()
+            runs.append(RecordingRun(
+                key=key, label=str(props.pop("label")), a2_deg=float(props.pop("a2_deg")),  # type: ignore[arg-type]
+                l2_m=float(props.pop("l2_m")), rws_m=float(props.pop("rws_m")),  # type: ignore[arg-type]
+                outcome={k: float(v) for k, v in props.items() if isinstance(v, (int, float))}, series=values,
+            ))
+    return RecordingSeriesOut(recording_id=recording_id, t_s=t_s, runs=runs)

@@ -1,0 +1,109 @@
+// The design page: one or two designs on a road, simulated by a recording request; their Fig. 13 time
+// series (interactive) and the rerun recording of both, side by side, in rerun's web viewer.
+import { api, el, num, showBanner } from "/static/api.js";
+import { lineChart } from "/static/charts.js";
+
+const $ = (id) => document.getElementById(id);
+const COLOURS = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd"];
+const SERIES = [
+  ["distance_m", "distance [m]"], ["chain_tension_n", "chain tension [N]"], ["squat_ratio", "squat ratio [-]"],
+  ["fz_rear_n", "rear tyre load Fz [N]"], ["fz_front_n", "front tyre load Fz [N]"], ["kappa", "rear slip kappa [-]"],
+  ["fx_n", "rear tyre force Fx [N]"],
+];
+const OUTCOME = [["distance_m", "distance [m]", 4], ["fitness_m", "fitness [m]", 4], ["squat_ratio", "squat ratio", 3],
+                 ["slack_m", "slack [m]", 4], ["chain_tension_max_n", "max chain tension [N]", 0],
+                 ["fz_rear_max_n", "max rear load [N]", 0]];
+
+function fromQuery() {
+  const q = new URLSearchParams(location.search);
+  if (q.get("road")) $("road").value = q.get("road");
+  for (const k of ["a", "b"]) {
+    const v = (q.get(k) ?? "").split(",").map(Number);
+    if (v.length === 3 && v.every(Number.isFinite)) [$(`${k}-a2`).value, $(`${k}-l2`).value, $(`${k}-rws`).value] = v;
+    if (q.get(`label_${k}`)) $(`${k}-label`).value = q.get(`label_${k}`);
+  }
+  return q.has("a");
+}
+
+function designs() {
+  const out = [];
+  for (const k of ["a", "b"]) {
+    const values = [`${k}-a2`, `${k}-l2`, `${k}-rws`].map((id) => $(id).value.trim());
+    if (k === "b" && values.every((v) => v === "")) continue;
+    out.push({ a2_deg: Number(values[0] || NaN), l2_m: Number(values[1] || NaN), rws_m: Number(values[2] || NaN),
+               label: $(`${k}-label`).value.trim() || k.toUpperCase() });
+  }
+  return out;
+}
+
+function showErrors(problem) {
+  document.querySelectorAll(".field-error").forEach((e) => e.remove());
+  const general = [];
+  for (const err of problem?.errors ?? [{ loc: [], msg: problem?.detail ?? "the request failed" }]) {
+    const path = err.loc[0] === "body" ? err.loc.slice(1) : err.loc;
+    const target = document.querySelector(`[data-field="${path.slice(0, 2).join(".")}"]`)
+      ?? document.querySelector(`[data-field="${path[0]}"]`);
+    if (target) target.append(el("span", { class: "field-error", role: "alert" }, `${path.join(".")}: ${err.msg}`));
+    else general.push(err.msg);
+  }
+  $("form-error").textContent = general.join("; ");
+}
+
+const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+
+async function run(event) {
+  event?.preventDefault();
+  showErrors({ errors: [] });
+  $("run").disabled = true;
+  try {
+    const body = { road: $("road").value.trim(), designs: designs(), duration: Number($("duration").value), fps: 50 };
+    let rec = await api("/v1/recordings", { method: "POST", body });
+    const started = Date.now();
+    while (rec.status === "queued" || rec.status === "running") {
+      $("status").textContent = `simulating and recording… ${((Date.now() - started) / 1000).toFixed(0)} s`;
+      await sleep(500);
+      rec = await api(`/v1/recordings/${rec.id}`);
+    }
+    if (rec.status !== "succeeded") throw new Error(rec.error || `the recording ${rec.status}`);
+    $("status").textContent = `recording #${rec.id}`;
+    await show(rec);
+  } catch (e) {
+    if (e.problem) showErrors(e.problem);
+    else $("form-error").textContent = e.message;
+    $("status").textContent = "";
+  } finally {
+    $("run").disabled = false;
+  }
+}
+
+async function show(rec) {
+  const data = await api(`/v1/recordings/${rec.id}/series`);
+  const head = el("tr", {}, el("th", {}, "design"), el("th", { class: "num" }, "a2 [deg]"), el("th", { class: "num" }, "L2 [m]"),
+                  el("th", { class: "num" }, "R_WS [m]"), ...OUTCOME.map(([, label]) => el("th", { class: "num" }, label)));
+  $("outcome").tHead.replaceChildren(head);
+  $("outcome").tBodies[0].replaceChildren(...data.runs.map((r, k) => el("tr", {},
+    el("td", {}, el("span", { style: `color:${COLOURS[k]}` }, "■ "), r.label), el("td", { class: "num" }, num(r.a2_deg, 2)),
+    el("td", { class: "num" }, num(r.l2_m, 4)), el("td", { class: "num" }, num(r.rws_m, 4)),
+    ...OUTCOME.map(([key, , d]) => el("td", { class: "num" }, num(r.outcome[key], d))))));
+  $("outcome-card").hidden = false;
+  $("series-card").hidden = false;
+  const boxes = SERIES.map(() => el("div", { class: "chart-box" }));
+  $("series").replaceChildren(...boxes);
+  SERIES.forEach(([key, label], i) => lineChart(boxes[i], data.runs.map((r, k) => ({
+    name: r.label, x: data.t_s, y: r.series[key], colour: COLOURS[k],
+  })), { xLabel: "t [s]", yLabel: label, title: label, height: 220 }));
+  $("download").href = `/v1/recordings/${rec.id}/file`;
+  $("viewer-card").hidden = false;
+  const file = `${location.origin}/v1/recordings/${rec.id}/recording.rrd`; // the viewer needs the .rrd suffix
+  $("viewer").src = `/viewer/?url=${encodeURIComponent(file)}&hide_welcome_screen&persist=0`;
+}
+
+async function init() {
+  const roads = await api("/v1/roads");
+  $("road-list").replaceChildren(...roads.map((r) => el("option", { value: r.spec }, r.name)));
+  $("designs").addEventListener("submit", run);
+  if (fromQuery()) await run();
+  document.body.dataset.ready = "1";
+}
+
+init().catch((e) => showBanner(`could not load the page: ${e.message}`));

@@ -1,0 +1,196 @@
+"""The dashboard in a real headless Chromium (Playwright, the system's browser) against a real
+``finaldrive serve`` on 127.0.0.1 with a token: sign-in, the submit form and live progress, the sweep
+map's click, the design page's series and rerun's viewer drawing the recording, the offline API docs.
+Every request a page makes is recorded and must go to the server itself.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import shutil
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from tests.service.processes import Server
+
+pytestmark = pytest.mark.slow
+TOKEN = "dashboard-test-token"
+#: run colours of the recording's first two geometries (service/recording.py)
+RUN_COLOURS = ((31, 119, 180), (214, 39, 40))
+#: a small sweep: 4 x 3 designs, 0.5 s each
+GRID = "a2_deg=0:270:90,l2_m=0.04:0.12:0.04,rws_m=0.093"
+
+
+def chromium() -> str | None:
+    return os.environ.get("FINALDRIVE_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    tmp = tmp_path_factory.mktemp("dashboard")
+    srv = Server(f"sqlite:///{tmp / 'fd.db'}", tmp / "serve.log", "--executor", "serial",
+                 env={"FINALDRIVE_API_TOKEN": TOKEN}, token=TOKEN).start()
+    try:
+        yield srv
+    finally:
+        srv.terminate()
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    executable = chromium()
+    if executable is None:
+        pytest.skip("Chromium not found; install Debian's chromium (as .ci/run does) or set FINALDRIVE_CHROMIUM")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=executable, args=[
+            "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
+            "--disable-sync", "--no-first-run"])
+        try:
+            yield b
+        finally:
+            b.close()
+
+
+class Page:
+    """A browser tab on the server that records every request the page (and its frames) makes."""
+
+    def __init__(self, browser: Any, server: Server, signed_in: bool) -> None:
+        self.base = server.url
+        self.context = browser.new_context(viewport={"width": 1400, "height": 1000})
+        if signed_in:
+            self.context.add_cookies([{"name": "finaldrive_token", "value": TOKEN, "url": self.base}])
+        self.page = self.context.new_page()
+        self.requests: list[str] = []
+        self.errors: list[str] = []
+        self.page.on("request", lambda r: self.requests.append(r.url))
+        self.page.on("pageerror", lambda e: self.errors.append(str(e)))
+
+    def goto(self, path: str) -> Any:
+        return self.page.goto(self.base + path)
+
+    def ready(self, timeout_s: float = 60) -> None:
+        self.page.wait_for_selector("body[data-ready]", timeout=timeout_s * 1000)
+
+    def foreign_requests(self) -> list[str]:
+        return [u for u in self.requests if not u.startswith((self.base + "/", "blob:" + self.base, "data:"))]
+
+
+@pytest.fixture
+def tab(browser: Any, server: Server) -> Iterator[Page]:
+    page = Page(browser, server, signed_in=True)
+    yield page
+    page.context.close()
+    assert page.foreign_requests() == [], "the page asked for something off this server"
+    assert page.errors == [], page.errors
+
+
+def submit_sweep(server: Server) -> int:
+    response = server.client.post("/v1/jobs", json={"kind": "sweep", "roads": ["flat"], "grid": GRID,
+                                                    "settings": {"duration": 0.5}})
+    assert response.status_code == 201, response.text
+    job_id = int(response.json()["id"])
+    deadline = time.monotonic() + 120
+    while server.client.get(f"/v1/jobs/{job_id}").json()["state"] != "succeeded":
+        assert time.monotonic() < deadline, "the sweep did not finish"
+        time.sleep(0.2)
+    return job_id
+
+
+def test_without_the_token_the_page_asks_for_it_and_signs_in(browser: Any, server: Server) -> None:
+    page = Page(browser, server, signed_in=False)
+    try:
+        answer = page.goto("/")
+        assert answer.status == 401
+        assert "needs its token" in page.page.inner_text("h1")
+        page.page.fill("#token", "not-the-token")
+        page.page.click("button[type=submit]")
+        page.page.wait_for_function("document.getElementById('message').textContent.length > 0")
+        assert "not the server's token" in page.page.inner_text("#message")
+        page.page.fill("#token", TOKEN)
+        page.page.click("button[type=submit]")
+        page.ready()
+        assert page.page.inner_text("h1") == "Jobs"
+        assert page.foreign_requests() == []
+    finally:
+        page.context.close()
+
+
+def test_a_job_submitted_through_the_form_appears_and_advances_to_succeeded(tab: Page) -> None:
+    tab.goto("/")
+    tab.ready()
+    tab.page.select_option("#kind", "de")
+    tab.page.fill("#np", "3")  # below the minimum: the API's message appears next to the field
+    tab.page.click("#submit-button")
+    note = tab.page.wait_for_selector('.field-error[data-loc="de.np"]')
+    assert "greater than or equal to" in note.inner_text()
+    tab.page.select_option("#kind", "sweep")
+    tab.page.fill("#grid", GRID)
+    tab.page.fill("#duration", "0.5")
+    tab.page.click("#submit-button")
+    row = tab.page.wait_for_selector("tr[data-job]")
+    job_id = row.get_attribute("data-job")
+    tab.page.wait_for_selector(f'tr[data-job="{job_id}"] .state.succeeded', timeout=120_000)
+    bar = tab.page.query_selector(f'tr[data-job="{job_id}"] [role=progressbar]')
+    assert bar is not None and bar.get_attribute("aria-valuenow") == "100"
+    assert tab.page.inner_text(f'tr[data-job="{job_id}"] .count') == "12 / 12"
+
+
+def test_the_sweep_map_renders_and_a_click_selects_a_design(tab: Page, server: Server) -> None:
+    job_id = submit_sweep(server)
+    tab.goto(f"/jobs/{job_id}")
+    tab.ready()
+    canvas = tab.page.wait_for_selector("#map canvas")
+    best = tab.page.evaluate("window.fdMap.best")
+    x, y = tab.page.evaluate(f"window.fdMap.positionOf({best})")
+    canvas.click(position={"x": x, "y": y})
+    selected = tab.page.get_attribute("#selected", "data-evaluation")
+    points = server.client.get(f"/v1/jobs/{job_id}/points").json()
+    fitness = [f if f is not None else -1e9 for f in points["fitness_m"]]
+    assert int(selected) == points["id"][fitness.index(max(fitness))]  # the best design: a2 = 0 on flat
+    link = tab.page.get_attribute("#open-design", "href")
+    assert link is not None and link.startswith("/design?")
+    assert tab.page.locator("#evaluations tbody tr").count() == 12
+
+
+def _run_pixels(png: bytes) -> list[int]:
+    """Pixels of each run's colour (within a few levels) in the left part of the viewer: its 2D view of
+    the bikes (the series panels on the right draw in the same colours)."""
+    from PIL import Image
+
+    image = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
+    left = image[:, : int(image.shape[1] * 0.55)]
+    return [int((np.abs(left - np.array(c)).sum(axis=2) < 40).sum()) for c in RUN_COLOURS]
+
+
+def test_the_design_page_plays_both_designs_in_rerun_s_viewer(tab: Page, tmp_path: Path) -> None:
+    tab.goto("/design?road=flat&a=0,0.08,0.093&label_a=A&b=180,0.1,0.093&label_b=B")
+    tab.ready(timeout_s=180)
+    assert tab.page.locator("#series svg").count() == 7
+    assert tab.page.locator("#series svg polyline.series").count() == 14
+    assert tab.page.locator("#outcome tbody tr").count() == 2
+    viewer = tab.page.locator("#viewer")
+    deadline = time.monotonic() + 120
+    pixels = [0, 0]
+    while time.monotonic() < deadline:
+        png = viewer.screenshot()
+        pixels = _run_pixels(png)
+        if min(pixels) > 300:  # both bikes drawn: the whole recording is loaded
+            break
+        time.sleep(2)
+    (tmp_path / "viewer.png").write_bytes(png)
+    assert min(pixels) > 300, f"the viewer drew {pixels} pixels of each bike's colour (see {tmp_path / 'viewer.png'})"
+    assert any(u.endswith("/recording.rrd") for u in tab.requests)
+
+
+@pytest.mark.parametrize(("path", "selector"), [("/docs", ".swagger-ui .opblock"), ("/redoc", "[role=menuitem]")])
+def test_the_api_docs_render_offline(tab: Page, path: str, selector: str) -> None:
+    tab.goto(path)
+    tab.page.wait_for_selector(selector, timeout=30_000)
