@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from finaldrive.service.api.routes import events, geometry, health, jobs, plots, recordings, results, roads
+from finaldrive.service.api.routes import events, geometry, health, jobs, plots, points, recordings, results, roads
 
 api_router = APIRouter(prefix="/v1")
-for module in (jobs, results, events, roads, geometry, health, recordings, plots):
+for module in (jobs, results, events, roads, geometry, health, recordings, plots, points):
     api_router.include_router(module.router)

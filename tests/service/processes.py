@@ -83,7 +83,9 @@ class Server(Proc):
 
     def start(self) -> Server:
         super().start()
-        self.client = httpx.Client(base_url=self.url, timeout=30)
+        token = self.env.get("FINALDRIVE_API_TOKEN")
+        headers = {"Authorization": f"Bearer {token}"} if token else {}
+        self.client = httpx.Client(base_url=self.url, timeout=30, headers=headers)
         deadline = time.monotonic() + 90
         while time.monotonic() < deadline:
             assert self.alive(), self.log.read_text()[-5000:]
