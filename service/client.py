@@ -36,15 +36,19 @@ def default_server() -> str:
     return os.environ.get("FINALDRIVE_SERVER") or DEFAULT_SERVER
 
 
+def auth_headers(token: str | None = None) -> dict[str, str]:
+    """The bearer header of ``token`` (default: $FINALDRIVE_API_TOKEN) for every request, reads included."""
+    token = token if token is not None else os.environ.get("FINALDRIVE_API_TOKEN")
+    return {"Authorization": f"Bearer {token}"} if token else {}
+
+
 class ServiceClient:
     """The service's endpoints as methods; ``http`` can be injected (tests, transports)."""
 
     def __init__(self, server: str | None = None, *, token: str | None = None,
                  http: httpx.Client | None = None, timeout: float = 30.0) -> None:
         self.server = (server or default_server()).rstrip("/")
-        token = token if token is not None else os.environ.get("FINALDRIVE_API_TOKEN")
-        headers = {"Authorization": f"Bearer {token}"} if token else {}
-        self.http = http or httpx.Client(base_url=self.server, timeout=timeout, headers=headers)
+        self.http = http or httpx.Client(base_url=self.server, timeout=timeout, headers=auth_headers(token))
 
     def close(self) -> None:
         self.http.close()

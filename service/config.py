@@ -6,12 +6,19 @@ first use, and tests pass their own :class:`Settings` to ``create_app``.
 
 from __future__ import annotations
 
+import json
 from functools import lru_cache
+from typing import Annotated, Any, Self
 
-from pydantic import Field, SecretStr
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic import Field, SecretStr, field_validator, model_validator
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from finaldrive.workers import ExecutorKind
+
+#: Host names a loopback client sends (IPv6 with and without brackets).
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "[::1]", "::1")
+#: Bind addresses meaning every interface: no name to allow by default.
+WILDCARD_BINDS = ("0.0.0.0", "::", "[::]")
 
 
 class Settings(BaseSettings):
@@ -28,7 +35,12 @@ class Settings(BaseSettings):
     num_workers: int | None = Field(None, ge=1, description="worker processes (process/ray)")
     ray_address: str | None = Field(None, description="Ray cluster address (ray executor)")
     batch_size: int | None = Field(None, ge=1, description="designs per worker task")
-    api_token: SecretStr | None = Field(None, description="bearer token for mutating endpoints")
+    api_token: SecretStr | None = Field(None, description="bearer token for every route (reads included); "
+                                        "browsers may send it as the cookie finaldrive_token on GET/HEAD")
+    allowed_hosts: Annotated[list[str], NoDecode] = Field(
+        default_factory=lambda: list(LOOPBACK_HOSTS),
+        description="Host header names the service answers (ports ignored; comma-separated or a JSON list; "
+                    "'*' allows any). Default: the loopback names plus the bind host unless it is 0.0.0.0 or ::")
     max_body_bytes: int = Field(1_048_576, ge=1024, description="request body size limit")
     max_job_evaluations: int = Field(250_000, ge=1, description="largest job accepted")
     max_job_cpu_hours: float = Field(100.0, gt=0, description="largest estimated cost of a job accepted, in "
@@ -45,6 +57,35 @@ class Settings(BaseSettings):
     events_poll_seconds: float = Field(0.5, gt=0, description="SSE progress poll interval")
     status_cache_seconds: float = Field(0.25, ge=0, description="max age of a cached GET /v1/jobs/{id} (0: off)")
     auto_create_db: bool = Field(True, description="create the schema in an empty database")
+    max_streams: int = Field(1000, ge=1, description="event streams open at once (429 above)")
+    max_streams_per_client: int = Field(16, ge=1, description="event streams open at once from one client "
+                                        "address (429 above; a reverse proxy counts as one client)")
+    max_concurrent_renders: int = Field(2, ge=1, description="plots and /points answers built at once; "
+                                        "others wait (bounded memory)")
+    render_wait_seconds: float = Field(30.0, gt=0, description="how long a plot or /points request waits "
+                                       "for a render slot before 503")
+
+    @field_validator("api_token")
+    @classmethod
+    def _token_not_empty(cls, token: SecretStr | None) -> SecretStr | None:
+        if token is not None and not token.get_secret_value().strip():
+            raise ValueError("FINALDRIVE_API_TOKEN is empty: set a token or unset the variable")
+        return token
+
+    @field_validator("allowed_hosts", mode="before")
+    @classmethod
+    def _split_hosts(cls, value: Any) -> Any:
+        if isinstance(value, str):
+            text = value.strip()
+            return json.loads(text) if text.startswith("[") else [h.strip() for h in text.split(",") if h.strip()]
+        return value
+
+    @model_validator(mode="after")
+    def _bind_host_allowed(self) -> Self:
+        """By default the bind host is one of the allowed names (unless it binds every interface)."""
+        if "allowed_hosts" not in self.model_fields_set and self.host not in WILDCARD_BINDS:
+            self.allowed_hosts = [*LOOPBACK_HOSTS, *([self.host] if self.host not in LOOPBACK_HOSTS else [])]
+        return self
 
 
 @lru_cache

@@ -412,6 +412,8 @@ class RecordingOut(BaseModel):
     frames: int = Field(description="frames on the sim_time timeline (duration x fps + 1)")
     error: str | None
     file: str | None = Field(description="download path, once succeeded")
+    viewer_file: str | None = Field(description="the file as rerun's web viewer loads it, once succeeded (it sends "
+                                    "no credentials: with a token set, a link signed for this file, valid an hour)")
     created_at: datetime
 
 

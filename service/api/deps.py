@@ -6,6 +6,8 @@ from typing import Annotated
 
 from fastapi import Depends, Path, Request
 
+from finaldrive.service.api.event_hub import EventHub
+from finaldrive.service.api.renders import RenderSlots
 from finaldrive.service.services import Services
 
 
@@ -15,6 +17,20 @@ def get_services(request: Request) -> Services:
 
 
 ServicesDep = Annotated[Services, Depends(get_services)]
+
+
+def get_events(request: Request) -> EventHub:
+    events: EventHub = request.app.state.events
+    return events
+
+
+def get_renders(request: Request) -> RenderSlots:
+    renders: RenderSlots = request.app.state.renders
+    return renders
+
+
+EventsDep = Annotated[EventHub, Depends(get_events)]
+RendersDep = Annotated[RenderSlots, Depends(get_renders)]
 
 #: Largest row id SQLite (and a BIGINT) can hold.
 MAX_ID = 2**63 - 1

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from sqlalchemy.orm import Session
+
 from finaldrive.service.api.deps import MAX_ID, ServicesDep
 from finaldrive.service.api.problems import ApiProblem, validation_problem
 from finaldrive.service.api.views import job_out
@@ -25,6 +27,14 @@ def load_job(services: ServicesDep, job_id: int) -> JobOut:
             raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
         return job_out(session, job, roads_of(session, [job_id])[job_id], detail=True)
 
+
+def job_road(session: Session, job_id: int, road: str | None) -> tuple[Job, JobRoad]:
+    """A job and one of its roads by name, spec or index (default: the first); 404 without the job."""
+    job = session.get(Job, job_id)
+    if job is None:
+        raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
+    roads = [r for r, _ in roads_of(session, [job_id])[job_id]]
+    return job, roads[find_road(road, roads) if road is not None else 0]
 
 
 def find_road(road: str, roads: list[JobRoad]) -> int:

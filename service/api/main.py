@@ -4,9 +4,19 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from finaldrive.service.api.routes import events, geometry, health, history, jobs, plots, recordings, results, roads
+from finaldrive.service.api.routes import (
+    events,
+    geometry,
+    health,
+    history,
+    jobs,
+    plots,
+    points,
+    recordings,
+    results,
+    roads,
+)
 
 api_router = APIRouter(prefix="/v1")
-
-for module in (jobs, results, history, events, roads, geometry, health, recordings, plots):
+for module in (jobs, results, history, points, events, roads, geometry, health, recordings, plots):
     api_router.include_router(module.router)

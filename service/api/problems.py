@@ -110,7 +110,10 @@ def documented(*statuses: int) -> dict[int | str, dict[str, Any]]:
         413: "request body larger than FINALDRIVE_MAX_BODY_BYTES",
         415: "the body's Content-Type is not one this operation takes",
         422: "invalid request; `errors` names each field and the reason",
-        503: "the results store is unavailable (locked, full or unreachable); retry after Retry-After seconds",
+        429: "too many event streams open (FINALDRIVE_MAX_STREAMS_PER_CLIENT, FINALDRIVE_MAX_STREAMS); "
+             "retry after Retry-After seconds",
+        503: "the results store is unavailable (locked, full or unreachable), or the server is busy rendering "
+             "(plots, points); retry after Retry-After seconds",
     }
     return {s: {"model": Problem, "description": text[s]} for s in (*statuses, 503)}
 

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from datetime import UTC, datetime
 from typing import Any
 
-from sqlalchemy import func, select, update
+from sqlalchemy import Row, func, or_, select, update
 from sqlalchemy.orm import Session, undefer
 
 from finaldrive.engine import Road
@@ -87,6 +87,13 @@ def cancel_job(session: Session, job_id: int) -> bool:
 def count_active(session: Session) -> int:
     states = [s.value for s in ACTIVE_STATES]
     return int(session.scalar(select(func.count()).select_from(Job).where(Job.state.in_(states))) or 0)
+
+
+def job_progress(session: Session, job_ids: Sequence[int]) -> Sequence[Row[int, str, str, int, int, int]]:
+    """(id, kind, state, n_done, n_failed, total) of every unfinished job and of ``job_ids``, in one query."""
+    active = Job.state.in_([s.value for s in ACTIVE_STATES])
+    query = select(Job.id, Job.kind, Job.state, Job.n_done, Job.n_failed, Job.total).order_by(Job.id)
+    return session.execute(query.where(or_(active, Job.id.in_(job_ids)) if job_ids else active)).all()
 
 
 # ---------------------------------------------------------------------- evaluations

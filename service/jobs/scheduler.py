@@ -79,6 +79,8 @@ log = logging.getLogger(__name__)
 TIME_LIMIT = "time limit"
 #: A scheduler's transactions wait this long for a lock, then retry later (the loop keeps dispatching).
 SCHEDULER_LOCK_TIMEOUT_S = 2.0
+#: An idle loop waits this long per turn: with jobs (a result may be on its way to the store), without.
+_IDLE_WAIT_S, _IDLE_POLL_S = 0.02, 0.2
 
 
 @dataclass(frozen=True)
@@ -147,21 +149,26 @@ class Scheduler:
             self.recordings.start()
         try:
             while not stop.is_set():
-                self.turn(0.05 if self.dispatcher.in_flight() else 0.2)
+                finished = self.turn(0.05 if self.dispatcher.in_flight() else 0.2)
+                if not finished and not self.dispatcher.in_flight():
+                    # nothing ran nor came back: executors answer at once then, so wait here rather than
+                    # spin (an idle loop held a core and the GIL the recordings' thread needs)
+                    stop.wait(_IDLE_WAIT_S if self.jobs else _IDLE_POLL_S)
         finally:
             self.shutdown()
 
-    def turn(self, timeout: float) -> None:
-        """One turn of the loop (tests drive it step by step)."""
+    def turn(self, timeout: float) -> int:
+        """One turn of the loop (tests drive it step by step); returns how many tasks finished."""
         now = time.monotonic()
         if now >= self._next_beat:
             self._next_beat = now + self.config.heartbeat_s
             self._maintain()
         self._intake()
-        self.dispatcher.step(timeout)
+        finished = self.dispatcher.step(timeout)
         self._finish_ready()
         if time.monotonic() >= self._next_flush:
             self._flush()
+        return finished
 
     def shutdown(self) -> None:
         """Cancel what runs, store what arrived, give the jobs back (``interrupted``)."""

@@ -105,8 +105,10 @@ def from_server(base_url: str, job_id: int, *, client: httpx.Client | None = Non
     """Read a study through the REST API of a running service (or through ``client``)."""
     import httpx
 
+    from finaldrive.service.client import auth_headers
+
     own = client is None
-    client = client or httpx.Client(base_url=base_url.rstrip("/"), timeout=60.0)
+    client = client or httpx.Client(base_url=base_url.rstrip("/"), timeout=60.0, headers=auth_headers())
     try:
         response = client.get(f"/v1/jobs/{job_id}")
         if response.status_code == 404:
@@ -117,7 +119,7 @@ def from_server(base_url: str, job_id: int, *, client: httpx.Client | None = Non
         rows: list[tuple[Any, ...]] = []
         cursor: str | None = None
         while True:
-            params: dict[str, Any] = {"limit": 100_000, **({"cursor": cursor} if cursor else {})}
+            params: dict[str, Any] = {"limit": 10_000, **({"cursor": cursor} if cursor else {})}
             page = client.get(f"/v1/jobs/{job_id}/evaluations", params=params)
             page.raise_for_status()
             body = page.json()

@@ -63,7 +63,7 @@ def test_service_refuses_a_database_at_another_revision(url: str) -> None:
     _set_revision(url, "v0.0.1.a")
     with (
         pytest.raises(SchemaMismatchError, match="newer finaldrive"),
-        TestClient(create_app(Settings(db_url=url, executor="serial"))),
+        TestClient(create_app(Settings(db_url=url, executor="serial", allowed_hosts=["testserver"]))),
     ):
         pass
 

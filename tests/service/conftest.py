@@ -14,7 +14,7 @@ from tests.service.svc_helpers import ToyTask, running_scheduler
 @pytest.fixture
 def settings(tmp_path: Path) -> Settings:
     return Settings(db_url=f"sqlite:///{tmp_path / 'fd.db'}", executor="serial", events_poll_seconds=0.02,
-                    status_cache_seconds=0)
+                    status_cache_seconds=0, allowed_hosts=["testserver"])
 
 
 @pytest.fixture

@@ -76,16 +76,15 @@ class Proc:
 class Server(Proc):
     """``finaldrive serve`` on a free loopback port (with its scheduler, unless ``--no-scheduler``)."""
 
-    def __init__(self, db_url: str, log: Path, *extra: str, env: dict[str, str] | None = None,
-                 token: str | None = None) -> None:
+    def __init__(self, db_url: str, log: Path, *extra: str, env: dict[str, str] | None = None) -> None:
         self.port = free_port()
-        self.token = token
         self.url = f"http://127.0.0.1:{self.port}"
         super().__init__(["serve", "--port", str(self.port), "--db", db_url, *extra], log, env)
 
     def start(self) -> Server:
         super().start()
-        headers = {"Authorization": f"Bearer {self.token}"} if self.token else {}
+        token = self.env.get("FINALDRIVE_API_TOKEN")
+        headers = {"Authorization": f"Bearer {token}"} if token else {}
         self.client = httpx.Client(base_url=self.url, timeout=30, headers=headers)
         deadline = time.monotonic() + 90
         while time.monotonic() < deadline:

@@ -3,14 +3,21 @@
 from __future__ import annotations
 
 import math
+import threading
 from pathlib import Path
 
+import anyio
 import numpy as np
+import pytest
 from fastapi.testclient import TestClient
 
 from finaldrive.engine.study.sweep import parse_grid
 from finaldrive.service import plots
-from tests.service.svc_helpers import DE, SWEEP, wait_done
+from finaldrive.service.api.problems import ApiProblem
+from finaldrive.service.api.renders import RenderSlots
+from finaldrive.service.config import Settings
+from finaldrive.service.main import create_app
+from tests.service.svc_helpers import DE, SWEEP, ToyTask, running_scheduler, wait_done
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -60,3 +67,41 @@ def test_plot_routes(client: TestClient) -> None:
     assert client.get(f"/v1/jobs/{sweep['id']}/plots/sweep-map.png?road=moon").status_code == 422
     assert client.get("/v1/jobs/999/plots/sweep-map.png").status_code == 404
     assert client.get(f"/v1/jobs/{sweep['id']}/plots/pie.png").status_code == 422
+
+
+def test_points_are_a_roads_columns(client: TestClient) -> None:
+    sweep = wait_done(client, client.post("/v1/jobs", json=SWEEP).json()["id"])
+    stored = client.get(f"/v1/jobs/{sweep['id']}/evaluations", params={"road": "1"}).json()["items"]
+    points = client.get(f"/v1/jobs/{sweep['id']}/points", params={"road": "sine:0.025:3"}).json()
+    assert list(points) == ["road", "id", "step", "a2_deg", "l2_m", "rws_m", "distance_m", "fitness_m",
+                            "squat_ratio", "slack_m", "status"]
+    assert points["road"] == "sine:0.025:3" and points["id"] == [e["id"] for e in stored]
+    for name in ("step", "a2_deg", "l2_m", "rws_m", "distance_m", "fitness_m", "squat_ratio", "slack_m", "status"):
+        assert points[name] == [e[name] for e in stored], name
+    assert client.get(f"/v1/jobs/{sweep['id']}/points").json()["road"] == "flat"
+    assert client.get(f"/v1/jobs/{sweep['id']}/points?road=moon").status_code == 422
+    assert client.get("/v1/jobs/999/points").status_code == 404
+
+
+def test_failed_evaluations_are_nulls_in_points(settings: Settings) -> None:
+    with TestClient(create_app(settings)) as c, running_scheduler(settings, ToyTask(fail_above_l2=0.12)):
+        job = wait_done(c, c.post("/v1/jobs", json=SWEEP).json()["id"])
+        points = c.get(f"/v1/jobs/{job['id']}/points").json()
+    failed = [i for i, s in enumerate(points["status"]) if s == "failed"]
+    assert len(failed) == 4 and all(points["fitness_m"][i] is None for i in failed)
+    assert all(points["l2_m"][i] == 0.15 for i in failed)
+
+
+def test_render_slots_bound_the_renders_at_once() -> None:
+    async def scenario() -> None:
+        slots, gate = RenderSlots(1, wait_s=0.05), threading.Event()
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(slots.run, gate.wait)
+            await anyio.sleep(0.02)
+            with pytest.raises(ApiProblem) as refused:
+                await slots.run(lambda: 1)
+            gate.set()
+        assert refused.value.status == 503 and refused.value.headers == {"Retry-After": "5"}
+        assert await slots.run(lambda: 2) == 2
+
+    anyio.run(scenario)

@@ -94,7 +94,8 @@ def test_fps_must_divide_the_step_rate() -> None:
 @pytest.fixture
 def client(tmp_path: Path) -> Iterator[TestClient]:
     """The API and a scheduler (it produces the recordings; the jobs use the toy fitness)."""
-    settings = Settings(db_url=f"sqlite:///{tmp_path / 'r.db'}", executor="serial", status_cache_seconds=0)
+    settings = Settings(db_url=f"sqlite:///{tmp_path / 'r.db'}", executor="serial", status_cache_seconds=0,
+                        allowed_hosts=["testserver"])
     with TestClient(create_app(settings)) as c, running_scheduler(settings, ToyTask()):
         yield c
 

@@ -57,7 +57,7 @@ def test_report_is_complete_and_byte_identical_when_rerun(study: str, tmp_path: 
 
 def test_the_server_and_the_database_give_the_same_study(study: str, tmp_path: Path) -> None:
     from_db = from_database(study, 1)
-    settings = Settings(db_url=study, executor="serial", status_cache_seconds=0)
+    settings = Settings(db_url=study, executor="serial", status_cache_seconds=0, allowed_hosts=["testserver"])
     with TestClient(create_app(settings)) as client:
         via_api = from_server("http://testserver", 1, client=client)
     assert from_db.spec == via_api.spec and from_db.roads == via_api.roads

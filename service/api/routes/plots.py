@@ -12,12 +12,12 @@ from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
 from finaldrive.engine import DEFAULT_TOLERANCE_PCT, MAX_TOLERANCE_PCT, history_record, near_mask
-from finaldrive.service.api.deps import JobId, ServicesDep
-from finaldrive.service.api.lookups import find_road
+from finaldrive.service.api.deps import JobId, RendersDep, ServicesDep
+from finaldrive.service.api.lookups import job_road
 from finaldrive.service.api.problems import ApiProblem, documented
-from finaldrive.service.db.models import Job, JobRoad
-from finaldrive.service.db.repository import list_evaluations, roads_of
+from finaldrive.service.db.columns import road_points
 from finaldrive.service.db.results import last_generations
+from finaldrive.service.services import Services
 
 router = APIRouter(prefix="/jobs", tags=["results"])
 
@@ -35,51 +35,51 @@ def _png(draw: object, *args: object, **kwargs: object) -> bytes:
 
 @router.get("/{job_id}/plots/{name}.png", response_class=Response, responses={**_PNG, **documented(404, 409, 422)},
             summary="A plot of a job's results (sweep-map: values over a2/L2 per road; de-history)")
-def plot(
-    job_id: JobId, name: PlotName, services: ServicesDep,
+async def plot(
+    job_id: JobId, name: PlotName, services: ServicesDep, renders: RendersDep,
     road: Annotated[str | None, Query(description="road name, spec or index (default: the first)")] = None,
     value: Annotated[Literal["fitness", "distance"], Query(description="sweep-map colour")] = "fitness",
     tolerance_pct: Annotated[float, Query(gt=0, le=MAX_TOLERANCE_PCT, description="sweep-map: outline the designs "
                                           "whose fitness is within this % of the best")] = DEFAULT_TOLERANCE_PCT,
 ) -> Response:
+    """Rendered in a worker thread, at most FINALDRIVE_MAX_CONCURRENT_RENDERS at once (others wait)."""
+    draw = _sweep_map if name == "sweep-map" else _de_history
+    body = await renders.run(draw, services, job_id, road, value, tolerance_pct)
+    return Response(body, media_type="image/png")
+
+
+def _sweep_map(services: Services, job_id: int, road: str | None, value: str, tolerance_pct: float) -> bytes:
     from finaldrive.service import plots
 
     with services.db.read() as session:
-        job = session.get(Job, job_id)
-        if job is None:
-            raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
-        roads = [r for r, _ in roads_of(session, [job_id])[job_id]]
-        index = find_road(road, roads) if road is not None else 0
-        chosen: JobRoad = roads[index]
-        if name == "sweep-map":
-            rows = list_evaluations(session, job_id, road_index=index, after_id=None, limit=10**7)
-            designs = np.array([[math.radians(e.a2_deg), e.l2_m, e.rws_m] for e in rows]).reshape(-1, 3)
-            column = "fitness_m" if value == "fitness" else "distance_m"
-            values = np.array([math.nan if getattr(e, column) is None else getattr(e, column) for e in rows])
-            near = near_mask(np.array([math.nan if e.fitness_m is None else e.fitness_m for e in rows]),
-                             tolerance_pct)[0]
-            generation = None
-        else:
-            if job.kind == "sweep":
-                raise ApiProblem(409, f"job {job_id} is a sweep; de-history needs a de or robust-de job",
-                                 slug="wrong-kind")
-            generation = last_generations(session, job_id).get(0 if job.kind == "robust-de" else index)
-    if name == "sweep-map":
-        if not np.isfinite(values).any():
-            raise ApiProblem(409, f"job {job_id} has no successful evaluation on road {chosen.name!r} yet",
-                             slug="no-results")
-        b = int(np.nanargmax(values))
-        title = f"job {job_id} ({job.kind}) on {chosen.name}: {value} over the engine sprocket position"
-        body = _png(plots.sweep_map_png, designs, values, title=title, value_label=f"{value} [m]",
-                    best=(designs[b, 0], designs[b, 1]), near=near,
-                    near_label=f"fitness within {tolerance_pct:g} % of the best ({int(near.sum())} designs)")
-    else:
-        if generation is None:
-            raise ApiProblem(409, f"job {job_id} has no stored DE generation yet", slug="no-results")
-        fitness = [math.nan if f is None else f for f in generation.fitness_m]
-        population = np.column_stack([np.array(generation.population, float), fitness])
-        history = [{k: (math.nan if v is None else v) for k, v in history_record(h).items()}
-                   for h in generation.state["history"]]
-        where = "all roads" if job.kind == "robust-de" else chosen.name
-        body = _png(plots.de_history_png, history, population, title=f"job {job_id} ({job.kind}) on {where}")
-    return Response(body, media_type="image/png")
+        job, chosen = job_road(session, job_id, road)
+        points = road_points(session, job_id, chosen.road_index)
+    designs = np.column_stack([np.radians(points["a2_deg"]), points["l2_m"], points["rws_m"]])
+    values = points["fitness_m" if value == "fitness" else "distance_m"]
+    if not np.isfinite(values).any():
+        raise ApiProblem(409, f"job {job_id} has no successful evaluation on road {chosen.name!r} yet",
+                         slug="no-results")
+    near = near_mask(points["fitness_m"], tolerance_pct)[0]
+    b = int(np.nanargmax(values))
+    title = f"job {job_id} ({job.kind}) on {chosen.name}: {value} over the engine sprocket position"
+    return _png(plots.sweep_map_png, designs, values, title=title, value_label=f"{value} [m]",
+                best=(designs[b, 0], designs[b, 1]), near=near,
+                near_label=f"fitness within {tolerance_pct:g} % of the best ({int(near.sum())} designs)")
+
+
+def _de_history(services: Services, job_id: int, road: str | None, value: str, tolerance_pct: float) -> bytes:
+    from finaldrive.service import plots
+
+    with services.db.read() as session:
+        job, chosen = job_road(session, job_id, road)
+        if job.kind == "sweep":
+            raise ApiProblem(409, f"job {job_id} is a sweep; de-history needs a de or robust-de job", slug="wrong-kind")
+        generation = last_generations(session, job_id).get(0 if job.kind == "robust-de" else chosen.road_index)
+    if generation is None:
+        raise ApiProblem(409, f"job {job_id} has no stored DE generation yet", slug="no-results")
+    fitness = [math.nan if f is None else f for f in generation.fitness_m]
+    population = np.column_stack([np.array(generation.population, float), fitness])
+    history = [{k: (math.nan if v is None else v) for k, v in history_record(h).items()}
+               for h in generation.state["history"]]
+    where = "all roads" if job.kind == "robust-de" else chosen.name
+    return _png(plots.de_history_png, history, population, title=f"job {job_id} ({job.kind}) on {where}")

@@ -9,13 +9,14 @@ from pathlib import Path as FilePath
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Response
+from pydantic import SecretStr
 from sqlalchemy.orm import undefer
 
 from finaldrive.engine import design_label
+from finaldrive.service.api.access import signed_link
 from finaldrive.service.api.deps import MAX_ID, ServicesDep
 from finaldrive.service.api.lookups import load_job
 from finaldrive.service.api.problems import ApiProblem, documented, validation_problem
-from finaldrive.service.api.security import MutationAuth
 from finaldrive.service.db.models import Job, Recording
 from finaldrive.service.db.repository import create_recording, profile_roads
 from finaldrive.service.profiles import profile_ids, resolver
@@ -90,13 +91,15 @@ def _spec(request: RecordingRequest, services: Any) -> dict[str, Any]:
             "profile": None if profile is None else [list(profile.xs), list(profile.ys)]}
 
 
-def _out(r: Recording) -> RecordingOut:
+def _out(r: Recording, token: SecretStr | None) -> RecordingOut:
     s = r.spec
+    done = r.status == "succeeded"
     return RecordingOut(
         id=r.id, status=r.status, job_id=r.job_id, road=s["road"],
         designs=[RecordingDesign(**d) for d in s["designs"]], duration=s["duration"], fps=s["fps"],
         frames=math.ceil(s["duration"] * s["fps"] - 1e-9) + 1, error=s.get("error"),
-        file=f"/v1/recordings/{r.id}/file" if r.status == "succeeded" else None,
+        file=f"/v1/recordings/{r.id}/file" if done else None,
+        viewer_file=signed_link(token, f"/v1/recordings/{r.id}/recording.rrd") if done else None,
         created_at=r.created_at.replace(tzinfo=UTC),
     )
 
@@ -109,7 +112,7 @@ def _load(services: Services, recording_id: int) -> Recording:
     return row
 
 
-@router.post("", status_code=202, response_model=RecordingOut, dependencies=[MutationAuth],
+@router.post("", status_code=202, response_model=RecordingOut,
              responses=documented(400, 401, 404, 409, 413, 422),
              summary="Request a recording (produced in the background; poll GET until succeeded)")
 def create(request: RecordingRequest, services: ServicesDep, response: Response) -> RecordingOut:
@@ -120,13 +123,13 @@ def create(request: RecordingRequest, services: ServicesDep, response: Response)
             job_id = request.job_id
         row = create_recording(session, job_id, spec)
     response.headers["Location"] = f"/v1/recordings/{row.id}"
-    return _out(row)
+    return _out(row, services.settings.api_token)
 
 
 @router.get("/{recording_id}", response_model=RecordingOut, responses=documented(404, 422),
             summary="A recording's status")
 def get(recording_id: RecordingId, services: ServicesDep) -> RecordingOut:
-    return _out(_load(services, recording_id))
+    return _out(_load(services, recording_id), services.settings.api_token)
 
 
 _RRD: dict[int | str, dict[str, Any]] = {

@@ -4,17 +4,19 @@ from __future__ import annotations
 
 import csv
 import io
-from typing import Annotated, Literal
+from collections.abc import Iterator
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query
-from fastapi.responses import Response
+from fastapi.responses import Response, StreamingResponse
 
 from finaldrive.engine import DEFAULT_TOLERANCE_PCT, MAX_TOLERANCE_PCT
 from finaldrive.service.api.deps import JobId, ServicesDep
 from finaldrive.service.api.lookups import find_road, load_job, parse_cursor
-from finaldrive.service.api.problems import ApiProblem, documented
+from finaldrive.service.api.problems import ApiProblem, documented, validation_problem
 from finaldrive.service.api.sharpness import job_sharpness
 from finaldrive.service.api.views import evaluation_out
+from finaldrive.service.db.columns import page_end, row_chunks
 from finaldrive.service.db.models import Job
 from finaldrive.service.db.repository import list_evaluations, roads_of
 from finaldrive.service.schemas import BestOut, EvaluationOut, EvaluationPage
@@ -24,43 +26,65 @@ router = APIRouter(prefix="/jobs", tags=["results"])
 CSV_COLUMNS = tuple(EvaluationOut.model_fields)
 
 
+#: Largest JSON page (its rows are built as objects); CSV pages stream, up to the query's limit.
+JSON_PAGE_MAX = 10_000
+
+
 @router.get(
     "/{job_id}/evaluations", response_model=EvaluationPage,
     responses={200: {"content": {"text/csv": {"schema": {"type": "string"}}},
-                     "description": "a page of evaluations (CSV: next cursor in the X-Next-Cursor header)"},
+                     "description": "a page of evaluations (CSV: streamed; next cursor in the X-Next-Cursor header)"},
                **documented(404, 422)},
-    summary="A job's evaluations, in storage order",
+    summary="A job's evaluations, in storage order (JSON pages up to 10,000; CSV pages, streamed, up to 100,000)",
 )
 def evaluations(
     job_id: JobId, services: ServicesDep,
     road: Annotated[str | None, Query(description="road name, spec or index")] = None,
     cursor: Annotated[str | None, Query(description="next_cursor of the previous page")] = None,
-    limit: Annotated[int, Query(ge=1, le=100_000)] = 1000,
+    limit: Annotated[int, Query(ge=1, le=100_000, description="page size (JSON: at most 10,000)")] = 1000,
     format: Literal["json", "csv"] = "json",
 ) -> EvaluationPage | Response:
     after = parse_cursor(cursor)
+    if format == "json" and limit > JSON_PAGE_MAX:
+        raise validation_problem(("query", "limit"), f"at most {JSON_PAGE_MAX} for format=json "
+                                 "(format=csv streams pages of up to 100000)")
     with services.db.read() as session:
         if session.get(Job, job_id) is None:
             raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
         roads = [road for road, _ in roads_of(session, [job_id])[job_id]]
         road_index = None if road is None else find_road(road, roads)
-        rows = list_evaluations(session, job_id, road_index=road_index, after_id=after, limit=limit + 1)
+        if format == "csv":
+            until, more = page_end(session, job_id, road_index, after, limit)
+        else:
+            rows = list_evaluations(session, job_id, road_index=road_index, after_id=after, limit=limit + 1)
     names = {r.road_index: r.name for r in roads}
+    if format == "csv":
+        chunks = row_chunks(services.db, job_id, road_index, STORED_COLUMNS, after_id=after, until_id=until)
+        return StreamingResponse(_csv(chunks, names), media_type="text/csv",
+                                 headers={"X-Next-Cursor": str(until) if more else ""})
     items = [evaluation_out(e, names[e.road_index]) for e in rows[:limit]]
-    next_cursor = str(rows[limit - 1].id) if len(rows) > limit else None
-    if format == "json":
-        return EvaluationPage(items=items, next_cursor=next_cursor)
-    return Response(_csv(items), media_type="text/csv", headers={"X-Next-Cursor": next_cursor or ""})
+    return EvaluationPage(items=items, next_cursor=str(rows[limit - 1].id) if len(rows) > limit else None)
 
 
-def _csv(items: list[EvaluationOut]) -> str:
+#: The stored columns of the CSV, in its order (its ``road`` column is the name of ``road_index``).
+STORED_COLUMNS = tuple(c for c in CSV_COLUMNS if c != "road")
+
+
+def _csv(chunks: Iterator[list[tuple[Any, ...]]], names: dict[int, str]) -> Iterator[str]:
+    """The header, then each chunk of rows as CSV text (None as an empty field)."""
+    yield ",".join(CSV_COLUMNS) + "\n"
     out = io.StringIO()
     writer = csv.writer(out, lineterminator="\n")
-    writer.writerow(CSV_COLUMNS)
-    for item in items:
-        values = item.model_dump()
-        writer.writerow("" if values[c] is None else values[c] for c in CSV_COLUMNS)
-    return out.getvalue()
+    road = STORED_COLUMNS.index("road_index")
+    insert_at = CSV_COLUMNS.index("road")
+    for rows in chunks:
+        for row in rows:
+            values: list[Any] = ["" if v is None else v for v in row]
+            values.insert(insert_at, names[row[road]])
+            writer.writerow(values)
+        yield out.getvalue()
+        out.seek(0)
+        out.truncate()
 
 
 @router.get("/{job_id}/best", response_model=BestOut, responses=documented(404, 422),

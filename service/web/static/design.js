@@ -94,7 +94,7 @@ async function show(rec) {
   })), { xLabel: "t [s]", yLabel: label, title: label, height: 220 }));
   $("download").href = `/v1/recordings/${rec.id}/file`;
   $("viewer-card").hidden = false;
-  const file = `${location.origin}/v1/recordings/${rec.id}/recording.rrd`; // the viewer needs the .rrd suffix
+  const file = location.origin + rec.viewer_file; // ends in .rrd (how the viewer knows it) and signed when needed
   $("viewer").src = `/viewer/?url=${encodeURIComponent(file)}&hide_welcome_screen&persist=0`;
 }
 

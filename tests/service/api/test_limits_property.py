@@ -23,7 +23,8 @@ FAST = settings(max_examples=40, deadline=None, database=None,
 @pytest.fixture(scope="module")
 def api(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
     db = Path(tmp_path_factory.mktemp("limits")) / "limits.db"
-    with TestClient(create_app(Settings(db_url=f"sqlite:///{db}", executor="serial", max_job_evaluations=5_000))) as c:
+    with TestClient(create_app(Settings(db_url=f"sqlite:///{db}", executor="serial", max_job_evaluations=5_000,
+                                               allowed_hosts=["testserver"]))) as c:
         yield c
 
 

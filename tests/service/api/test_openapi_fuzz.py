@@ -32,7 +32,7 @@ CHECKS = [not_a_server_error, status_code_conformance, content_type_conformance,
 def app(tmp_path_factory: pytest.TempPathFactory) -> Iterator[FastAPI]:
     db = Path(tmp_path_factory.mktemp("fuzz")) / "fuzz.db"
     config = Settings(db_url=f"sqlite:///{db}", executor="serial", max_job_evaluations=500, events_poll_seconds=0.01,
-                      api_token=SecretStr("fuzz-token"))
+                      api_token=SecretStr("fuzz-token"), allowed_hosts=["testserver", "localhost"])
     application = create_app(config)
     # /v1/geometry runs the engine in the request: load (or compile) the model before the 10 s read timeouts
     static_geometry(Design.from_deg(0.0, 0.0, 0.093), default_vehicle())
@@ -43,7 +43,7 @@ def app(tmp_path_factory: pytest.TempPathFactory) -> Iterator[FastAPI]:
 
 @pytest.fixture(scope="module")
 def api_schema(app: FastAPI) -> schemathesis.BaseSchema:
-    return schemathesis.openapi.from_asgi("/openapi.json", app)
+    return schemathesis.openapi.from_asgi("/openapi.json", app, headers={"Authorization": "Bearer fuzz-token"})
 
 
 schema = schemathesis.pytest.from_fixture("api_schema")

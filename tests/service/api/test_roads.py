@@ -38,7 +38,7 @@ def upload_csv(client: TestClient, text: str, name: str = "kerb") -> Any:
 
 def test_upload_get_list_and_the_same_points_again(store_url: str) -> None:
     """On SQLite and PostgreSQL (the migration's table on both)."""
-    with TestClient(create_app(Settings(db_url=store_url, executor="serial"))) as client:
+    with TestClient(create_app(Settings(db_url=store_url, executor="serial", allowed_hosts=["testserver"]))) as client:
         r = upload_csv(client, CSV)
         assert r.status_code == 201, r.text
         out = r.json()

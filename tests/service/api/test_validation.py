@@ -8,7 +8,6 @@ from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
-from pydantic import SecretStr
 
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
@@ -66,20 +65,6 @@ def test_unknown_job_and_bad_cursor(client: TestClient) -> None:
     for path in ("/v1/jobs/5", "/v1/jobs/5/evaluations", "/v1/jobs/5/best", "/v1/jobs/5/events"):
         assert_problem(client.get(path), 404)
     assert_problem(client.get("/v1/jobs", params={"cursor": "zz"}), 422)
-
-
-def test_token_guards_mutations(settings: Settings, fake: ToyTask) -> None:
-    with TestClient(create_app(settings.model_copy(update={"api_token": SecretStr("s3cret")}))) as c:
-        for headers in ({}, {"Authorization": "Bearer wrong"}):
-            r = c.post("/v1/jobs", json=SWEEP, headers=headers)
-            assert_problem(r, 401)
-            assert r.headers["www-authenticate"] == "Bearer"
-        assert c.get("/v1/jobs").json()["items"] == []
-        ok = c.post("/v1/jobs", json=SWEEP, headers={"Authorization": "Bearer s3cret"})
-        assert ok.status_code == 201
-        job_id = ok.json()["id"]
-        assert_problem(c.post(f"/v1/jobs/{job_id}/cancel"), 401)
-        assert c.get(f"/v1/jobs/{job_id}").json()["state"] != "cancelled"
 
 
 def _vehicle(key: str, value: Any) -> dict[str, Any]:

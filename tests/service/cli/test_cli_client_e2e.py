@@ -39,7 +39,7 @@ def server(tmp_path: Path) -> Iterator[str]:
         while True:
             assert proc.poll() is None, (tmp_path / "server.log").read_text()
             try:
-                if httpx.get(f"{url}/v1/health").status_code == 200:
+                if httpx.get(f"{url}/v1/health", headers={"Authorization": f"Bearer {TOKEN}"}).status_code == 200:
                     break
             except httpx.TransportError:
                 assert time.monotonic() < deadline, "server did not start"
@@ -88,9 +88,11 @@ def test_submit_follow_results_record_plot(server: str, tmp_path: Path, monkeypa
     assert main(["cancel", "1", *s]) == EXIT_HTTP
     err = capsys.readouterr().err.splitlines()
     assert err[-2:] == ["finaldrive: error: HTTP 404: job 999 does not exist",
-                        "finaldrive: error: HTTP 401: a valid `Authorization: Bearer <token>` header is required "
-                        "(the token is the server's FINALDRIVE_API_TOKEN); the client sends $FINALDRIVE_API_TOKEN, "
-                        "which here is set, but to another value"]
+                        "finaldrive: error: HTTP 401: a valid token is required: the header `Authorization: Bearer "
+                        "<token>` (any method) or the cookie `finaldrive_token=<token>` (GET and HEAD only); the token "
+                        "is the server's FINALDRIVE_API_TOKEN; the client sends $FINALDRIVE_API_TOKEN, which here is "
+                        "set, but to another value"]
+    assert main(["status", "1", *s]) == EXIT_HTTP  # reads need the token too
 
 
 def test_stopped_server(capsys: pytest.CaptureFixture[str]) -> None:

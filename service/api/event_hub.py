@@ -1,0 +1,162 @@
+"""One poll of the store for every open event stream, fanned out to the streams.
+
+Each tick (``events_poll_seconds``) reads, in one query and in a worker thread, the progress of
+the jobs that are not finished plus those streams watch, and hands each stream the jobs that
+changed. A stream's mailbox keeps only the latest state of each job: a slow reader skips
+intermediate progress and never holds the hub up. The hub runs while streams are open; the
+number of streams is capped in total and per client address.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any
+
+import anyio
+from sqlalchemy.exc import SQLAlchemyError
+
+from finaldrive.service.db.engine import Database
+from finaldrive.service.db.models import TERMINAL_STATES, JobState
+from finaldrive.service.db.repository import job_progress
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class JobProgress:
+    id: int
+    kind: str
+    state: str
+    done: int
+    failed: int
+    total: int
+
+    @property
+    def finished(self) -> bool:
+        return JobState(self.state) in TERMINAL_STATES
+
+    def counts(self) -> dict[str, Any]:
+        """The body of a job stream's events."""
+        return {"state": self.state, "done": self.done, "failed": self.failed, "total": self.total}
+
+    def summary(self) -> dict[str, Any]:
+        """An item of the jobs stream."""
+        progress = (self.done + self.failed) / self.total if self.total else 0.0
+        return {"id": self.id, "kind": self.kind, **self.counts(), "progress": round(min(progress, 1.0), 4)}
+
+
+def read_progress(db: Database, job_ids: list[int]) -> list[JobProgress]:
+    """Every unfinished job and those of ``job_ids``, in one query."""
+    with db.read() as session:
+        return [JobProgress(*row) for row in job_progress(session, job_ids)]
+
+
+class TooManyStreams(Exception):
+    """A cap on open streams is reached; the message names it."""
+
+
+class Subscriber:
+    """A stream's mailbox: ``job_id`` None watches every job (the first delivery: all unfinished ones)."""
+
+    def __init__(self, client: str, job_id: int | None) -> None:
+        self.client = client
+        self.job_id = job_id
+        self._fresh = True
+        self._pending: dict[int, JobProgress] = {}
+        self._wake = asyncio.Event()
+
+    def deliver(self, changed: list[JobProgress], known: dict[int, JobProgress]) -> None:
+        """Take a tick's news (never blocks: a newer state of a job replaces one not yet read)."""
+        if self._fresh:
+            self._fresh = False
+            items = [p for p in known.values() if not p.finished] if self.job_id is None else (
+                [known[self.job_id]] if self.job_id in known else [])
+        else:
+            items = [p for p in changed if self.job_id in (None, p.id)]
+            if not items:
+                return
+        self._pending.update((p.id, p) for p in items)
+        self._wake.set()
+
+    async def take(self) -> list[JobProgress]:
+        """The latest state of each job that changed since the last take (the first: possibly empty)."""
+        await self._wake.wait()
+        self._wake.clear()
+        items, self._pending = list(self._pending.values()), {}
+        return items
+
+
+class EventHub:
+    def __init__(self, db: Database, *, poll_s: float, max_streams: int, max_per_client: int) -> None:
+        self.db = db
+        self.poll_s = poll_s
+        self.max_streams = max_streams
+        self.max_per_client = max_per_client
+        #: store reads so far (one a tick, whatever the number of streams)
+        self.reads = 0
+        self._subscribers: set[Subscriber] = set()
+        self._per_client: Counter[str] = Counter()
+        self._known: dict[int, JobProgress] = {}
+        self._task: asyncio.Task[None] | None = None
+
+    @property
+    def streams(self) -> int:
+        return len(self._subscribers)
+
+    def subscribe(self, client: str, job_id: int | None) -> Subscriber:
+        """A new stream's mailbox (the hub starts with the first); :class:`TooManyStreams` above a cap."""
+        if len(self._subscribers) >= self.max_streams:
+            raise TooManyStreams(f"{len(self._subscribers)} event streams are open, the server's limit "
+                                 f"(FINALDRIVE_MAX_STREAMS = {self.max_streams})")
+        if self._per_client[client] >= self.max_per_client:
+            raise TooManyStreams(f"{self._per_client[client]} event streams are open from {client}, the limit "
+                                 f"per client (FINALDRIVE_MAX_STREAMS_PER_CLIENT = {self.max_per_client})")
+        subscriber = Subscriber(client, job_id)
+        self._subscribers.add(subscriber)
+        self._per_client[client] += 1
+        if self._task is None:
+            self._task = asyncio.get_running_loop().create_task(self._run(), name="finaldrive-event-hub")
+        return subscriber
+
+    def unsubscribe(self, subscriber: Subscriber) -> None:
+        if subscriber in self._subscribers:
+            self._subscribers.discard(subscriber)
+            self._per_client[subscriber.client] -= 1
+            if not self._per_client[subscriber.client]:
+                del self._per_client[subscriber.client]
+
+    async def tick(self) -> None:
+        """One read of the store, and its news to every subscriber."""
+        watched = {s.job_id for s in self._subscribers if s.job_id is not None}
+        watched |= {p.id for p in self._known.values() if not p.finished}  # so their end is seen
+        try:
+            rows = await anyio.to_thread.run_sync(self._read, sorted(watched))
+        except SQLAlchemyError as exc:  # the store is unavailable: streams wait for the next tick
+            log.warning("event hub: store unavailable: %s", " ".join(str(exc).split())[:300])
+            return
+        changed = [p for p in rows if self._known.get(p.id) != p]
+        self._known = {p.id: p for p in rows}
+        for subscriber in list(self._subscribers):
+            subscriber.deliver(changed, self._known)
+
+    def _read(self, job_ids: list[int]) -> list[JobProgress]:
+        self.reads += 1
+        return read_progress(self.db, job_ids)
+
+    async def _run(self) -> None:
+        try:
+            while self._subscribers:
+                await self.tick()
+                await anyio.sleep(self.poll_s)
+        finally:
+            self._task = None
+            self._known = {}
+
+    async def aclose(self) -> None:
+        """Stop the hub (at shutdown)."""
+        if self._task is not None:
+            self._task.cancel()
+            await asyncio.gather(self._task, return_exceptions=True)
