@@ -19,6 +19,8 @@ from finaldrive.service.cli.common import parser_options, print_json, stop_proce
 from finaldrive.service.cli.remote import EXIT_FAILED, EXIT_OK, client_command, follow
 
 LOG = Path("finaldrive-demo.log")
+#: the demo's store: the one `finaldrive serve` opens by default, so the dashboard finds the job there
+DEFAULT_DB = "sqlite:///./finaldrive.db"
 START_TIMEOUT_S = 120.0
 
 
@@ -99,14 +101,22 @@ def _run_job(args: argparse.Namespace, client: Any) -> int:
               f"{result['wall_s']} s):")
         print(f"  a2 = {best['a2_deg']:.1f} deg   L2 = {best['l2_m']:.4f} m   R_WS = {best['rws_m']:.4f} m")
         print(f"  fitness = {best['fitness_m']:.3f} m   distance = {best['distance_m']:.3f} m")
+        print(dashboard_hint(args.db, result["job"]))
     return EXIT_OK
+
+
+def dashboard_hint(db: str, job_id: int) -> str:
+    """How to look at the job in the dashboard after the demo's service has stopped."""
+    serve = "finaldrive serve" + ("" if db == DEFAULT_DB else f" --db {db}")
+    return (f"look at it in the dashboard: run `{serve}`, then open http://127.0.0.1:8000/jobs/{job_id}\n"
+            "  (the sweep map, the DE history, every evaluation, and the best design riding the road in rerun's viewer)")
 
 
 def register(sub: Any) -> None:
     p = sub.add_parser("demo", help="start a local service, run a small DE through it, print the best design, stop",
                        **parser_options())
     p.add_argument("--port", type=int, help="port of the service (default: a free one)")
-    p.add_argument("--db", default="sqlite:///./finaldrive.db", help="database URL")
+    p.add_argument("--db", default=DEFAULT_DB, help="database URL")
     p.add_argument("--executor", choices=("serial", "process", "ray"), default="ray", help="where simulations run")
     p.add_argument("--np", type=int, default=12, help="DE population size")
     p.add_argument("--iters", type=int, default=6, help="DE generations after the initial population")

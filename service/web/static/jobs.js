@@ -21,7 +21,7 @@ function row(job) {
     el("td", {}, el("a", { href: `/jobs/${job.id}` }, `#${job.id}`)),
     el("td", {}, job.kind),
     el("td", {}, el("span", { class: `state ${job.state}` }, job.state)),
-    el("td", { title: roads.join(", ") }, roads.length > 3 ? `${roads.slice(0, 3).join(", ")} +${roads.length - 3}` : roads.join(", ")),
+    el("td", { class: "wrap", title: roads.join(", ") }, roads.length > 3 ? `${roads.slice(0, 3).join(", ")} +${roads.length - 3}` : roads.join(", ")),
     el("td", { class: "progress" }, progressBar(job.progress, job.state)),
     el("td", { class: "num count" }, `${job.done + job.failed} / ${job.total}`),
     el("td", { class: "num" }, num(best.fitness, 4)),

@@ -47,7 +47,10 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
 def browser() -> Iterator[Any]:
     executable = chromium()
     if executable is None:
-        pytest.skip("Chromium not found; install Debian's chromium (as .ci/run does) or set FINALDRIVE_CHROMIUM")
+        reason = "Chromium not found; install Debian's chromium (as .ci/run does) or set FINALDRIVE_CHROMIUM"
+        if os.environ.get("FINALDRIVE_REQUIRE_CHROMIUM"):
+            pytest.fail(reason)
+        pytest.skip(reason)
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as p:
