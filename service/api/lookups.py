@@ -28,6 +28,16 @@ def load_job(services: ServicesDep, job_id: int) -> JobOut:
         return job_out(session, job, roads_of(session, [job_id])[job_id], detail=True)
 
 
+def job_version(services: ServicesDep, job_id: int) -> tuple[str, int, int]:
+    """What a job's results depend on (state, successful and failed evaluations): a render cache key;
+    404 without the job."""
+    with services.db.read() as session:
+        job = session.get(Job, job_id)
+        if job is None:
+            raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
+        return job.state, job.n_done, job.n_failed
+
+
 def job_road(session: Session, job_id: int, road: str | None) -> tuple[Job, JobRoad]:
     """A job and one of its roads by name, spec or index (default: the first); 404 without the job."""
     job = session.get(Job, job_id)

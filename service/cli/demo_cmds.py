@@ -109,7 +109,7 @@ def dashboard_hint(db: str, job_id: int) -> str:
     """How to look at the job in the dashboard after the demo's service has stopped."""
     serve = "finaldrive serve" + ("" if db == DEFAULT_DB else f" --db {db}")
     return (f"look at it in the dashboard: run `{serve}`, then open http://127.0.0.1:8000/jobs/{job_id}\n"
-            "  (the sweep map, the DE history, every evaluation, and the best design riding the road in rerun's viewer)")
+            "  (the sweep map, the DE history, every evaluation, the best design riding the road in rerun's viewer)")
 
 
 def register(sub: Any) -> None:

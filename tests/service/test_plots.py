@@ -3,18 +3,13 @@
 from __future__ import annotations
 
 import math
-import threading
 from pathlib import Path
 
-import anyio
 import numpy as np
-import pytest
 from fastapi.testclient import TestClient
 
 from finaldrive.engine.study.sweep import parse_grid
 from finaldrive.service import plots
-from finaldrive.service.api.problems import ApiProblem
-from finaldrive.service.api.renders import RenderSlots
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
 from tests.service.svc_helpers import DE, SWEEP, ToyTask, running_scheduler, wait_done
@@ -90,18 +85,3 @@ def test_failed_evaluations_are_nulls_in_points(settings: Settings) -> None:
     failed = [i for i, s in enumerate(points["status"]) if s == "failed"]
     assert len(failed) == 4 and all(points["fitness_m"][i] is None for i in failed)
     assert all(points["l2_m"][i] == 0.15 for i in failed)
-
-
-def test_render_slots_bound_the_renders_at_once() -> None:
-    async def scenario() -> None:
-        slots, gate = RenderSlots(1, wait_s=0.05), threading.Event()
-        async with anyio.create_task_group() as tg:
-            tg.start_soon(slots.run, gate.wait)
-            await anyio.sleep(0.02)
-            with pytest.raises(ApiProblem) as refused:
-                await slots.run(lambda: 1)
-            gate.set()
-        assert refused.value.status == 503 and refused.value.headers == {"Retry-After": "5"}
-        assert await slots.run(lambda: 2) == 2
-
-    anyio.run(scenario)

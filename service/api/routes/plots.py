@@ -7,13 +7,14 @@ import tempfile
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+import anyio
 import numpy as np
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
 from finaldrive.engine import DEFAULT_TOLERANCE_PCT, MAX_TOLERANCE_PCT, history_record, near_mask
 from finaldrive.service.api.deps import JobId, RendersDep, ServicesDep
-from finaldrive.service.api.lookups import job_road
+from finaldrive.service.api.lookups import job_road, job_version
 from finaldrive.service.api.problems import ApiProblem, documented
 from finaldrive.service.db.columns import road_points
 from finaldrive.service.db.results import last_generations
@@ -44,7 +45,9 @@ async def plot(
 ) -> Response:
     """Rendered in a worker thread, at most FINALDRIVE_MAX_CONCURRENT_RENDERS at once (others wait)."""
     draw = _sweep_map if name == "sweep-map" else _de_history
-    body = await renders.run(draw, services, job_id, road, value, tolerance_pct)
+    version = await anyio.to_thread.run_sync(job_version, services, job_id)
+    key = (name, job_id, version, road, value, tolerance_pct)
+    body = await renders.run(key, draw, services, job_id, road, value, tolerance_pct)
     return Response(body, media_type="image/png")
 
 

@@ -6,13 +6,14 @@ import json
 import math
 from typing import Annotated, Any
 
+import anyio
 import numpy as np
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 from pydantic import BaseModel, Field
 
 from finaldrive.service.api.deps import JobId, RendersDep, ServicesDep
-from finaldrive.service.api.lookups import job_road
+from finaldrive.service.api.lookups import job_road, job_version
 from finaldrive.service.api.problems import documented
 from finaldrive.service.db.columns import POINT_COLUMNS, road_points
 from finaldrive.service.services import Services
@@ -47,7 +48,9 @@ async def points(
     job_id: JobId, services: ServicesDep, renders: RendersDep,
     road: Annotated[str | None, Query(description="road name, spec or index (default: the first)")] = None,
 ) -> Response:
-    return Response(await renders.run(_points_json, services, job_id, road), media_type="application/json")
+    version = await anyio.to_thread.run_sync(job_version, services, job_id)
+    body = await renders.run(("points", job_id, version, road), _points_json, services, job_id, road)
+    return Response(body, media_type="application/json")
 
 
 def _points_json(services: Services, job_id: int, road: str | None) -> bytes:
