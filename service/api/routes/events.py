@@ -51,8 +51,11 @@ async def _jobs_stream(request: Request, events: EventsDep) -> AsyncIterator[Sub
         events.unsubscribe(subscriber)
 
 
+#: Each event of the stream (OpenAPI 3.2's itemSchema, as FastAPI documents its own SSE routes).
+_EVENT = {"type": "object", "required": ["event", "data"], "properties": {
+    "event": {"type": "string"}, "data": {"type": "string", "contentMediaType": "application/json"}}}
 _SSE: dict[int | str, dict[str, Any]] = {
-    200: {"content": {"text/event-stream": {"schema": {"type": "string"}}}, "description": "the event stream"}}
+    200: {"content": {"text/event-stream": {"itemSchema": _EVENT}}, "description": "the event stream"}}
 #: Sent after this long without an event [s], so that proxies keep an idle stream open.
 PING_S = 15.0
 KEEPALIVE = b": ping\n\n"

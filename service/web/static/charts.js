@@ -55,6 +55,36 @@ function showTip(tip, x, y, html) {
   tip.hidden = false;
 }
 
+/** Hover (a tooltip) and click (``pick``) on the nearest of ``indices`` within ``radius`` px of the pointer. */
+function pickable(canvas, tip, indices, position, radius, describe, pick) {
+  const nearest = (mx, my) => {
+    let hit = null;
+    let d2 = radius ** 2;
+    for (const i of indices) {
+      const [x, y] = position(i);
+      const d = (x - mx) ** 2 + (y - my) ** 2;
+      if (d < d2) (d2 = d), (hit = i);
+    }
+    return hit;
+  };
+  const at = (e) => {
+    const r = canvas.getBoundingClientRect();
+    return [e.clientX - r.left, e.clientY - r.top];
+  };
+  canvas.addEventListener("mousemove", (e) => {
+    const [mx, my] = at(e);
+    const i = nearest(mx, my);
+    if (i === null) tip.hidden = true;
+    else showTip(tip, mx, my, describe(i));
+    canvas.style.cursor = i === null ? "default" : "pointer";
+  });
+  canvas.addEventListener("mouseleave", () => (tip.hidden = true));
+  canvas.addEventListener("click", (e) => {
+    const i = nearest(...at(e));
+    if (i !== null) pick(i);
+  });
+}
+
 function colourBar(ctx, x, y, h, lo, hi, label) {
   for (let i = 0; i < h; i++) {
     ctx.fillStyle = viridis(1 - i / h);
@@ -184,33 +214,7 @@ export function polarMap(container, data, { valueLabel = "value [m]", near = nul
     ctx.stroke();
   }
 
-  function nearest(mx, my) {
-    let hit = null;
-    let d2 = 14 ** 2;
-    for (const i of shown) {
-      const [x, y] = pos(i);
-      const d = (x - mx) ** 2 + (y - my) ** 2;
-      if (d < d2) (d2 = d), (hit = i);
-    }
-    return hit;
-  }
-
-  const at = (e) => {
-    const r = canvas.getBoundingClientRect();
-    return [e.clientX - r.left, e.clientY - r.top];
-  };
-  canvas.addEventListener("mousemove", (e) => {
-    const [mx, my] = at(e);
-    const i = nearest(mx, my);
-    if (i === null) tip.hidden = true;
-    else showTip(tip, mx, my, describe(i));
-    canvas.style.cursor = i === null ? "default" : "pointer";
-  });
-  canvas.addEventListener("mouseleave", () => (tip.hidden = true));
-  canvas.addEventListener("click", (e) => {
-    const i = nearest(...at(e));
-    if (i !== null) api.select(i);
-  });
+  pickable(canvas, tip, shown, pos, 14, describe, (i) => api.select(i));
   const api = {
     best,
     positionOf: (i) => pos(i),
@@ -325,29 +329,6 @@ export function scatter(container, { x, y, c, xLabel, yLabel, cLabel, describe =
     ctx.fillRect(X(x[i]) - 2, Y(y[i]) - 2, 4, 4);
   }
   colourBar(ctx, width - 70, 30, height - 90, c0, c1, cLabel);
-  const nearest = (mx, my) => {
-    let hit = null;
-    let d2 = 10 ** 2;
-    for (let i = 0; i < x.length; i++) {
-      if (!ok[i]) continue;
-      const d = (X(x[i]) - mx) ** 2 + (Y(y[i]) - my) ** 2;
-      if (d < d2) (d2 = d), (hit = i);
-    }
-    return hit;
-  };
-  const at = (e) => {
-    const r = canvas.getBoundingClientRect();
-    return [e.clientX - r.left, e.clientY - r.top];
-  };
-  canvas.addEventListener("mousemove", (e) => {
-    const [mx, my] = at(e);
-    const i = nearest(mx, my);
-    if (i === null) tip.hidden = true;
-    else showTip(tip, mx, my, describe(i));
-  });
-  canvas.addEventListener("mouseleave", () => (tip.hidden = true));
-  canvas.addEventListener("click", (e) => {
-    const i = nearest(...at(e));
-    if (i !== null) onSelect(i);
-  });
+  const indices = x.map((_, i) => i).filter((i) => ok[i]);
+  pickable(canvas, tip, indices, (i) => [X(x[i]), Y(y[i])], 10, describe, onSelect);
 }
