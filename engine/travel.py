@@ -19,7 +19,6 @@ from finaldrive.engine.model import params as P
 from finaldrive.engine.model.coordinates import PHI, THETA, X1, X6, X10, X11, X14, X15, Y1, Y6, Y10, Y11
 from finaldrive.engine.model.kinematics import design_pose, squat_line, taut_length
 from finaldrive.engine.model.road import Road
-from finaldrive.engine.simulation import pack_parameters, prepare, simulate
 from finaldrive.engine.vehicle import Vehicle
 
 #: Points of a travel curve: default and largest.
@@ -85,6 +84,8 @@ def travel_kinematics(design: Design, vehicle: Vehicle, points: int = TRAVEL_POI
     """Squat ratio, anti-squat %, chain growth (change of the taut run, eq. 68, from full extension)
     and the sprocket-pivot geometry from full extension to full compression, with the design pose
     and the static sag (equilibrium on flat ground) as points of their own."""
+    from finaldrive.engine.simulation import pack_parameters, prepare  # the solvers' machinery: only here
+
     if not 2 <= points <= MAX_TRAVEL_POINTS:
         raise ValueError(f"points must be in [2, {MAX_TRAVEL_POINTS}], got {points}")
     v = vehicle
@@ -128,6 +129,8 @@ def _with_angle(p: np.ndarray, angle: float) -> np.ndarray:
 def drive_squat(design: Design, road: Road, settings: SimSettings, vehicle: Vehicle) -> dict[str, Any]:
     """The squat one simulation shows under drive: the rear travel (as in :func:`travel_kinematics`)
     and the chassis pitch over the run, beside their values at the static equilibrium on the road."""
+    from finaldrive.engine.simulation import simulate
+
     result = simulate(design, road, settings.with_(series=True), vehicle)
     out: dict[str, Any] = {"road": road.spec, "status": result.status, "reason": result.reason,
                            "distance_m": result.distance_m, "duration_s": settings.duration}

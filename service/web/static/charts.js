@@ -234,7 +234,7 @@ export function polarMap(container, data, { valueLabel = "value [m]", near = nul
 export function lineChart(container, series, { xLabel = "", yLabel = "", height = 220, title = "" } = {}) {
   container.replaceChildren();
   const width = container.clientWidth || 500;
-  const m = { l: 64, r: 12, t: title ? 22 : 10, b: 36 };
+  const m = { l: 64, r: 12, t: title ? 40 : 24, b: 36 }; // title, then the legend, above the plot
   const [x0, x1] = extent(series.flatMap((s) => s.x));
   const [y0, y1] = extent(series.flatMap((s) => s.y));
   const pad = (y1 - y0) * 0.05;
@@ -267,8 +267,8 @@ export function lineChart(container, series, { xLabel = "", yLabel = "", height 
     add("polyline", { points: pts.join(" "), fill: "none", stroke: s.colour, "stroke-width": 1.6, class: "series" });
   }
   series.forEach((s, k) => {
-    add("rect", { x: m.l + 8 + k * 150, y: m.t + 4, width: 10, height: 10, fill: s.colour });
-    add("text", { x: m.l + 22 + k * 150, y: m.t + 13, class: "legend" }, s.name);
+    add("rect", { x: m.l + 8 + k * 150, y: m.t - 18, width: 10, height: 10, fill: s.colour });
+    add("text", { x: m.l + 22 + k * 150, y: m.t - 9, class: "legend" }, s.name);
   });
   const cursor = add("line", { y1: m.t, y2: height - m.b, class: "cursor", visibility: "hidden" });
   container.append(svg);
