@@ -18,7 +18,6 @@ import asyncio
 import os
 import random
 import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -28,17 +27,11 @@ from pathlib import Path
 
 import httpx
 
-from finaldrive.service.machine import describe
+from finaldrive.service.machine import describe, free_port
 
 #: The Table 9 sweep on all 23 roads at full duration: it keeps both cores busy for minutes,
 #: longer than any measurement window.
 SWEEP = {"kind": "sweep", "roads": ["paper"], "grid": "table9"}
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def start_server(db: Path, port: int, executor: str, log: Path) -> subprocess.Popen[bytes]:

@@ -38,18 +38,10 @@ import httpx
 import numpy as np
 import psutil
 
-from finaldrive.service.machine import describe
+from finaldrive.service.machine import describe, free_port
 
 SWEEP = {"kind": "sweep", "roads": ["paper"], "grid": "table9"}
 A2_STEPS = 200
-
-
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def start_server(db: Path, port: int, log: Path, *extra: str) -> subprocess.Popen[bytes]:

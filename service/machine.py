@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import platform
+import socket
 from pathlib import Path
 
 
@@ -25,3 +26,10 @@ def describe(load: bool = True) -> str:
     if load and hasattr(os, "getloadavg"):
         text += ", load average {:.2f} {:.2f} {:.2f}".format(*os.getloadavg())
     return text
+
+
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 now (for a server this process is about to start)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])

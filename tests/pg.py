@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import os
 import shutil
-import socket
 import subprocess
 import tempfile
 import uuid
 from pathlib import Path
+
+from finaldrive.service.machine import free_port
 
 
 def bindir() -> Path | None:
@@ -26,18 +27,12 @@ def bindir() -> Path | None:
     return versions[-1].parent if versions else None
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 class PostgresServer:
     """One cluster; :meth:`new_database` gives each test a database of its own."""
 
     def __init__(self, binaries: Path) -> None:
         self.bin = binaries
-        self.port = _free_port()
+        self.port = free_port()
         self.dir = Path(tempfile.mkdtemp(prefix="finaldrive-pg-"))
         self.data = self.dir / "data"
         self._as_postgres = os.geteuid() == 0

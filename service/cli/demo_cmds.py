@@ -8,7 +8,6 @@ The server (``finaldrive serve``) runs on a free 127.0.0.1 port with ``--db`` (d
 from __future__ import annotations
 
 import argparse
-import socket
 import subprocess
 import sys
 import time
@@ -17,17 +16,12 @@ from typing import Any
 
 from finaldrive.service.cli.common import parser_options, print_json, stop_process
 from finaldrive.service.cli.remote import EXIT_FAILED, EXIT_OK, client_command, follow
+from finaldrive.service.machine import free_port
 
 LOG = Path("finaldrive-demo.log")
 #: the demo's store: the one `finaldrive serve` opens by default, so the dashboard finds the job there
 DEFAULT_DB = "sqlite:///./finaldrive.db"
 START_TIMEOUT_S = 120.0
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def start_server(port: int, db: str, executor: str, log: Path) -> subprocess.Popen[bytes]:

@@ -18,7 +18,6 @@ import importlib.metadata
 import os
 import re
 import shutil
-import socket
 import subprocess
 import sys
 import tempfile
@@ -27,6 +26,8 @@ import time
 from pathlib import Path
 
 import httpx
+
+from finaldrive.service.machine import free_port
 
 FILES = ("index.html", "re_viewer.js", "re_viewer_bg.wasm", "favicon.ico")
 _FONTS = re.compile(r"<link\b[^>]*?fonts\.(?:googleapis|gstatic)\.com[^>]*?>", re.S)
@@ -63,15 +64,8 @@ def assets(timeout: float = 60.0) -> Path:
     return folder
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
-
-
 def _extract(folder: Path, timeout: float) -> None:
-    port = _free_port()
+    port = free_port()
     child = subprocess.Popen(
         [sys.executable, "-m", "finaldrive.service.web.viewer", str(port)],
         stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,

@@ -5,7 +5,6 @@ from __future__ import annotations
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -14,6 +13,8 @@ from pathlib import Path
 import httpx
 import psutil
 
+from finaldrive.service.machine import free_port
+
 
 def console_script(name: str) -> str:
     """The installed console script ``name``: beside this interpreter (a venv not activated), else on PATH."""
@@ -21,12 +22,6 @@ def console_script(name: str) -> str:
     found = str(beside) if beside.is_file() else shutil.which(name)
     assert found, f"the {name} console script is not installed (pip install -e .)"
     return found
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class Proc:

@@ -16,7 +16,6 @@ import os
 import secrets
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -26,18 +25,14 @@ from pathlib import Path
 
 import pytest
 
+from finaldrive.service.machine import free_port
+
 pytest.importorskip("ray")
 psutil = pytest.importorskip("psutil")
 
 pytestmark = pytest.mark.slow
 
 REPO = Path(__file__).resolve().parents[2]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def processes_under(temp_dir: str) -> list[psutil.Process]:
@@ -51,6 +46,7 @@ def processes_under(temp_dir: str) -> list[psutil.Process]:
 CLIENT = """
 import json, os, ray
 from tests.workers import toyfns
+from finaldrive.service.machine import free_port
 from finaldrive.workers import make_executor
 with make_executor("ray") as executor:
     gcs = ray.get_runtime_context().gcs_address

@@ -76,6 +76,45 @@ export function showBanner(text, signIn = false) {
   }
 }
 
+// ---- a form's validation messages ----
+export function clearProblem(form, general) {
+  form.querySelectorAll(".field-error").forEach((e) => e.remove());
+  form.querySelectorAll(".invalid").forEach((e) => e.classList.remove("invalid"));
+  general.textContent = "";
+}
+
+/** The element of ``form`` that shows an error at ``path``: the deepest [data-field] matching it, refined by a
+ * message that names a member (as the bounds' "a2_deg: lower bound ..." does). */
+function fieldOf(form, path, msg) {
+  const named = /^(\w+):/.exec(msg)?.[1];
+  for (let n = path.length; n > 0; n--) {
+    const key = path.slice(0, n).join(".");
+    const target = (named && form.querySelector(`[data-field="${key}.${named}"]`))
+      || form.querySelector(`[data-field="${key}"]`);
+    if (target) return target;
+  }
+  return null;
+}
+
+/** Put each of a problem's validation messages next to the field its loc names; the rest in ``general``. */
+export function showProblem(form, problem, general) {
+  clearProblem(form, general);
+  const rest = [];
+  for (const err of problem?.errors ?? [{ loc: [], msg: problem?.detail ?? "the request failed" }]) {
+    const path = err.loc[0] === "body" ? err.loc.slice(1) : err.loc;
+    const msg = err.msg.replace(/^Value error, /, "");
+    const target = fieldOf(form, path, msg);
+    if (!target) {
+      rest.push(`${path.join(".") || "request"}: ${msg}`);
+      continue;
+    }
+    target.querySelectorAll("input, select, textarea").forEach((i) => i.classList.add("invalid"));
+    const box = target.closest("div[data-field]") ?? target;
+    box.append(el("span", { class: "field-error", role: "alert", "data-loc": path.join(".") }, `${path.join(".")}: ${msg}`));
+  }
+  general.textContent = rest.join("; ");
+}
+
 // ---- formatting ----
 export function num(value, digits = 3) {
   return value === null || value === undefined || !Number.isFinite(value) ? "–" : value.toFixed(digits);

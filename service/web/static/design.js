@@ -1,6 +1,6 @@
 // The design page: one or two designs on a road, simulated by a recording request; their Fig. 13 time
 // series (interactive) and the rerun recording of both, side by side, in rerun's web viewer.
-import { api, el, num, showBanner } from "/static/api.js";
+import { api, clearProblem, el, num, showBanner, showProblem } from "/static/api.js";
 import { lineChart } from "/static/charts.js";
 
 const $ = (id) => document.getElementById(id);
@@ -36,24 +36,11 @@ function designs() {
   return out;
 }
 
-function showErrors(problem) {
-  document.querySelectorAll(".field-error").forEach((e) => e.remove());
-  const general = [];
-  for (const err of problem?.errors ?? [{ loc: [], msg: problem?.detail ?? "the request failed" }]) {
-    const path = err.loc[0] === "body" ? err.loc.slice(1) : err.loc;
-    const target = document.querySelector(`[data-field="${path.slice(0, 2).join(".")}"]`)
-      ?? document.querySelector(`[data-field="${path[0]}"]`);
-    if (target) target.append(el("span", { class: "field-error", role: "alert" }, `${path.join(".")}: ${err.msg}`));
-    else general.push(err.msg);
-  }
-  $("form-error").textContent = general.join("; ");
-}
-
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
 async function run(event) {
   event?.preventDefault();
-  showErrors({ errors: [] });
+  clearProblem($("designs"), $("form-error"));
   $("run").disabled = true;
   try {
     const body = { road: $("road").value.trim(), designs: designs(), duration: Number($("duration").value), fps: 50 };
@@ -68,8 +55,7 @@ async function run(event) {
     $("status").textContent = `recording #${rec.id}`;
     await show(rec);
   } catch (e) {
-    if (e.problem) showErrors(e.problem);
-    else $("form-error").textContent = e.message;
+    showProblem($("designs"), e.problem ?? { detail: e.message }, $("form-error"));
     $("status").textContent = "";
   } finally {
     $("run").disabled = false;

@@ -1,5 +1,5 @@
 // The jobs page: every job with a live progress bar (one SSE stream for all), filters, and the submit form.
-import { api, duration, el, num, progressBar, stream } from "/static/api.js";
+import { api, clearProblem, duration, el, num, progressBar, showProblem, stream } from "/static/api.js";
 
 const $ = (id) => document.getElementById(id);
 const TERMINAL = new Set(["succeeded", "failed", "cancelled"]);
@@ -146,43 +146,6 @@ function spec() {
   return body;
 }
 
-function clearErrors() {
-  document.querySelectorAll("#submit .field-error").forEach((e) => e.remove());
-  document.querySelectorAll("#submit .invalid").forEach((e) => e.classList.remove("invalid"));
-  $("form-error").textContent = "";
-}
-
-/** The form element that shows an error at ``path`` (the deepest data-field matching it, refined by a
- * message that names a member, as the bounds' "a2_deg: lower bound ..." does). */
-function fieldOf(path, msg) {
-  for (let n = path.length; n > 0; n--) {
-    const key = path.slice(0, n).join(".");
-    const named = /^(\w+):/.exec(msg)?.[1];
-    const target = (named && document.querySelector(`#submit [data-field="${key}.${named}"]`))
-      || document.querySelector(`#submit [data-field="${key}"]`);
-    if (target) return target;
-  }
-  return null;
-}
-
-/** Put each of the API's validation messages next to its field; the rest under the button. */
-function showErrors(problem) {
-  const general = [];
-  for (const err of problem?.errors ?? [{ loc: [], msg: problem?.detail ?? "the request failed" }]) {
-    const path = err.loc[0] === "body" ? err.loc.slice(1) : err.loc;
-    const msg = err.msg.replace(/^Value error, /, "");
-    const target = fieldOf(path, msg);
-    if (!target) {
-      general.push(`${path.join(".") || "request"}: ${msg}`);
-      continue;
-    }
-    target.querySelectorAll("input, select, textarea").forEach((i) => i.classList.add("invalid"));
-    const box = target.closest("div[data-field]") ?? target;
-    box.append(el("span", { class: "field-error", role: "alert", "data-loc": path.join(".") }, `${path.join(".")}: ${msg}`));
-  }
-  $("form-error").textContent = general.join("; ");
-}
-
 function kindChanged() {
   const kind = $("kind").value;
   document.querySelectorAll(".for-grid").forEach((e) => (e.hidden = !(kind === "sweep" || kind === "paper-study")));
@@ -192,7 +155,7 @@ function kindChanged() {
 
 async function submit(event) {
   event.preventDefault();
-  clearErrors();
+  clearProblem($("submit"), $("form-error"));
   $("submit-button").disabled = true;
   try {
     const job = await api("/v1/jobs", { method: "POST", body: spec() });
@@ -200,7 +163,7 @@ async function submit(event) {
     const tr = shown.get(job.id);
     if (tr) tr.classList.add("new");
   } catch (e) {
-    showErrors(e.problem ?? { detail: e.message });
+    showProblem($("submit"), e.problem ?? { detail: e.message }, $("form-error"));
   } finally {
     $("submit-button").disabled = false;
   }

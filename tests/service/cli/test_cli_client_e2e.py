@@ -15,8 +15,8 @@ import pytest
 
 from finaldrive.service.cli import main
 from finaldrive.service.cli.common import stop_process
-from finaldrive.service.cli.demo_cmds import free_port
 from finaldrive.service.cli.remote import EXIT_HTTP, EXIT_JOB_NOT_SUCCEEDED, EXIT_UNREACHABLE
+from finaldrive.service.machine import free_port
 from finaldrive.service.recording import frame_count
 from tests.service.processes import console_script
 
