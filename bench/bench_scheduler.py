@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from finaldrive.engine import BatchResult, Road, SimSettings, Vehicle
+from finaldrive.engine import DIAGNOSTICS, BatchResult, Road, SimSettings, Vehicle
 from finaldrive.service.config import Settings
 from finaldrive.service.db.models import Job
 from finaldrive.service.jobs.scheduler import Scheduler, SchedulerConfig
@@ -58,10 +58,11 @@ class SleepTask:
         x = rows[:, 1:]
         n = len(x)
         fitness = 20.0 - np.cos(x[:, 0]) * 0.01 - (x[:, 1] - 0.05) ** 2 - (x[:, 2] - 0.09) ** 2
-        ones = np.ones(n)
+        ones, nan = np.ones(n), np.full(n, np.nan)
         return [(int(rows[0, 0]), BatchResult(
             designs=x, distance_m=fitness, squat_ratio=ones, slack_m=0.0 * ones, fitness_m=fitness,
-            chain_length_m=ones, wall_s=np.full(n, self.ms * 1e-3), status=("ok",) * n, reason=("",) * n))]
+            chain_length_m=ones, wall_s=np.full(n, self.ms * 1e-3), status=("ok",) * n, reason=("",) * n,
+            **dict.fromkeys(DIAGNOSTICS, nan)))]
 
 
 class VirtualCluster(ExecutorMixin):

@@ -11,14 +11,16 @@ The rule (docs/workers.md, "Batching"):
    least-queued task; cold-start tasks only overestimate it, and later tasks lower it).
 3. **Size.** Overhead fraction ``o / (b c) <= 0.05`` needs ``b >= o / (0.05 c)``; take the
    smallest such ``b``, but at most ``remaining // (num_workers * 4)`` (at least 1), so at
-   least four waves remain: every worker gets work, the tail balances, and progress streams;
-   and at most ``MAX_TASK_S / c`` (at least 1), so no task runs much longer than half a
-   second: a cancel waits for little, a DE generation is not held by one long task, and a
-   queueing delay mistaken for overhead cannot grow batches without bound. When the rules
-   cannot all hold, giving every worker work wins.
+   least four waves remain: every worker gets work, the tail balances, and progress streams
+   (``remaining``: the designs that go before or with the request being cut, so a DE
+   generation beside a sweep is cut for the generations); and at most ``MAX_TASK_S / c``
+   (at least 1), so no task runs much longer than half a second: a cancel waits for little, a
+   DE generation is not held by one long task, and a queueing delay mistaken for overhead
+   cannot grow batches without bound. When the rules cannot all hold, giving every worker
+   work wins.
 4. **Keep up.** The thread that dispatches spends ``d`` seconds of its own on each task
-   (submitting it, taking its result, storing it: measured by the dispatcher as its time not spent
-   waiting for results, over finished tasks). ``N`` workers finishing a task every ``b c`` seconds
+   (submitting it, taking its result, handing it on: measured by the dispatcher as its time spent
+   starting tasks and handling results, over finished tasks). ``N`` workers finishing a task every ``b c`` seconds
    keep it busy ``N d / (b c)`` of the time; batches hold at least ``N d / (DRIVER_SHARE c)``
    designs so that stays under ``DRIVER_SHARE``. On a big cluster with short simulations the
    dispatcher, not the workers, would otherwise set the pace, and no number of waves helps then:

@@ -3,9 +3,16 @@
 A source of work (:class:`Work`: a job of the service, or a study run from the command line)
 holds requests that are ready to simulate, each designs on one road (the study layer's
 :class:`~finaldrive.engine.Request`). The :class:`Dispatcher` cuts them into batches and keeps
-up to the executor's capacity in flight, taking one batch from each source with ready work in
-turn, so concurrent jobs share the executor fairly and none waits for another's request to end.
-Results go back to their source as each batch completes, in any order.
+the executor full, taking one batch from each source with ready work in turn, so concurrent jobs
+share the executor fairly and none waits for another's request to end. Results go back to their
+source as each batch completes, in any order.
+
+Latency where it matters: within a source the **smallest request goes first**. A DE generation
+(tens of designs, the next one waits for it) thus overtakes a sweep's road (thousands, which
+nothing waits for), and the sweep fills the CPUs the generations leave idle. For the same reason
+only a few tasks beyond one a worker are kept in flight (:func:`in_flight_limit`): executors
+start tasks first-in first-out, and a deep queue of long tasks would hold every generation
+behind it.
 
 Batch sizes adapt per source (:mod:`finaldrive.workers.batching`): a source's estimates of
 per-design time and per-task overhead last as long as the source, not one request.
@@ -16,6 +23,7 @@ task, so only the design at fault fails (``on_failure``), never its neighbours i
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 from collections.abc import Callable, Hashable
@@ -60,6 +68,23 @@ class Work:
         """Designs waiting to be started."""
         return sum(len(q) for q in self.queue) + len(self.alone)
 
+    def next_request(self) -> tuple[int, int]:
+        """Position in ``queue`` of the request to start next, the smallest (the first of equals),
+        and the designs queued that go before or with it (its requests' sizes and ``alone``)."""
+        sizes = [len(q) for q in self.queue]
+        at = min(range(len(sizes)), key=sizes.__getitem__)
+        return at, sum(n for n in sizes if n <= sizes[at]) + len(self.alone)
+
+
+def in_flight_limit(num_workers: int, capacity: int) -> int:
+    """Tasks the dispatcher keeps in flight: one a worker, plus an eighth more (at least two) so
+    no worker waits for the driver between tasks, within the executor's capacity.
+
+    A task is at least ~20 times the executor's round trip (batching rule 3), so a queue of an
+    eighth of the workers hides the round trip with room to spare, while a task started now waits
+    for at most that many ahead of it instead of a whole second wave."""
+    return max(1, min(capacity, num_workers + max(2, math.ceil(num_workers / 8))))
+
 
 @dataclass(frozen=True)
 class _Task:
@@ -81,10 +106,11 @@ class Dispatcher:
         self._works: dict[Hashable, tuple[Work, tuple[Any, ...]]] = {}
         self._tasks: dict[int, _Task] = {}
         self._turn: deque[Hashable] = deque()
+        self.limit = in_flight_limit(executor.num_workers, executor.capacity)
         # the driving thread's own time a finished task (batching rule 4), from windows of >= 1 s
         self.driver_s = 0.0
         self._window_start = time.perf_counter()
-        self._window_wait_s = 0.0
+        self._window_busy_s = 0.0
         self._window_tasks = 0
 
     # ------------------------------------------------------------------ sources
@@ -132,10 +158,11 @@ class Dispatcher:
         return finished
 
     def fill(self) -> int:
-        """Start batches, one source at a time in turn, until the executor is full; returns how many."""
+        """Start batches, one source at a time in turn, until :attr:`limit` are in flight; returns how many."""
+        begun = time.perf_counter()
         started = 0
         idle = 0
-        while self._turn and len(self._tasks) < self.executor.capacity and idle < len(self._turn):
+        while self._turn and len(self._tasks) < self.limit and idle < len(self._turn):
             key = self._turn[0]
             self._turn.rotate(-1)
             work, handles = self._works[key]
@@ -145,31 +172,34 @@ class Dispatcher:
             idle = 0
             self._start(work, handles)
             started += 1
+        self._window_busy_s += time.perf_counter() - begun
         return started
 
     def _start(self, work: Work, handles: tuple[Any, ...]) -> None:
         if work.alone:
             part = work.alone.popleft()
         else:
-            request = work.queue[0]
+            at, ahead = work.next_request()
+            request = work.queue[at]
             assert work.sizer is not None
-            size = self._batch_size or work.sizer.next_size(work.queued(), self.driver_s)
+            size = self._batch_size or work.sizer.next_size(ahead, self.driver_s)
             if size >= len(request):
-                part = work.queue.popleft()
+                part = request
+                del work.queue[at]
             else:
-                part = request.part(np.arange(size))
-                work.queue[0] = request.part(np.arange(size, len(request)))
+                part, work.queue[at] = request.split(size)
         rows = np.column_stack([np.full(len(part), float(part.road)), part.designs])
         task_id = self.executor.submit(_apply, rows, self._fn, *handles)
         self._tasks[task_id] = _Task(work, part, time.perf_counter())
 
     def collect(self, timeout: float) -> int:
         """Deliver the results of finished tasks (waiting up to ``timeout`` s for the first)."""
-        waited = time.perf_counter()
-        busy = bool(self._tasks)
-        done = self.executor.poll(timeout)
-        now = time.perf_counter()
-        self._measure(now - waited, len(done), now, busy)
+        begun = time.perf_counter()
+        done = self.executor.poll(0.0)  # what has finished: handling it is the driver's work
+        if not done and self._tasks:
+            self._window_busy_s += time.perf_counter() - begun
+            done = self.executor.poll(timeout)  # waiting for results is not
+            begun = time.perf_counter()
         for d in done:
             task = self._tasks.pop(d.task, None)
             if task is None or d.cancelled:
@@ -187,21 +217,19 @@ class Dispatcher:
                 work.sizer.observe(len(part), time.perf_counter() - task.handed_at, timed.busy_s, timed.compute_s)
                 ((_, batch),) = timed.result
                 work.on_result(part, batch)
+        now = time.perf_counter()
+        self._window_busy_s += now - begun
+        self._measure(len(done), now)
         return len(done)
 
-    def _measure(self, waited_s: float, finished: int, now: float, busy: bool) -> None:
-        """Account the driving thread's time: what it did not spend waiting for results,
-        over the tasks that finished (updated once a window of at least a second holds tasks;
-        time with nothing in flight is no task's)."""
-        if not busy:
-            self._window_start, self._window_wait_s, self._window_tasks = now, 0.0, 0
-            return
-        self._window_wait_s += waited_s
+    def _measure(self, finished: int, now: float) -> None:
+        """Batching rule 4's driver time a task: the time spent starting tasks and handling their
+        results (not waiting for them, nor the source's own work between steps) over the tasks that
+        finished, once a window of at least a second holds tasks."""
         self._window_tasks += finished
-        elapsed = now - self._window_start
-        if elapsed >= 1.0 and self._window_tasks:
-            self.driver_s = max(0.0, elapsed - self._window_wait_s) / self._window_tasks
-            self._window_start, self._window_wait_s, self._window_tasks = now, 0.0, 0
+        if now - self._window_start >= 1.0 and self._window_tasks:
+            self.driver_s = self._window_busy_s / self._window_tasks
+            self._window_start, self._window_busy_s, self._window_tasks = now, 0.0, 0
 
     def close(self) -> None:
         """Remove every source (cancelling what runs); the executor stays open."""

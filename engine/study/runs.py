@@ -47,6 +47,11 @@ class Request:
         rows = np.asarray(rows, dtype=int)
         return Request(self.run, self.step, self.road, self.candidates[rows], self.designs[rows])
 
+    def split(self, n: int) -> tuple[Request, Request]:
+        """The first ``n`` rows and the rest (views, nothing copied)."""
+        return (Request(self.run, self.step, self.road, self.candidates[:n], self.designs[:n]),
+                Request(self.run, self.step, self.road, self.candidates[n:], self.designs[n:]))
+
 
 class SweepRun:
     """Every design of a grid on every road of the run: one request a road, all at once."""

@@ -51,7 +51,7 @@ from finaldrive.engine import (
 from finaldrive.service.config import Settings
 from finaldrive.service.db.engine import Database
 from finaldrive.service.db.leases import beat, claim_jobs, finish_job, register_scheduler, stop_scheduler
-from finaldrive.service.db.models import EvalStatus, Evaluation, Job, JobState
+from finaldrive.service.db.models import EvalStatus, Job, JobState
 from finaldrive.service.db.repository import profile_roads
 from finaldrive.service.db.results import (
     FITNESS,
@@ -79,6 +79,8 @@ log = logging.getLogger(__name__)
 TIME_LIMIT = "time limit"
 #: A scheduler's transactions wait this long for a lock, then retry later (the loop keeps dispatching).
 SCHEDULER_LOCK_TIMEOUT_S = 2.0
+#: Designs of a job looked up in the store a turn (the rest wait for the next turns).
+_INTAKE_DESIGNS = 4096
 #: An idle loop waits this long per turn: with jobs (a result may be on its way to the store), without.
 _IDLE_WAIT_S, _IDLE_POLL_S = 0.02, 0.2
 
@@ -235,16 +237,19 @@ class Scheduler:
 
     def _intake(self) -> None:
         """Every run's ready requests: slots already stored and cache hits are taken from the store,
-        the rest (each distinct design once) goes to the dispatcher."""
+        the rest (each distinct design once) goes to the dispatcher. The smallest requests first and
+        about :data:`_INTAKE_DESIGNS` designs a job a turn, so a DE generation is not held behind the
+        lookups of a whole sweep."""
         for job in list(self.jobs.values()):
             for run in job.runs.values():
                 if not run.done:
                     job.intake.extend(run.take())
             if job.intake:
-                requests = list(job.intake)
+                requests = _first_designs(job.intake, _INTAKE_DESIGNS)
                 found = self._db(partial(_lookup, job=job, requests=requests), f"job {job.id}", write=False)
                 if found is not None:  # else the store is unavailable: keep the requests, retry next turn
-                    job.intake.clear()
+                    taken = {id(request) for request in requests}
+                    job.intake = deque(request for request in job.intake if id(request) not in taken)
                     hits = found[1]
                     for request, (stored, keys) in zip(requests, found[0], strict=True):
                         self._admit(job, request, stored, keys, hits)
@@ -252,7 +257,7 @@ class Scheduler:
             job.work.paused = len(job.writes) + self.writer.pending(job.id) > self.config.max_backlog_rows
 
     def _admit(self, job: ActiveJob, request: Request, stored: dict[int, float], keys: list[str],
-               hits: dict[str, Evaluation]) -> None:
+               hits: dict[str, dict[str, Any]]) -> None:
         """Tell what is known, queue the rest: each distinct design once (duplicates are copied)."""
         keep = np.array([int(c) not in stored for c in request.candidates], dtype=bool)
         if not keep.all():
@@ -288,16 +293,19 @@ class Scheduler:
         fitness = fitness_values(batch)
         keys = [job.keys.pop((part.road, part.step, int(c))) for c in part.candidates]
         rows = _rows_from_result(part, batch, fitness, keys, transient)
-        told_candidates, told_fitness, told_designs = list(part.candidates), list(fitness), list(part.designs)
-        for j, candidate in enumerate(part.candidates):  # designs that were duplicates of this one
-            for copy in job.copies.pop((part.road, part.step, int(candidate)), []):
-                rows.append((part.road, part.step, copy, *rows[j][3:_WALL], 0.0, True, *rows[j][_CACHED + 1:]))
-                told_candidates.append(copy)
-                told_fitness.append(fitness[j])
-                told_designs.append(part.designs[j])
+        copies = [job.copies.pop((part.road, part.step, int(c)), None) for c in part.candidates] if job.copies else []
+        if any(copies):  # designs that were duplicates of one in this part: the same result, told and stored
+            told_candidates, told_fitness, told_designs = list(part.candidates), list(fitness), list(part.designs)
+            for j, duplicates in enumerate(copies):
+                for copy in duplicates or ():
+                    rows.append((part.road, part.step, copy, *rows[j][3:_WALL], 0.0, True, *rows[j][_CACHED + 1:]))
+                    told_candidates.append(copy)
+                    told_fitness.append(fitness[j])
+                    told_designs.append(part.designs[j])
+            part = Request(part.run, part.step, part.road, np.array(told_candidates), np.array(told_designs))
+            fitness = np.array(told_fitness, dtype=float)
         job.writes.rows += rows
-        told = Request(part.run, part.step, part.road, np.array(told_candidates), np.array(told_designs))
-        self._tell(job, told, np.array(told_fitness, dtype=float))
+        self._tell(job, part, fitness)
 
     def _on_failure(self, job: ActiveJob, part: Request, reason: str) -> None:
         """A part that could not be evaluated: failed evaluations with the reason, never reused."""
@@ -318,7 +326,12 @@ class Scheduler:
 
     def _finish_ready(self) -> None:
         for job in list(self.jobs.values()):
-            if not job.done(self.dispatcher.in_flight(job.id)) or job.writes or self.writer.pending(job.id):
+            if not job.done(self.dispatcher.in_flight(job.id)):
+                continue
+            if job.writes:  # its last results: to the writer now rather than at the next flush
+                writes, job.writes = job.writes, Writes()
+                self.writer.put(job.id, writes)
+            if self.writer.pending(job.id):
                 continue
             finished = partial(finish_job, scheduler_id=self.id, job_id=job.id, state=JobState.succeeded)
             if self._db(finished, f"finish job {job.id}") is not None:
@@ -334,6 +347,18 @@ class Scheduler:
                 self.writer.put(job.id, writes)
         for job_id in self.writer.lost():
             self._drop(job_id)
+
+
+def _first_designs(requests: deque[Request], designs: int) -> list[Request]:
+    """The smallest requests, while they hold no more than ``designs`` designs together (at least one)."""
+    out: list[Request] = []
+    total = 0
+    for request in sorted(requests, key=len):
+        if out and total + len(request) > designs:
+            break
+        out.append(request)
+        total += len(request)
+    return out
 
 
 def _load(session: Any, job_id: int
@@ -353,7 +378,7 @@ def _load(session: Any, job_id: int
 
 
 def _lookup(session: Any, job: ActiveJob, requests: list[Request]
-            ) -> tuple[list[tuple[dict[int, float], list[str]]], dict[str, Any]]:
+            ) -> tuple[list[tuple[dict[int, float], list[str]]], dict[str, dict[str, Any]]]:
     """What the store knows of requests: for each, its stored slots (a resumed job) and the cache
     keys of the rest; and the result-cache hits among all those keys (one query)."""
     out = []
@@ -366,44 +391,48 @@ def _lookup(session: Any, job: ActiveJob, requests: list[Request]
     return out, cached_evaluations(session, [key for _, keys in out for key in keys])
 
 
+_OK, _FAILED = EvalStatus.ok.value, EvalStatus.failed.value
 #: where the wall time and the cached flag sit in a row (a copy of a duplicate: 0 s, cached)
 _WALL, _CACHED = ROW_COLUMNS.index("wall_s"), ROW_COLUMNS.index("cached")
 
 
 def _rows_from_result(part: Request, batch: BatchResult, fitness: np.ndarray, keys: list[str],
                       transient: bool) -> list[Row]:
-    """The rows of a finished part, built column by column (NaN stored as NULL)."""
+    """The rows of a finished part (NaN stored as NULL), the numbers converted in one block."""
     n = len(part)
-    ok = np.isfinite(fitness)
+    ok = np.isfinite(fitness).tolist()
     reasons = [batch.reason[j] or ("" if ok[j] else f"non-finite fitness ({batch.fitness_m[j]})") for j in range(n)]
     failed_for_now = [transient or (batch.status[j] != STATUS_OK and reasons[j].startswith(TIME_LIMIT))
                       for j in range(n)]
+    designs = part.designs.T
+    numbers = _nullable_columns(np.array([
+        np.degrees(designs[0]), designs[1], designs[2], batch.distance_m, batch.squat_ratio, batch.slack_m, fitness,
+        batch.chain_length_m, *(getattr(batch, name) for name in DIAGNOSTICS)], dtype=float))
     columns = [
-        [part.road] * n, [part.step] * n, part.candidates.tolist(), *_design_columns(part.designs),
-        _nullable(batch.distance_m), _nullable(batch.squat_ratio), _nullable(batch.slack_m), _nullable(fitness),
-        _nullable(batch.chain_length_m),
-        [EvalStatus.ok.value if good else EvalStatus.failed.value for good in ok.tolist()], reasons,
-        batch.wall_s.tolist(), [False] * n, keys, [key_hash(key) for key in keys], failed_for_now,
-        *(_nullable(getattr(batch, name)) for name in DIAGNOSTICS),
+        [part.road] * n, [part.step] * n, part.candidates.tolist(), *numbers[:8],
+        [_OK if good else _FAILED for good in ok], reasons,
+        batch.wall_s.tolist(), [False] * n, keys, [key_hash(key) for key in keys], failed_for_now, *numbers[8:],
     ]
     return list(zip(*columns, strict=True))
 
 
-def _row_from_cache(hit: Evaluation, road: int, step: int, candidate: int, design: np.ndarray, key: str) -> Row:
-    values = {name: getattr(hit, name) for name in ROW_COLUMNS[6:]}
-    values.update(wall_s=0.0, cached=True, cache_key=key, cache_hash=key_hash(key), transient=False)
-    return (road, step, candidate, *(c[0] for c in _design_columns(design[None, :])), *values.values())
+def _row_from_cache(hit: dict[str, Any], road: int, step: int, candidate: int, design: np.ndarray, key: str) -> Row:
+    values = hit | {"wall_s": 0.0, "cached": True, "cache_key": key, "cache_hash": key_hash(key), "transient": False}
+    a2, l2, rws = (c[0] for c in _nullable_columns(np.array([[np.degrees(design[0])], [design[1]], [design[2]]])))
+    return (road, step, candidate, a2, l2, rws, *(values[name] for name in ROW_COLUMNS[6:]))
 
 
-def _design_columns(designs: np.ndarray) -> list[list[float | None]]:
-    """The stored columns a2_deg, l2_m, rws_m of designs given as rows (a2 [rad], L2 [m], R_WS [m])."""
-    return [_nullable(np.degrees(designs[:, 0])), _nullable(designs[:, 1]), _nullable(designs[:, 2])]
+def _nullable_columns(columns: np.ndarray) -> list[list[float | None]]:
+    """Columns given as the rows of a float block, as plain floats, None for NaN and infinities."""
+    out = columns.astype(object)
+    out[~np.isfinite(columns)] = None
+    plain: list[list[float | None]] = out.tolist()
+    return plain
 
 
 def _nullable(values: Sequence[float] | np.ndarray) -> list[float | None]:
     """Plain floats, None for NaN and infinities."""
-    plain = values.tolist() if isinstance(values, np.ndarray) else [float(v) for v in values]
-    return [v if math.isfinite(v) else None for v in plain]
+    return _nullable_columns(np.asarray(values, dtype=float)[None, :])[0]
 
 
 def run_scheduler(settings: Settings, stop: threading.Event, *, scheduler_id: str | None = None,

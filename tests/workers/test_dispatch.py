@@ -8,7 +8,7 @@ import numpy as np
 
 from finaldrive.engine import BatchResult, Request
 from finaldrive.workers import ProcessExecutor, SerialExecutor
-from finaldrive.workers.dispatch import Dispatcher, Work
+from finaldrive.workers.dispatch import Dispatcher, Work, in_flight_limit
 from tests.service.svc_helpers import toy_batch
 
 
@@ -95,3 +95,21 @@ def test_removing_a_source_cancels_its_tasks_and_drops_its_queue() -> None:
         drain(dispatcher, b)
     assert removed.results == [] and removed.failures == []
     assert sorted(int(p.candidates[0]) for p, _ in kept.results) == [0, 1, 2, 3]
+
+
+def test_the_smallest_request_goes_first() -> None:
+    """A DE generation (small, the next waits for it) overtakes a sweep's road (big, nothing waits)."""
+    sink = Sink()
+    dispatcher = Dispatcher(SerialExecutor(), task, batch_size=4)
+    work = sink.work("a", request(40, road=0), request(6, road=1, run=1), request(5, road=1, run=2))
+    dispatcher.add(work)
+    drain(dispatcher, work)
+    runs = [part.run for part, _ in sink.results]
+    assert runs[:4] == [2, 2, 1, 1] and set(runs[4:]) == {0}
+    assert sum(len(part) for part, _ in sink.results) == 51
+
+
+def test_only_a_few_tasks_wait_beyond_one_a_worker() -> None:
+    """Executors start tasks first in, first out: a deep queue would hold a new generation behind it."""
+    assert [in_flight_limit(n, 2 * n) for n in (1, 2, 16, 64, 256)] == [2, 4, 18, 72, 288]
+    assert in_flight_limit(256, 100) == 100  # never beyond the executor's capacity

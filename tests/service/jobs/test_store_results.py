@@ -1,0 +1,53 @@
+"""The scheduler's path through the store, on SQLite and PostgreSQL: fenced bulk writes and the
+result cache read back through the driver."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from finaldrive.engine import DIAGNOSTICS, Request, Road
+from finaldrive.service.config import Settings
+from finaldrive.service.db.leases import claim_jobs, register_scheduler
+from finaldrive.service.db.results import CACHED_COLUMNS, cached_evaluations, store_results
+from finaldrive.service.jobs.scheduler import _rows_from_result
+from finaldrive.service.jobs.submit import submit_job
+from finaldrive.service.schemas import JobSpec
+from finaldrive.service.services import open_database
+from tests.service.svc_helpers import SWEEP, toy_batch
+
+
+def test_cache_hits_are_the_stored_values_and_transient_failures_are_never_hits(store_url: str) -> None:
+    db = open_database(Settings(db_url=store_url))
+    try:
+        job, _ = submit_job(db, JobSpec.model_validate(SWEEP), idempotency_key=None, max_evaluations=1000,
+                            max_cpu_hours=1.0)
+        with db.write() as session:
+            register_scheduler(session, "s1", host="h", pid=1, executor="serial", capacity=1)
+        with db.write() as session:
+            assert claim_jobs(session, "s1", lease_s=30.0, limit=1) == [job.id]
+        k0, k1, k2, k3 = (f"{i:x}" * 64 for i in range(4))  # sha256-shaped keys
+        designs = np.array([[0.5, 0.1, 0.09], [1.0, 0.2, 0.09], [1.5, 0.1, 0.09]])
+        part = Request(0, 0, 1, np.arange(3), designs)
+        road = Road.parse("sine:0.025:3")
+        first, last = part.split(2)
+        batch = toy_batch(first.designs, road, fail_above_l2=0.15)  # the second design fails
+        stable = _rows_from_result(first, batch, batch.fitness_m, [k0, k1], transient=False)
+        again = toy_batch(last.designs, road)
+        lost = _rows_from_result(last, again, again.fitness_m, [k2], transient=True)
+        with db.write() as session:
+            assert store_results(session, "s1", job.id, stable + lost, []) == 3
+        with db.write() as session:  # the same slots again: stored once
+            assert store_results(session, "s1", job.id, stable, []) == 0
+        with db.read() as session:
+            hits = cached_evaluations(session, [k0, k1, k2, k3])
+    finally:
+        db.dispose()
+    assert set(hits) == {k0, k1}  # k2's worker was lost (transient); k3 was never stored
+    assert set(hits[k0]) == set(CACHED_COLUMNS)
+    assert math.isclose(hits[k0]["distance_m"], batch.distance_m[0])
+    assert math.isclose(hits[k0]["fitness_m"], batch.fitness_m[0]) and hits[k0]["status"] == "ok"
+    assert hits[k1]["fitness_m"] is None and hits[k1]["status"] == "failed"
+    assert hits[k1]["reason"] == "fake divergence"
+    assert all(hits[k0][name] is None for name in DIAGNOSTICS)  # NaN stored as NULL
