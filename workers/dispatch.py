@@ -63,6 +63,8 @@ class Work:
     sizer: BatchSizer | None = None
     #: single designs of a failed batch, tried again alone (before the queue)
     alone: deque[Request] = field(default_factory=deque)
+    #: the source's tasks started and not yet returned (kept by the dispatcher)
+    in_flight: int = 0
 
     def queued(self) -> int:
         """Designs waiting to be started."""
@@ -76,14 +78,20 @@ class Work:
         return at, sum(n for n in sizes if n <= sizes[at]) + len(self.alone)
 
 
-def in_flight_limit(num_workers: int, capacity: int) -> int:
-    """Tasks the dispatcher keeps in flight: one a worker, plus an eighth more (at least two) so
-    no worker waits for the driver between tasks, within the executor's capacity.
+#: Work queued in the executor beyond one task a worker, in seconds of the cluster's time.
+QUEUE_S = 0.05
 
-    A task is at least ~20 times the executor's round trip (batching rule 3), so a queue of an
-    eighth of the workers hides the round trip with room to spare, while a task started now waits
-    for at most that many ahead of it instead of a whole second wave."""
-    return max(1, min(capacity, num_workers + max(2, math.ceil(num_workers / 8))))
+
+def in_flight_limit(num_workers: int, capacity: int, task_s: float | None = None) -> int:
+    """Tasks the dispatcher keeps in flight: one a worker, plus a queue of about :data:`QUEUE_S`
+    of the cluster's work (``task_s``: a task's typical duration; unknown: an eighth of the
+    workers), at least two, within the executor's capacity.
+
+    The queue lets workers go on while the driver is busy elsewhere (storing, looking up, telling
+    a DE) for up to ~50 ms; kept that short, a new DE generation waits behind at most ~50 ms of
+    queued work, since executors start tasks first in, first out."""
+    queued = math.ceil(num_workers / 8) if not task_s else math.ceil(num_workers * QUEUE_S / task_s)
+    return max(1, min(capacity, num_workers + max(2, queued)))
 
 
 @dataclass(frozen=True)
@@ -107,6 +115,7 @@ class Dispatcher:
         self._tasks: dict[int, _Task] = {}
         self._turn: deque[Hashable] = deque()
         self.limit = in_flight_limit(executor.num_workers, executor.capacity)
+        self._task_s = 0.0  # running mean of a task's time in its worker [s]
         # the driving thread's own time a finished task (batching rule 4), from windows of >= 1 s
         self.driver_s = 0.0
         self._window_start = time.perf_counter()
@@ -135,6 +144,7 @@ class Dispatcher:
         self.executor.cancel(ids)
         for task_id in ids:
             del self._tasks[task_id]
+        work.in_flight = 0
         for handle in handles:
             self.executor.release(handle)
         self._turn.remove(key)
@@ -146,7 +156,8 @@ class Dispatcher:
         """Tasks started and not yet returned (of one source, or all)."""
         if key is None:
             return len(self._tasks)
-        return sum(1 for t in self._tasks.values() if t.work.key == key)
+        entry = self._works.get(key)
+        return entry[0].in_flight if entry is not None else 0
 
     # ------------------------------------------------------------------ driving
     def step(self, timeout: float) -> int:
@@ -191,6 +202,7 @@ class Dispatcher:
         rows = np.column_stack([np.full(len(part), float(part.road)), part.designs])
         task_id = self.executor.submit(_apply, rows, self._fn, *handles)
         self._tasks[task_id] = _Task(work, part, time.perf_counter())
+        work.in_flight += 1
 
     def collect(self, timeout: float) -> int:
         """Deliver the results of finished tasks (waiting up to ``timeout`` s for the first)."""
@@ -202,8 +214,11 @@ class Dispatcher:
             begun = time.perf_counter()
         for d in done:
             task = self._tasks.pop(d.task, None)
-            if task is None or d.cancelled:
+            if task is None:
                 continue  # its source was removed
+            task.work.in_flight -= 1
+            if d.cancelled:
+                continue
             work, part = task.work, task.part
             if (d.lost or d.error is not None) and len(part) > 1:
                 work.alone.extend(part.part(np.array([i])) for i in range(len(part)))  # find the one at fault
@@ -215,6 +230,7 @@ class Dispatcher:
                 timed: Timed = d.result
                 assert work.sizer is not None
                 work.sizer.observe(len(part), time.perf_counter() - task.handed_at, timed.busy_s, timed.compute_s)
+                self._task_s += 0.02 * (timed.busy_s - self._task_s) if self._task_s else timed.busy_s
                 ((_, batch),) = timed.result
                 work.on_result(part, batch)
         now = time.perf_counter()
@@ -229,6 +245,7 @@ class Dispatcher:
         self._window_tasks += finished
         if now - self._window_start >= 1.0 and self._window_tasks:
             self.driver_s = self._window_busy_s / self._window_tasks
+            self.limit = in_flight_limit(self.executor.num_workers, self.executor.capacity, self._task_s)
             self._window_start, self._window_busy_s, self._window_tasks = now, 0.0, 0
 
     def close(self) -> None:

@@ -109,15 +109,37 @@ class ActiveJob:
         self.resumed = resumed
         self.intake: deque[Request] = deque()
         self.writes = Writes()
+        self.finished: list[Finished] = []   # results whose rows are built in bulk when handed to the writer
+        self._finished_rows = 0
         self.copies: dict[tuple[int, int, int], list[int]] = {}   # (road, step, first candidate) -> duplicates
         self.keys: dict[tuple[int, int, int], str] = {}           # dispatched (road, step, candidate) -> key
         self.prefixes = [context_prefix(r.road, plan.settings, plan.vehicle, engine_version)
                          for r in plan.study.roads]
         self.work: Work | None = None
 
-    def done(self, in_flight: int) -> bool:
-        return (all(run.done for run in self.runs.values()) and not self.intake and in_flight == 0
-                and self.work is not None and not self.work.queue)
+    def done(self) -> bool:
+        """Every run is complete and nothing waits to be dispatched (tasks may still be in flight)."""
+        return (not self.intake and self.work is not None and not self.work.queue
+                and all(run.done for run in self.runs.values()))
+
+    def finish(self, part: Request, batch: BatchResult, fitness: np.ndarray, keys: list[str], transient: bool) -> None:
+        """A finished part, stored with the next writes."""
+        self.finished.append((part, batch, fitness, keys, transient))
+        self._finished_rows += len(part)
+
+    def backlog(self) -> int:
+        """Results and generations waiting to be handed to the writer."""
+        return len(self.writes) + self._finished_rows
+
+    def take_writes(self) -> Writes | None:
+        """What waits to be stored (the finished results made rows, all at once), or None."""
+        if self.finished:
+            self.writes.rows += _rows_from_results(self.finished)
+            self.finished, self._finished_rows = [], 0
+        if not self.writes:
+            return None
+        writes, self.writes = self.writes, Writes()
+        return writes
 
 
 class Scheduler:
@@ -254,7 +276,7 @@ class Scheduler:
                     for request, (stored, keys) in zip(requests, found[0], strict=True):
                         self._admit(job, request, stored, keys, hits)
             assert job.work is not None
-            job.work.paused = len(job.writes) + self.writer.pending(job.id) > self.config.max_backlog_rows
+            job.work.paused = job.backlog() + self.writer.pending(job.id) > self.config.max_backlog_rows
 
     def _admit(self, job: ActiveJob, request: Request, stored: dict[int, float], keys: list[str],
                hits: dict[str, dict[str, Any]]) -> None:
@@ -292,20 +314,23 @@ class Scheduler:
             return
         fitness = fitness_values(batch)
         keys = [job.keys.pop((part.road, part.step, int(c))) for c in part.candidates]
-        rows = _rows_from_result(part, batch, fitness, keys, transient)
         copies = [job.copies.pop((part.road, part.step, int(c)), None) for c in part.candidates] if job.copies else []
-        if any(copies):  # designs that were duplicates of one in this part: the same result, told and stored
-            told_candidates, told_fitness, told_designs = list(part.candidates), list(fitness), list(part.designs)
-            for j, duplicates in enumerate(copies):
-                for copy in duplicates or ():
-                    rows.append((part.road, part.step, copy, *rows[j][3:_WALL], 0.0, True, *rows[j][_CACHED + 1:]))
-                    told_candidates.append(copy)
-                    told_fitness.append(fitness[j])
-                    told_designs.append(part.designs[j])
-            part = Request(part.run, part.step, part.road, np.array(told_candidates), np.array(told_designs))
-            fitness = np.array(told_fitness, dtype=float)
+        if not any(copies):
+            job.finish(part, batch, fitness, keys, transient)
+            self._tell(job, part, fitness)
+            return
+        # designs that were duplicates of one in this part: the same result, told and stored as cached
+        rows = _rows_from_results([(part, batch, fitness, keys, transient)])
+        told_candidates, told_fitness, told_designs = list(part.candidates), list(fitness), list(part.designs)
+        for j, duplicates in enumerate(copies):
+            for copy in duplicates or ():
+                rows.append((part.road, part.step, copy, *rows[j][3:_WALL], 0.0, True, *rows[j][_CACHED + 1:]))
+                told_candidates.append(copy)
+                told_fitness.append(fitness[j])
+                told_designs.append(part.designs[j])
         job.writes.rows += rows
-        self._tell(job, part, fitness)
+        self._tell(job, Request(part.run, part.step, part.road, np.array(told_candidates), np.array(told_designs)),
+                   np.array(told_fitness, dtype=float))
 
     def _on_failure(self, job: ActiveJob, part: Request, reason: str) -> None:
         """A part that could not be evaluated: failed evaluations with the reason, never reused."""
@@ -326,10 +351,10 @@ class Scheduler:
 
     def _finish_ready(self) -> None:
         for job in list(self.jobs.values()):
-            if not job.done(self.dispatcher.in_flight(job.id)):
+            if not job.done() or self.dispatcher.in_flight(job.id):
                 continue
-            if job.writes:  # its last results: to the writer now rather than at the next flush
-                writes, job.writes = job.writes, Writes()
+            writes = job.take_writes()  # its last results: to the writer now rather than at the next flush
+            if writes is not None:
                 self.writer.put(job.id, writes)
             if self.writer.pending(job.id):
                 continue
@@ -342,8 +367,8 @@ class Scheduler:
         """Hand each job's new results to the writer; drop the jobs it found lost."""
         self._next_flush = time.monotonic() + self.config.flush_s
         for job in self.jobs.values():
-            if job.writes:
-                writes, job.writes = job.writes, Writes()
+            writes = job.take_writes()
+            if writes is not None:
                 self.writer.put(job.id, writes)
         for job_id in self.writer.lost():
             self._drop(job_id)
@@ -396,22 +421,37 @@ _OK, _FAILED = EvalStatus.ok.value, EvalStatus.failed.value
 _WALL, _CACHED = ROW_COLUMNS.index("wall_s"), ROW_COLUMNS.index("cached")
 
 
-def _rows_from_result(part: Request, batch: BatchResult, fitness: np.ndarray, keys: list[str],
-                      transient: bool) -> list[Row]:
-    """The rows of a finished part (NaN stored as NULL), the numbers converted in one block."""
-    n = len(part)
+#: A finished part of a request: (part, its results, their fitness, their cache keys, transient).
+Finished = tuple[Request, BatchResult, np.ndarray, list[str], bool]
+
+
+def _rows_from_results(finished: list[Finished]) -> list[Row]:
+    """The rows of finished parts (NaN stored as NULL), the numbers of all of them converted in one block."""
+    counts = [len(part) for part, *_ in finished]
+    fitness = np.concatenate([f for _, _, f, _, _ in finished])
+    batches = [batch for _, batch, *_ in finished]
     ok = np.isfinite(fitness).tolist()
-    reasons = [batch.reason[j] or ("" if ok[j] else f"non-finite fitness ({batch.fitness_m[j]})") for j in range(n)]
-    failed_for_now = [transient or (batch.status[j] != STATUS_OK and reasons[j].startswith(TIME_LIMIT))
-                      for j in range(n)]
-    designs = part.designs.T
+    reasons = [reason or ("" if good else f"non-finite fitness ({value})") for reason, good, value in zip(
+        (r for b in batches for r in b.reason), ok, (v for b in batches for v in b.fitness_m.tolist()), strict=True)]
+    transient = np.repeat([t for *_, t in finished], counts).tolist()
+    failed_for_now = [lost or (status != STATUS_OK and reason.startswith(TIME_LIMIT)) for lost, status, reason
+                      in zip(transient, (s for b in batches for s in b.status), reasons, strict=True)]
+    designs = np.concatenate([part.designs for part, *_ in finished]).T
+
+    def joined(name: str) -> np.ndarray:
+        return np.concatenate([getattr(b, name) for b in batches])
+
     numbers = _nullable_columns(np.array([
-        np.degrees(designs[0]), designs[1], designs[2], batch.distance_m, batch.squat_ratio, batch.slack_m, fitness,
-        batch.chain_length_m, *(getattr(batch, name) for name in DIAGNOSTICS)], dtype=float))
+        np.degrees(designs[0]), designs[1], designs[2], joined("distance_m"), joined("squat_ratio"),
+        joined("slack_m"), fitness, joined("chain_length_m"), *(joined(name) for name in DIAGNOSTICS)], dtype=float))
+    keys = [key for *_, part_keys, _ in finished for key in part_keys]
+    n = len(keys)
     columns = [
-        [part.road] * n, [part.step] * n, part.candidates.tolist(), *numbers[:8],
-        [_OK if good else _FAILED for good in ok], reasons,
-        batch.wall_s.tolist(), [False] * n, keys, [key_hash(key) for key in keys], failed_for_now, *numbers[8:],
+        np.repeat([part.road for part, *_ in finished], counts).tolist(),
+        np.repeat([part.step for part, *_ in finished], counts).tolist(),
+        np.concatenate([part.candidates for part, *_ in finished]).tolist(), *numbers[:8],
+        [_OK if good else _FAILED for good in ok], reasons, joined("wall_s").tolist(), [False] * n, keys,
+        [key_hash(key) for key in keys], failed_for_now, *numbers[8:],
     ]
     return list(zip(*columns, strict=True))
 

@@ -109,7 +109,10 @@ def test_the_smallest_request_goes_first() -> None:
     assert sum(len(part) for part, _ in sink.results) == 51
 
 
-def test_only_a_few_tasks_wait_beyond_one_a_worker() -> None:
+def test_about_50_ms_of_work_waits_beyond_one_task_a_worker() -> None:
     """Executors start tasks first in, first out: a deep queue would hold a new generation behind it."""
-    assert [in_flight_limit(n, 2 * n) for n in (1, 2, 16, 64, 256)] == [2, 4, 18, 72, 288]
-    assert in_flight_limit(256, 100) == 100  # never beyond the executor's capacity
+    assert [in_flight_limit(n, 2 * n) for n in (1, 2, 16, 64, 256)] == [2, 4, 18, 72, 288]  # nothing measured
+    assert in_flight_limit(256, 512, task_s=0.5) == 256 + 26  # 26 tasks of 0.5 s on 256 workers: 51 ms
+    assert in_flight_limit(256, 512, task_s=0.1) == 256 + 128
+    assert in_flight_limit(256, 512, task_s=0.01) == 512  # never beyond the executor's capacity
+    assert in_flight_limit(2, 4, task_s=5.0) == 4  # at least two queued

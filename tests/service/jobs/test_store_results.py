@@ -11,7 +11,7 @@ from finaldrive.engine import DIAGNOSTICS, Request, Road
 from finaldrive.service.config import Settings
 from finaldrive.service.db.leases import claim_jobs, register_scheduler
 from finaldrive.service.db.results import CACHED_COLUMNS, cached_evaluations, store_results
-from finaldrive.service.jobs.scheduler import _rows_from_result
+from finaldrive.service.jobs.scheduler import _rows_from_results
 from finaldrive.service.jobs.submit import submit_job
 from finaldrive.service.schemas import JobSpec
 from finaldrive.service.services import open_database
@@ -33,9 +33,9 @@ def test_cache_hits_are_the_stored_values_and_transient_failures_are_never_hits(
         road = Road.parse("sine:0.025:3")
         first, last = part.split(2)
         batch = toy_batch(first.designs, road, fail_above_l2=0.15)  # the second design fails
-        stable = _rows_from_result(first, batch, batch.fitness_m, [k0, k1], transient=False)
         again = toy_batch(last.designs, road)
-        lost = _rows_from_result(last, again, again.fitness_m, [k2], transient=True)
+        stable, lost = (_rows_from_results([finished]) for finished in (
+            (first, batch, batch.fitness_m, [k0, k1], False), (last, again, again.fitness_m, [k2], True)))
         with db.write() as session:
             assert store_results(session, "s1", job.id, stable + lost, []) == 3
         with db.write() as session:  # the same slots again: stored once
