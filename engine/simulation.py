@@ -109,10 +109,11 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
         # series rows every series_stride x dt, by dense output (the steps do not land on them)
         n_out = max(1, math.ceil(settings.duration / (settings.dt * settings.series_stride) - 1e-9))
         n_rows = n_out + 1 if settings.series else 0
+        two_runs = bool(p[P.CHAIN_RUNS] == 2.0)
         series = np.zeros((n_rows, outcome.N_SERIES))
-        states = np.zeros((n_rows, 2 * bodies.N_DOF))
+        states = np.zeros((n_rows, 2 * bodies.N_DOF + int(two_runs)))  # two runs: e too
         st = np.zeros(FAST_N_ST)
-        y = np.zeros(minimal.N_STATE_TWO_RUNS if p[P.CHAIN_RUNS] == 2.0 else minimal.N_STATE)
+        y = np.zeros(minimal.N_STATE_TWO_RUNS if two_runs else minimal.N_STATE)
         y[:bodies.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
 
         def chunk() -> int:
@@ -172,7 +173,8 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
     out = None
     if settings.series:
         if settings.method == "fast":
-            qs = np.array([pose_from_minimal(s, p, road) for s in states[:rows]])
+            play = states[:rows, 2 * bodies.N_DOF] if states.shape[1] > 2 * bodies.N_DOF else np.zeros(rows)
+            qs = np.array([pose_from_minimal(s, p, road, e) for s, e in zip(states[:rows], play, strict=True)])
         else:
             qs = states[:rows, :N_COORDS]
         out = _series(series[:rows], qs, setup, p, settings.method)

@@ -148,7 +148,7 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
     ja_t, ja_p, alpha_c, taut, taut_rate, alpha_dot = chain_terms(
         w2x, w2y, w6x, w6y, wt, wp, wb, p, -1.0 if run == LOWER else 1.0)
     rho = p[P.R_WS] / p[P.R_ES]
-    upper_rate = alpha_dot                                             # alpha_u' (but in LOWER)
+    upper_rate = alpha_dot                                             # alpha_u', read when FREE (e' below)
     if run == FREE:                                                    # no run engaged: alpha is free
         ja_t, ja_p, alpha_c, rho, alpha_dot = 0.0, 0.0, 0.0, 0.0, y[ZALPHA_DOT]
     ux, uy = inertia(geo, p, ct, st, cp, sp, fs, wt, wp, fsd, ja_t, ja_p, alpha_c, rho, ws)

@@ -35,7 +35,7 @@ from finaldrive.engine.fast.chain_runs import (
     released,
     run_tension,
 )
-from finaldrive.engine.fast.minimal import FREE, N_STATE, N_STATE_TWO_RUNS, UPPER, ZALPHA_DOT, ZU, fast_rhs
+from finaldrive.engine.fast.minimal import FREE, N_STATE, N_STATE_TWO_RUNS, UPPER, ZALPHA_DOT, ZPLAY, ZU, fast_rhs
 from finaldrive.engine.model.diagnostics import (
     E_CHAIN_COMPRESSION,
     E_TAUT_MAX,
@@ -119,6 +119,14 @@ def _record(row, t, y, aux, sigma, out):
     out[row, 12] = y[ZU]
     out[row, 13] = sigma
     out[row, 14] = 0.0  # no constraint residual in minimal coordinates
+
+
+@jit
+def _store(states, row, y):
+    """A row of the recorded states: z, z' and, in a third column block of one, the two-run chain's e."""
+    states[row, :2 * N_DOF] = y[:2 * N_DOF]
+    if states.shape[1] > 2 * N_DOF:
+        states[row, 2 * N_DOF] = y[ZPLAY]
 
 
 @jit
@@ -241,7 +249,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
         st[S_PREV_TAUT], st[S_PREV_RATE] = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
         if n_rows > 0:
             _record(0, 0.0, y, aux, st[S_SIGMA], series)
-            states[0] = y[:2 * N_DOF]
+            _store(states, 0, y)
             st[S_ROW] = 1.0
         st[S_STARTED] = 1.0
     elif fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, f1, aux, ws, int(st[S_MODE])) != OK:
@@ -328,12 +336,12 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
             t_row = min(row * dt_out, t_end)
             if t - t_row <= 1e-9 * dt_out:
                 _record(row, t_row, y, aux, sigma, series)
-                states[row] = y[:2 * N_DOF]
+                _store(states, row, y)
             else:
                 _hermite(y_old, f_old, y, f1, h_done, (t_row - t_old) / h_done, yi)
                 fast_rhs(yi, p, geo, kind, rp, sigma, longitudinal, fi, auxi, wsi, mode)
                 _record(row, t_row, yi, auxi, sigma, series)
-                states[row] = yi[:2 * N_DOF]
+                _store(states, row, yi)
             row += 1
         if two_runs:
             mode = _chain_after_step(y, mode, h_done, p, geo, ws, aux, ext, led)

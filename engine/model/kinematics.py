@@ -166,14 +166,15 @@ def assemble(p: np.ndarray, road: Road, x1: float, y1: float, theta: float, phi:
     return q
 
 
-def pose_from_minimal(z: np.ndarray, p: np.ndarray, road: Road) -> np.ndarray:
+def pose_from_minimal(z: np.ndarray, p: np.ndarray, road: Road, play: float = 0.0) -> np.ndarray:
     """All 39 coordinates from z = (x1, y1, theta, phi, fs, beta), alpha from the chain
-    length P[L_CHAIN] through eq. (30)."""
+    length P[L_CHAIN] through eq. (30), turned by play (the two-run chain's e: the engine
+    sprocket's turn beyond the upper run's engagement)."""
     x1, y1, theta, phi, fs, beta = (float(v) for v in z[:6])
     q = assemble(p, road, x1, y1, theta, phi, fs, beta, 0.0)
     gamma = q[GAMMA]
     alpha = gamma - (p[P.L_CHAIN] - taut_length(q) - (beta - gamma) * p[P.R_WS]) / p[P.R_ES]
-    return assemble(p, road, x1, y1, theta, phi, fs, beta, alpha)
+    return assemble(p, road, x1, y1, theta, phi, fs, beta, alpha + play)
 
 
 def taut_length(q: np.ndarray) -> float:

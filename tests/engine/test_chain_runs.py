@@ -27,7 +27,7 @@ from finaldrive.engine import Design, Road, SimSettings, simulate
 from finaldrive.engine.fast import bodies, chain_runs, minimal
 from finaldrive.engine.fast.rosenbrock import N_ST, run_fast
 from finaldrive.engine.model import diagnostics as D, params as P
-from finaldrive.engine.model.coordinates import BETA, X2, X6, X10, Y2, Y6, Y10
+from finaldrive.engine.model.coordinates import ALPHA, BETA, X2, X6, X10, Y2, Y6, Y10
 from finaldrive.engine.model.elements import AUX_ALPHA_DOT, N_AUX
 from finaldrive.engine.model.kinematics import (
     design_pose,
@@ -196,6 +196,20 @@ def test_reversed_drive_loads_the_lower_run_after_the_free_play(two_runs):
     assert np.all(tension[t > engaged + 0.002] < -100.0)       # the lower run carries the reversed drive
     assert ext[D.E_TENSION_MAX] <= 0.0 < led[D.L_IMPACT]
     assert ext[D.E_CHAIN_COMPRESSION] == pytest.approx(0.3, abs=1e-9)  # overrun all along
+
+
+def test_recorded_pose_turns_the_engine_sprocket_as_its_speed_says(two_runs):
+    """The series' q carries the free sprocket's own angle: its rate is the recorded sprocket speed
+    while the upper run is slack, the free play being taken up, and the lower run pulls."""
+    r = simulate(TABLE11, Road.parse("flat"), SimSettings(duration=0.1, series=True, series_stride=1),
+                 two_runs.replace(torque=REVERSED))
+    t, alpha, speed = r.series["t_s"], r.series["q"][:, ALPHA], r.series["sprocket_speed_rad_s"]
+    rate = -(alpha[2:] - alpha[:-2]) / (t[2:] - t[:-2])   # central differences, rows 1 ms apart
+    free = np.flatnonzero(r.series["chain_tension_n"][1:-1] == 0.0)
+    assert free.size > 15 and speed[10] == pytest.approx(REVERSED / two_runs["I_sprocket"] * 0.01, rel=1e-3)
+    np.testing.assert_allclose(rate[free[:-1]], speed[1:-1][free[:-1]], rtol=1e-6)  # I alpha'' = -T: exact
+    steady = np.abs(np.diff(speed, 2)) < 0.05    # away from the impact, where alpha' jumps
+    np.testing.assert_allclose(rate[steady], speed[1:-1][steady], atol=0.02)  # the lower run pulling
 
 
 @pytest.mark.parametrize("spec", ["flat", "bump:0.04:0.2"])
