@@ -45,13 +45,13 @@ def _centres(y: np.ndarray, p: np.ndarray, geo: np.ndarray) -> tuple[float, floa
 def slack(y: np.ndarray, p: np.ndarray, geo: np.ndarray) -> float:
     """s = g_u + g_l: the chain's length beyond the loop of its two taut runs at the state y [m]."""
     w2x, w2y, w6x, w6y = _centres(y, p, geo)
-    return p[P.L_LOOP] - loop_length(math.hypot(w6x - w2x, w6y - w2y), p[P.R_ES], p[P.R_WS])
+    return float(p[P.L_LOOP] - loop_length(math.hypot(w6x - w2x, w6y - w2y), p[P.R_ES], p[P.R_WS]))
 
 
 @jit
 def gap(y: np.ndarray, run: int, p: np.ndarray, geo: np.ndarray) -> float:
     """The gap of run (UPPER or LOWER) at the state y [m]."""
-    g_u = p[P.R_ES] * y[ZPLAY]
+    g_u = float(p[P.R_ES] * y[ZPLAY])
     return g_u if run == UPPER else slack(y, p, geo) - g_u
 
 
@@ -99,7 +99,7 @@ def engage(y: np.ndarray, run: int, p: np.ndarray, geo: np.ndarray, ws: np.ndarr
     for i in range(N_DOF):
         y[N_DOF + i] -= x[i] * impulse
     project(y, run, y[ZALPHA_DOT] + impulse / p[P.I_SPROCKET], p, geo)
-    return 0.5 * closing * closing / compliance
+    return float(0.5 * closing * closing / compliance)
 
 
 @jit

@@ -117,7 +117,7 @@ def whole_chain_length(q: np.ndarray, p: np.ndarray) -> float:
     """The two-run chain's whole length at pose q: the loop of both taut runs and the slack of the
     vehicle's chain_free_play measured at that pose."""
     dist = math.hypot(q[X6] - q[X2], q[Y6] - q[Y2])
-    return loop_length(dist, p[P.R_ES], p[P.R_WS]) + free_play_slack(taut_length(q), p[P.CHAIN_FREE_PLAY])
+    return float(loop_length(dist, p[P.R_ES], p[P.R_WS])) + free_play_slack(taut_length(q), p[P.CHAIN_FREE_PLAY])
 
 
 @jit
