@@ -34,7 +34,7 @@ TENSION_TOL = 1.0
 
 
 @jit
-def _centres(y: np.ndarray, p: np.ndarray, geo: np.ndarray) -> tuple[float, float, float, float]:
+def sprocket_centres(y: np.ndarray, p: np.ndarray, geo: np.ndarray) -> tuple[float, float, float, float]:
     """World offsets of points 2 and 6 from point 1 (eqs. 1-2, 9-10)."""
     ct, st = math.cos(y[ZTHETA]), math.sin(y[ZTHETA])
     w2x, w2y = ct * geo[G_P2_X] - st * geo[G_P2_Y], st * geo[G_P2_X] + ct * geo[G_P2_Y]
@@ -44,7 +44,7 @@ def _centres(y: np.ndarray, p: np.ndarray, geo: np.ndarray) -> tuple[float, floa
 @jit
 def slack(y: np.ndarray, p: np.ndarray, geo: np.ndarray) -> float:
     """s = g_u + g_l: the chain's length beyond the loop of its two taut runs at the state y [m]."""
-    w2x, w2y, w6x, w6y = _centres(y, p, geo)
+    w2x, w2y, w6x, w6y = sprocket_centres(y, p, geo)
     return float(p[P.L_LOOP] - loop_length(math.hypot(w6x - w2x, w6y - w2y), p[P.R_ES], p[P.R_WS]))
 
 
@@ -86,7 +86,7 @@ def engage(y: np.ndarray, run: int, p: np.ndarray, geo: np.ndarray, ws: np.ndarr
     The impulse G Lambda with G v+ = 0: Lambda = -G v / (G M7^-1 G), z'+ = z' - M^-1 J_a^T Lambda,
     alpha'+ = alpha' + Lambda / I; the loss 1/2 (G v)^2 / (G M7^-1 G).
     """
-    w2x, w2y, w6x, w6y = _centres(y, p, geo)
+    w2x, w2y, w6x, w6y = sprocket_centres(y, p, geo)
     wt, wp, wb = y[N_DOF + ZTHETA], y[N_DOF + ZPHI], y[N_DOF + ZBETA]
     ja_t, ja_p, _, _, _, alpha_rate = chain_terms(w2x, w2y, w6x, w6y, wt, wp, wb, p, float(run))
     ja = np.zeros(N_DOF)

@@ -104,7 +104,7 @@ def test_lower_run_terms_against_central_differences(vehicle, design, spec):
     z = setup.q0[list(MINIMAL_COORDS)] + rng.normal(scale=[0.02, 0.002, 0.01, 0.005, 0.01, 1.0])
     zd = rng.normal(scale=[3.0, 0.3, 0.5, 1.0, 0.3, 20.0])
     geo = bodies.design_constants(p)
-    w2x, w2y, w6x, w6y = chain_runs._centres(z, p, geo)
+    w2x, w2y, w6x, w6y = chain_runs.sprocket_centres(z, p, geo)
     ja_t, ja_p, alpha_c, _, _, alpha_dot = minimal.chain_terms(
         w2x, w2y, w6x, w6y, zd[bodies.ZTHETA], zd[bodies.ZPHI], zd[bodies.ZBETA], p, -1.0)
     jalpha = np.zeros(6)
@@ -149,7 +149,7 @@ def test_impact_stops_the_gap_conserves_momentum_and_books_the_lost_energy(two_r
     minimal.fast_rhs(y, p, geo, kind, rp, 0.1, True, out, aux, ws, run)
     assert y[minimal.ZALPHA_DOT] == pytest.approx(aux[AUX_ALPHA_DOT], abs=1e-12)
     # the impulse acts along G = (-J_a, 1): M dz' = -J_a Lambda and I dalpha' = Lambda
-    w2x, w2y, w6x, w6y = chain_runs._centres(y, p, geo)
+    w2x, w2y, w6x, w6y = chain_runs.sprocket_centres(y, p, geo)
     ja_t, ja_p, *_ = minimal.chain_terms(w2x, w2y, w6x, w6y, 0.0, 0.0, 0.0, p, float(run))
     ja = np.zeros(6)
     ja[bodies.ZTHETA], ja[bodies.ZPHI], ja[bodies.ZBETA] = ja_t, ja_p, p[P.R_WS] / p[P.R_ES]
