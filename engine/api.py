@@ -26,8 +26,9 @@ STATUS_FAILED = "failed"
 #: ledger (docs/engine.md, "Extremes and the energy ledger"); name -> meaning, the unit in the name.
 DIAGNOSTIC_MEANINGS: dict[str, str] = {
     "chain_tension_max_n": "largest tension of the chain's upper run [N]",
-    "chain_tension_min_n": "smallest (most negative: pushing) tension of the chain's upper run [N]",
-    "chain_compression_s": "time the chain's upper run spends in compression (tension < 0) [s]",
+    "chain_tension_min_n": "smallest chain tension: negative when the upper run pushes (the paper's chain) or the "
+                           "lower run pulls (two runs) [N]",
+    "chain_compression_s": "time in overrun: the upper run pushing (the paper's chain) or not taut (two runs) [s]",
     "fz_rear_max_n": "largest vertical load of the rear tyre [N]",
     "fz_rear_min_n": "smallest vertical load of the rear tyre (0 when airborne) [N]",
     "fz_front_max_n": "largest vertical load of the front tyre [N]",
@@ -40,7 +41,7 @@ DIAGNOSTIC_MEANINGS: dict[str, str] = {
     "drive_work_j": "work of the drive torque [J]",
     "kinetic_energy_j": "kinetic energy at the end [J]",
     "potential_energy_j": "change of the potential energy (gravity, springs, bump stop) [J]",
-    "damper_dissipation_j": "energy the suspension and tyre dampers dissipated [J]",
+    "damper_dissipation_j": "energy the suspension and tyre dampers (and the two-run chain's impacts) dissipated [J]",
     "tyre_slip_work_j": "work the longitudinal tyre force took by slip: carcass energy + dissipation [J]",
     "tyre_carcass_energy_j": "energy stored in the tyre carcass's deflection at the end [J]",
     "tyre_dissipation_j": "energy the tyre dissipated by slip (>= 0) [J]",

@@ -73,7 +73,7 @@ _DIAGNOSTIC_DIGITS = {"_n": 1, "_s": 3, "_m": 5, "_j": 3, "_w": 3}
 _SERIES = [
     _f("t_s", "simulated time", 3),
     _f("pitch_deg", "chassis pitch angle theta (the model's coordinate, docs/engine.md)", 3),
-    _f("chain_tension_n", "tension of the chain's upper run", 1),
+    _f("chain_tension_n", "chain tension: the upper run's, less the lower run's with two runs", 1),
     _f("fz_rear_n", "vertical load of the rear tyre", 1),
     _f("fz_front_n", "vertical load of the front tyre", 1),
     _f("kappa", "rear tyre's transient longitudinal slip kappa'", 4),

@@ -14,7 +14,7 @@ from finaldrive.engine.api import Design, SimSettings
 from finaldrive.engine.fast.equilibrium import static_equilibrium
 from finaldrive.engine.model import params as P
 from finaldrive.engine.model.coordinates import BETA, FS, PHI, THETA, X1, Y1
-from finaldrive.engine.model.kinematics import chain_length, design_pose, design_squat_ratio
+from finaldrive.engine.model.kinematics import chain_length, design_pose, design_squat_ratio, whole_chain_length
 from finaldrive.engine.model.road import Road
 from finaldrive.engine.solver.equilibrium import reference_equilibrium
 from finaldrive.engine.vehicle import Vehicle
@@ -44,13 +44,18 @@ class Setup:
 
 
 def prepare(design: Design, road: Road, settings: SimSettings, vehicle: Vehicle) -> Setup:
-    """Parameters, static equilibrium and the chain length L of eq. (69) at t = 0. Each method
-    finds the equilibrium of its own model (the reference in its 39 natural coordinates).
-    Raises DesignError for a design beyond the vehicle's limits (Vehicle.check_design)."""
+    """Parameters, static equilibrium and the chain length L of eq. (69) at t = 0 (with two chain
+    runs also the whole chain's length). Each method finds the equilibrium of its own model (the
+    reference in its 39 natural coordinates). Raises DesignError for a design beyond the vehicle's
+    limits (Vehicle.check_design), ValueError for the two-run chain with the reference method."""
+    if vehicle["chain_runs"] == 2 and settings.method == "reference":
+        raise ValueError("vehicle chain_runs = 2 (both chain runs) is supported by the fast method only; "
+                         "the reference method models the paper's upper run (chain_runs = 1)")
     vehicle.check_design(design)
     p = pack_parameters(vehicle, design, settings)
     pose = design_pose(p)
     equilibrium = reference_equilibrium if settings.method == "reference" else static_equilibrium
     q0 = equilibrium(p, road, pose)
     p[P.L_CHAIN] = chain_length(q0, p)
+    p[P.L_LOOP] = whole_chain_length(q0, p)
     return Setup(p=p, q0=q0, squat_ratio=float(design_squat_ratio(p, pose)))

@@ -25,7 +25,7 @@ from finaldrive.engine.api import (
 )
 from finaldrive.engine.fast import bodies, minimal
 from finaldrive.engine.fast.equilibrium import EquilibriumError
-from finaldrive.engine.fast.rosenbrock import N_ST as FAST_N_ST, S_ROW, S_T, run_fast
+from finaldrive.engine.fast.rosenbrock import N_ST as FAST_N_ST, S_MODE, S_ROW, S_T, run_fast
 from finaldrive.engine.fitness import fitness, slack
 from finaldrive.engine.model import diagnostics as D, params as P
 from finaldrive.engine.model.coordinates import N_CONSTRAINTS, N_COORDS, X1, X14, Y14
@@ -109,10 +109,11 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
         # series rows every series_stride x dt, by dense output (the steps do not land on them)
         n_out = max(1, math.ceil(settings.duration / (settings.dt * settings.series_stride) - 1e-9))
         n_rows = n_out + 1 if settings.series else 0
+        two_runs = bool(p[P.CHAIN_RUNS] == 2.0)
         series = np.zeros((n_rows, outcome.N_SERIES))
-        states = np.zeros((n_rows, 2 * bodies.N_DOF))
+        states = np.zeros((n_rows, 2 * bodies.N_DOF + int(two_runs)))  # two runs: e too
         st = np.zeros(FAST_N_ST)
-        y = np.zeros(minimal.N_STATE)
+        y = np.zeros(minimal.N_STATE_TWO_RUNS if two_runs else minimal.N_STATE)
         y[:bodies.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
 
         def chunk() -> int:
@@ -154,7 +155,7 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
         return _failed(f"{_REASONS[code]} at t = {reached:.4f} s", setup.squat_ratio, chain, start)
     if settings.method == "fast":
         x1_end = float(y[bodies.ZX1])
-        kinetic = float(minimal.kinetic_energy(y, p, kind, rp))
+        kinetic = float(minimal.kinetic_energy(y, p, kind, rp, int(st[S_MODE])))
         x1, y1, theta, phi, fs = (float(c) for c in y[:bodies.ZBETA])
         q_end = assemble(p, road, x1, y1, theta, phi, fs, 0.0, 0.0)  # the pose, but for alpha and beta
         rows = int(st[S_ROW])
@@ -172,7 +173,8 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
     out = None
     if settings.series:
         if settings.method == "fast":
-            qs = np.array([pose_from_minimal(s, p, road) for s in states[:rows]])
+            play = states[:rows, 2 * bodies.N_DOF] if states.shape[1] > 2 * bodies.N_DOF else np.zeros(rows)
+            qs = np.array([pose_from_minimal(s, p, road, e) for s, e in zip(states[:rows], play, strict=True)])
         else:
             qs = states[:rows, :N_COORDS]
         out = _series(series[:rows], qs, setup, p, settings.method)
@@ -193,10 +195,11 @@ def _diagnostics(ext: np.ndarray, led: np.ndarray, kinetic: float, potential: fl
         "tyre_compression_rear_max_m": ext[D.E_COMPRESSION_REAR],
         "tyre_compression_front_max_m": ext[D.E_COMPRESSION_FRONT],
         "drive_work_j": led[D.L_DRIVE], "kinetic_energy_j": kinetic, "potential_energy_j": potential,
-        "damper_dissipation_j": led[D.L_DAMPERS], "tyre_slip_work_j": slip,
+        "damper_dissipation_j": led[D.L_DAMPERS] + led[D.L_IMPACT], "tyre_slip_work_j": slip,
         "tyre_carcass_energy_j": led[D.L_CARCASS], "tyre_dissipation_j": led[D.L_TYRE_DISSIPATION],
         "tyre_lever_work_j": led[D.L_LEVER],
-        "ledger_residual_j": led[D.L_DRIVE] + led[D.L_LEVER] - (kinetic + potential + led[D.L_DAMPERS] + slip),
+        "ledger_residual_j": led[D.L_DRIVE] + led[D.L_LEVER] - (kinetic + potential + led[D.L_DAMPERS]
+                                                                + led[D.L_IMPACT] + slip),
         "tyre_dissipation_min_w": led[D.L_DISSIPATION_MIN],
     }
     assert tuple(values) == DIAGNOSTICS

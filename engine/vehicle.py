@@ -54,6 +54,7 @@ PARAMETERS: tuple[tuple[str, Rule], ...] = (
     ("sigma_k0", _POSITIVE), ("sigma_min", _POSITIVE), ("eps_F", _POSITIVE), ("V_low", _POSITIVE),
     ("torque", _ANY), ("sprocket_ratio", _POSITIVE), ("gravity", _POSITIVE), ("eps1", _NON_NEGATIVE),
     ("eps2", _NON_NEGATIVE), ("sr_optimum", _ANY), ("floor", _FRACTION), ("squat_K", _POSITIVE),
+    ("chain_runs", (1.0, True, 2.0)), ("chain_free_play", _POSITIVE),
 )
 _RULES: dict[str, Rule] = dict(PARAMETERS)
 #: Calibration targets: validated and carried, not packed for the model.
@@ -195,6 +196,8 @@ def load_vehicle_dict(data: Any) -> Vehicle:
         raise VehicleError("vehicle parameter 'Fz_max': the load range Fz_min < Fz0 < Fz_max is required")
     if v["rt_bottoming"] >= v["rt0"]:
         raise VehicleError("vehicle parameter 'rt_bottoming': must be less than the unloaded radius rt0")
+    if v["chain_runs"] not in (1.0, 2.0):
+        raise VehicleError("vehicle parameter 'chain_runs': must be 1 (the paper's upper run) or 2 (both runs)")
     if v["rws_tyre_margin"] >= v["rt0"]:
         raise VehicleError("vehicle parameter 'rws_tyre_margin': must be less than the rear tyre's radius rt0")
     return Vehicle(

@@ -90,12 +90,13 @@ def design_constants(p: np.ndarray) -> np.ndarray:
 
 @jit
 def inertia(geo: np.ndarray, p: np.ndarray, ct: float, st: float, cp: float, sp: float, fs: float, wt: float,
-            wp: float, fs_dot: float, ja_t: float, ja_p: float, alpha_c: float, ws: np.ndarray) -> tuple[float, float]:
+            wp: float, fs_dot: float, ja_t: float, ja_p: float, alpha_c: float, rho: float,
+            ws: np.ndarray) -> tuple[float, float]:
     """Fill M's entries into ws and start Q with gravity minus the velocity products h.
 
-    ct, st, cp, sp: cos and sin of theta and phi; wt, wp, fs_dot: theta', phi', fs'; ja_t, ja_p:
-    d(alpha)/d(theta, phi) (d(alpha)/d(beta) = rho); alpha_c: alpha'' at z'' = 0. Returns the
-    world fork axis (ux, uy).
+    ct, st, cp, sp: cos and sin of theta and phi; wt, wp, fs_dot: theta', phi', fs'; ja_t, ja_p, rho:
+    d(alpha)/d(theta, phi, beta) through the engaged chain run (all 0 for a free engine sprocket, whose
+    inertia then leaves M); alpha_c: alpha'' at z'' = 0. Returns the world fork axis (ux, uy).
     """
     g = p[P.GRAVITY]
     m_fork = geo[G_MASS_FORK]
@@ -110,7 +111,6 @@ def inertia(geo: np.ndarray, p: np.ndarray, ct: float, st: float, cp: float, sp:
     # swingarm bodies
     spx, spy = geo[G_S_SWING] * cp, geo[G_S_SWING] * sp
     i_sp = p[P.I_SPROCKET]
-    rho = p[P.R_WS] / p[P.R_ES]
     ws[W_MXT], ws[W_MYT] = -sty, stx
     ws[W_MXP], ws[W_MYP] = -spy, spx
     ws[W_MXS], ws[W_MYS] = m_fork * ux, m_fork * uy

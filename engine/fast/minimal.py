@@ -9,6 +9,13 @@ Lagrange's equations with the bodies' kinetic energy (engine.fast.bodies) give
 M(z) z'' = F(z, z', u) - h(z, z'). Applied forces are the elements of engine.model.elements
 (eqs. 34-52), projected by virtual work. The tyre state u obeys eq. (42) with the relaxation
 length held through a step.
+
+With the two-run chain (vehicle chain_runs = 2, docs/engine.md#chain-overrun) the engaged run
+chooses the tangent: the upper run as above, or the lower run, the mirror of eqs. (24)-(29):
+alpha = (1 - rho) gamma_l(D) - L_taut(D) / R_ES + rho beta + L_l / R_ES, gamma_l = delta + psi. Between
+them the engine sprocket turns freely (its inertia leaves M); the state then carries the play the
+sprocket has turned beyond the upper run's engagement, e = alpha - alpha_u(z) (the upper run's gap is
+R_ES e), and alpha'.
 """
 
 from __future__ import annotations
@@ -62,17 +69,24 @@ from finaldrive.engine.model.road_height import road_height
 
 N_STATE = 2 * N_DOF + 1
 ZU = 2 * N_DOF
+#: The two-run chain's state adds e, the engine sprocket's turn beyond the upper run's engagement
+#: [rad], and alpha' (in an engaged mode both follow from z, z').
+ZPLAY, ZALPHA_DOT = N_STATE, N_STATE + 1
+N_STATE_TWO_RUNS = N_STATE + 2
+#: The chain's modes (the engaged run): upper, lower, none (the engine sprocket turning freely).
+UPPER, LOWER, FREE = 1, -1, 0
 
 
 @jit
-def chain_terms(w2x, w2y, w6x, w6y, wt, wp, wb, p):
+def chain_terms(w2x, w2y, w6x, w6y, wt, wp, wb, p, run=1.0):
     """The chain constraint solved for alpha, given the world offsets of points 2 and 6 from
     point 1 and theta', phi', beta': (d(alpha)/d(theta), d(alpha)/d(phi), alpha'' at z'' = 0,
     L_taut, L_taut', alpha'); d(alpha)/d(beta) = rho.
 
-    alpha = g(D) + rho beta + const with g = (1 - rho) (delta - psi) + L_taut / R_ES, delta the
-    angle of D, psi = acos(k / |D|), k = R_ES - R_WS (eqs. 24-29, 31); alpha'' at z'' = 0 is g's
-    second derivative along D(t) with D'' the centripetal part.
+    alpha = g(D) + rho beta + const with g = (1 - rho) (delta - s psi) + s L_taut / R_ES, delta the
+    angle of D, psi = acos(k / |D|), k = R_ES - R_WS; s = run = 1 for the upper run (eqs. 24-29, 31,
+    30), -1 for the lower (their mirror); alpha'' at z'' = 0 is g's second derivative along D(t) with
+    D'' the centripetal part.
     """
     dx, dy = w6x - w2x, w6y - w2y                                 # D = r6 - r2
     dth_x, dth_y = w2y, -w2x                                      # dD/dtheta
@@ -93,9 +107,9 @@ def chain_terms(w2x, w2y, w6x, w6y, wt, wp, wb, p):
     d_dot = radial / d
     d_ddot = (vx * vx + vy * vy + dx * ddx + dy * ddy) / d - d_dot * d_dot / d
     delta_ddot = (dx * ddy - dy * ddx - 2.0 * radial * cross * inv_d2) * inv_d2
-    psi1 = k / d * inv_lt                                         # d(psi)/d|D|
-    psi2 = -k * (2.0 * d2 - k * k) * inv_d2 * inv_lt * inv_lt * inv_lt
-    lt1, lt2 = d * inv_lt, -k * k * inv_lt * inv_lt * inv_lt       # d(L_taut)/d|D|, second derivative
+    psi1 = run * k / d * inv_lt                                   # s d(psi)/d|D|
+    psi2 = -run * k * (2.0 * d2 - k * k) * inv_d2 * inv_lt * inv_lt * inv_lt
+    lt1, lt2 = run * d * inv_lt, -run * k * k * inv_lt * inv_lt * inv_lt   # s d(L_taut)/d|D|, s d2(L_taut)/d|D|2
     f = 1.0 - rho
     # gradient of g in D: (1 - rho) (perp(D) / |D|^2 - psi1 D / |D|) + lt1 D / (|D| R_ES)
     radial_part = (-f * psi1 + lt1 / res) / d
@@ -109,8 +123,12 @@ def chain_terms(w2x, w2y, w6x, w6y, wt, wp, wb, p):
 
 
 @jit
-def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws):
-    """y' for y = (z, z', u); returns a failure code (0 = ok).
+def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
+    """y' for y = (z, z', u), or (z, z', u, e, alpha') for the two-run chain; returns a failure code (0 = ok).
+
+    run: the chain's mode, UPPER (the paper's), LOWER or FREE. aux[AUX_TENSION] is the chain's net
+    pull on the engine sprocket, T_upper - T_lower = (T + I alpha'') / R_ES: the upper run's tension
+    in the paper's model (negative: pushing), the lower run's pull with its sign changed in LOWER.
 
     The force elements are engine.model.elements' (aux receives their outputs); this function
     projects them onto z by virtual work beside the bodies' gravity and inertia
@@ -127,9 +145,13 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws):
     cp, sp = math.cos(phi), math.sin(phi)
     w2x, w2y = ct * geo[G_P2_X] - st * geo[G_P2_Y], st * geo[G_P2_X] + ct * geo[G_P2_Y]
     w6x, w6y = p[P.L_SA] * cp, p[P.L_SA] * sp
-    ja_t, ja_p, alpha_c, taut, taut_rate, alpha_dot = chain_terms(w2x, w2y, w6x, w6y, wt, wp, wb, p)
-    ux, uy = inertia(geo, p, ct, st, cp, sp, fs, wt, wp, fsd, ja_t, ja_p, alpha_c, ws)
+    ja_t, ja_p, alpha_c, taut, taut_rate, alpha_dot = chain_terms(
+        w2x, w2y, w6x, w6y, wt, wp, wb, p, -1.0 if run == LOWER else 1.0)
     rho = p[P.R_WS] / p[P.R_ES]
+    upper_rate = alpha_dot                                             # alpha_u', read when FREE (e' below)
+    if run == FREE:                                                    # no run engaged: alpha is free
+        ja_t, ja_p, alpha_c, rho, alpha_dot = 0.0, 0.0, 0.0, 0.0, y[ZALPHA_DOT]
+    ux, uy = inertia(geo, p, ct, st, cp, sp, fs, wt, wp, fsd, ja_t, ja_p, alpha_c, rho, ws)
     # drive torque on the sprocket (alpha decreasing) and its reaction on the chassis
     torque = drive_torque(wt, alpha_dot, p, aux)
     q_x = ws[W_Q + ZX1]
@@ -186,24 +208,31 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws):
     out[:N_DOF] = y[N_DOF:ZU]
     out[ZU] = aux[AUX_DUDT]                                            # (42)
     alpha_dd = alpha_c + ja_t * out[N_DOF + ZTHETA] + ja_p * out[N_DOF + ZPHI] + rho * out[N_DOF + ZBETA]
+    if run == FREE:
+        alpha_dd = -torque / p[P.I_SPROCKET]                           # the free sprocket: I alpha'' = -T
     aux[AUX_TENSION] = sprocket_chain_tension(alpha_dd, p)
     aux[AUX_TAUT] = taut
     aux[AUX_TAUT_RATE] = taut_rate
     aux[AUX_ALPHA_DOT] = alpha_dot
-    for i in range(N_STATE):
+    if y.shape[0] == N_STATE_TWO_RUNS:  # e' (engaged: e follows from z, projected after each step)
+        out[ZPLAY] = alpha_dot - upper_rate if run == FREE else 0.0
+        out[ZALPHA_DOT] = alpha_dd
+    for i in range(y.shape[0]):
         if not math.isfinite(out[i]):
             return 1
     return 0
 
 
 @jit
-def kinetic_energy(y, p, kind, rp):
-    """1/2 z'^T M(z) z' [J] at the state y, with the mass matrix of fast_rhs."""
-    out = np.zeros(N_STATE)
+def kinetic_energy(y, p, kind, rp, run=UPPER):
+    """1/2 z'^T M(z) z' [J] at the state y, with the mass matrix of fast_rhs in the chain's mode run
+    (FREE: the engine sprocket's 1/2 I alpha'^2 added, its inertia being out of M)."""
+    out = np.zeros(y.shape[0])
     aux = np.zeros(N_AUX)
     ws = np.zeros(N_WS)
     geo = design_constants(p)
-    fast_rhs(y, p, geo, kind, rp, p[P.SIGMA_K0], False, out, aux, ws)
+    fast_rhs(y, p, geo, kind, rp, p[P.SIGMA_K0], False, out, aux, ws, run)
     mz = np.zeros(N_DOF)
     mass_product(geo, ws, y[N_DOF:ZU], mz)
-    return 0.5 * np.dot(y[N_DOF:ZU], mz)
+    free = 0.5 * p[P.I_SPROCKET] * y[ZALPHA_DOT] ** 2 if run == FREE else 0.0
+    return 0.5 * np.dot(y[N_DOF:ZU], mz) + free

@@ -11,6 +11,11 @@ kappa' of that state (computed with the previous sigma*) and held through the st
 Step size: local error estimate y_{n+1} - (y_n + h k1) (ROS2's embedded first-order
 solution) against a tolerance; steps shrink in the slip transients after a wheel lands and
 grow to h_max elsewhere.
+
+With the two-run chain (a state of N_STATE_TWO_RUNS, engine.fast.chain_runs) each step is taken in
+one mode of the chain; a step whose end would see the engaged run push, or the free sprocket close a
+gap, is shortened (secant on the tension or the gap) until it ends at the event; the run is then
+released at the start of the next step, or re-engaged by its impact at the end of this one.
 """
 
 from __future__ import annotations
@@ -20,10 +25,22 @@ import math
 import numpy as np
 
 from finaldrive.engine.fast.bodies import N_DOF, N_WS, W_B, W_C, ZBETA, ZTHETA, ZX1, design_constants, mass_solve
-from finaldrive.engine.fast.minimal import N_STATE, ZU, fast_rhs
+from finaldrive.engine.fast.chain_runs import (
+    GAP_TOL,
+    TENSION_TOL,
+    closing_run,
+    engage,
+    gap,
+    project,
+    released,
+    run_tension,
+)
+from finaldrive.engine.fast.minimal import FREE, N_STATE, N_STATE_TWO_RUNS, UPPER, ZALPHA_DOT, ZPLAY, ZU, fast_rhs
 from finaldrive.engine.model.diagnostics import (
+    E_CHAIN_COMPRESSION,
     E_TAUT_MAX,
     E_TAUT_MIN,
+    L_IMPACT,
     N_POWERS,
     integrate_powers,
     powers,
@@ -59,16 +76,21 @@ MIN_STEP = 1.0e-7
 #: First step tried [s] (the control adapts it at once).
 FIRST_STEP = 1.0e-3
 
-# Slots of the loop's saved state (st): everything a paused run needs to continue exactly.
-S_T, S_H, S_SIGMA, S_PREV_TAUT, S_PREV_RATE, S_AIR_REAR, S_AIR_FRONT, S_ROW, S_STARTED = range(9)
-N_ST = 9
+#: Shortened tries of one step that locate a chain event before the step is taken as it is.
+MAX_EVENT_TRIES = 40
+
+# Slots of the loop's saved state (st): everything a paused run needs to continue exactly; S_MODE:
+# the chain's mode (engine.fast.minimal: UPPER, LOWER, FREE).
+S_T, S_H, S_SIGMA, S_PREV_TAUT, S_PREV_RATE, S_AIR_REAR, S_AIR_FRONT, S_ROW, S_STARTED, S_MODE = range(10)
+N_ST = 10
 
 
 @jit
 def _w_solve(r, gh, v, c_row, a_uu, k):
     """k = W^-1 r for W = I - gh J with J's nonzero blocks dz''/du = v, du'/dz' = c_row,
-    du'/du = a_uu (rows of z: identity)."""
+    du'/du = a_uu (rows of z and of the two-run chain's e, alpha': identity)."""
     k[:N_DOF] = r[:N_DOF]
+    k[ZU + 1:] = r[ZU + 1:]
     cr = 0.0
     cv = 0.0
     for i in range(N_DOF):
@@ -100,13 +122,21 @@ def _record(row, t, y, aux, sigma, out):
 
 
 @jit
-def _error_norm(e, scale):
-    """Weighted RMS of the local error estimate e (per-component absolute scales)."""
+def _store(states, row, y):
+    """A row of the recorded states: z, z' and, in a third column block of one, the two-run chain's e."""
+    states[row, :2 * N_DOF] = y[:2 * N_DOF]
+    if states.shape[1] > 2 * N_DOF:
+        states[row, 2 * N_DOF] = y[ZPLAY]
+
+
+@jit
+def _error_norm(e, scale, n):
+    """Weighted RMS of the local error estimate e over its first n components (absolute scales)."""
     acc = 0.0
-    for i in range(N_STATE):
+    for i in range(n):
         r = e[i] / scale[i]
         acc += r * r
-    return math.sqrt(acc / N_STATE)
+    return math.sqrt(acc / n)
 
 
 @jit
@@ -141,14 +171,30 @@ def _hermite(y0, f0, y1, f1, h, s, out):
     h10 = s * (1.0 - s) * (1.0 - s)
     h01 = s * s * (3.0 - 2.0 * s)
     h11 = s * s * (s - 1.0)
-    for i in range(N_STATE):
+    for i in range(y0.shape[0]):
         out[i] = h00 * y0[i] + h10 * h * f0[i] + h01 * y1[i] + h11 * h * f1[i]
+
+
+@jit
+def _event_fraction(y, ynew, mode, tension, tension_end, p, geo):
+    """Two-run chain: the fraction of a step to try instead when its end passes a chain event (the
+    engaged run pushing beyond TENSION_TOL, a free run's gap closing beyond GAP_TOL), by the secant
+    through the event function's values at both ends; 1 when the step may be taken."""
+    if mode != FREE:
+        t0, t1 = run_tension(mode, tension), run_tension(mode, tension_end)
+        return t0 / (t0 - t1) if t1 < -TENSION_TOL else 1.0
+    run, g1 = closing_run(ynew, p, geo)
+    if g1 >= -GAP_TOL:
+        return 1.0
+    g0 = gap(y, run, p, geo)
+    return g0 / (g0 - g1)
 
 
 @jit
 def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_time, keep_series,
              st, ext, led, series, states, max_steps):
-    """Integrate y = (z, z', u) from rest to t_end with step-size control; returns a code.
+    """Integrate y = (z, z', u), or (z, z', u, e, alpha') with the two-run chain, from rest to t_end
+    with step-size control; returns a code.
 
     Resumable: every quantity the loop carries between steps is in y and the arrays st (N_ST),
     ext, led (engine.model.diagnostics), series and states; after max_steps accepted steps the
@@ -157,59 +203,70 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
     series rows, every dt_out, come from cubic Hermite interpolation inside the steps (dense
     output), so the series changes nothing of the run. The local error estimate is
     y_{n+1} - (y_n + h k1), ROS2's embedded first-order solution, in a weighted RMS norm with
-    absolute scales tol * (1 m, 1 m, 1 rad, 1 rad, 1 m, 1 rad; x 10 /s for rates; 1 for u).
-    Extremes and the energy ledger are tracked at every accepted step (the extremes of L_taut
-    also inside steps, from its rate at both ends). Codes: OK, PAUSED, NONFINITE, REAR_AIRBORNE,
-    FRONT_AIRBORNE; st[S_T] is the time reached.
+    absolute scales tol * (1 m, 1 m, 1 rad, 1 rad, 1 m, 1 rad; x 10 /s for rates; 1 for u; with a
+    free engine sprocket also 1 rad for e, 10 /s for alpha'). Extremes and the energy ledger are
+    tracked at every accepted step (the extremes of L_taut also inside steps, from its rate at both
+    ends). Codes: OK, PAUSED, NONFINITE, REAR_AIRBORNE, FRONT_AIRBORNE; st[S_T] is the time reached.
     """
     geo = design_constants(p)
+    n_state = y.shape[0]
+    two_runs = n_state == N_STATE_TWO_RUNS
     ws = np.zeros(N_WS)
     c_row = np.zeros(N_DOF)
     v = np.zeros(N_DOF)
     aux = np.zeros(N_AUX)
-    f1 = np.zeros(N_STATE)
-    f2 = np.zeros(N_STATE)
-    k1 = np.zeros(N_STATE)
-    k2 = np.zeros(N_STATE)
-    y2 = np.zeros(N_STATE)
-    ynew = np.zeros(N_STATE)
-    y_old = np.zeros(N_STATE)
-    f_old = np.zeros(N_STATE)
-    err = np.zeros(N_STATE)
+    f1 = np.zeros(n_state)
+    f2 = np.zeros(n_state)
+    k1 = np.zeros(n_state)
+    k2 = np.zeros(n_state)
+    y2 = np.zeros(n_state)
+    ynew = np.zeros(n_state)
+    y_old = np.zeros(n_state)
+    f_old = np.zeros(n_state)
+    err = np.zeros(n_state)
     pw0 = np.zeros(N_POWERS)
     pw1 = np.zeros(N_POWERS)
-    # scratch for the dense output's evaluations (the step's own buffers stay untouched)
-    yi = np.zeros(N_STATE)
-    fi = np.zeros(N_STATE)
+    # scratch for the dense output's evaluations and the two-run chain's event checks
+    yi = np.zeros(n_state)
+    fi = np.zeros(n_state)
     auxi = np.zeros(N_AUX)
     wsi = np.zeros(N_WS)
-    scale = np.full(N_STATE, tol)
+    scale = np.full(n_state, tol)
     for i in range(N_DOF, ZU):
         scale[i] = 10.0 * tol
+    if two_runs:
+        scale[ZALPHA_DOT] = 10.0 * tol
     n_rows = series.shape[0] if keep_series else 0
     if st[S_STARTED] == 0.0:
         st[:] = 0.0
+        st[S_MODE] = UPPER
         st[S_SIGMA] = relaxation_length(0.0, 0.0, 1.0, p)
         st[S_H] = min(h_max, FIRST_STEP)
         start_records(ext, led)
-        if fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, f1, aux, ws) != OK:
+        if fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, f1, aux, ws, UPPER) != OK:
             return NONFINITE
         track_state(ext, aux, p)
         st[S_PREV_TAUT], st[S_PREV_RATE] = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
         if n_rows > 0:
             _record(0, 0.0, y, aux, st[S_SIGMA], series)
-            states[0] = y[:2 * N_DOF]
+            _store(states, 0, y)
             st[S_ROW] = 1.0
         st[S_STARTED] = 1.0
-    elif fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, f1, aux, ws) != OK:
+    elif fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, f1, aux, ws, int(st[S_MODE])) != OK:
         return NONFINITE  # not reached: the same evaluation succeeded before the pause
     t, h, sigma = st[S_T], st[S_H], st[S_SIGMA]
+    mode = int(st[S_MODE])
     row = int(st[S_ROW])
     steps = 0
     while t < t_end:
         if steps >= max_steps:
-            st[S_T], st[S_H], st[S_SIGMA], st[S_ROW] = t, h, sigma, row
+            st[S_T], st[S_H], st[S_SIGMA], st[S_ROW], st[S_MODE] = t, h, sigma, row, mode
             return PAUSED
+        if two_runs and released(mode, aux[AUX_TENSION]) != mode:   # the engaged run would push: it goes slack
+            mode = FREE
+            if fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, f1, aux, ws, mode) != OK:
+                st[S_T] = t
+                return NONFINITE
         # eq. (41) closed with this state's values; f1 and the tyre's outputs moved to the new sigma*
         new_sigma = relaxation_length(aux[AUX_FX], aux[AUX_KAPPA], aux[AUX_FZ_REAR], p)
         mass_solve(geo, ws, ws[W_B:W_B + N_DOF], v)   # M^-1 b
@@ -226,26 +283,36 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
             v[i] *= fx_u                                  # dz''/du = M^-1 b dF_x/du
         powers(aux, p, pw0)
         fz_rear, fz_front, tension = aux[AUX_FZ_REAR], aux[AUX_FZ_FRONT], aux[AUX_TENSION]
+        n_err = n_state if mode == FREE else N_STATE
+        tries = 0
         while True:
             h = min(h, h_max, t_end - t)
             gh = GAMMA * h
             _w_solve(f1, gh, v, c_row, a_uu, k1)
-            for i in range(N_STATE):
+            for i in range(n_state):
                 y2[i] = y[i] + h * k1[i]
-            if fast_rhs(y2, p, geo, kind, rp, sigma, longitudinal, f2, aux, ws) != OK:
+            if fast_rhs(y2, p, geo, kind, rp, sigma, longitudinal, f2, aux, ws, mode) != OK:
                 st[S_T] = t
                 return NONFINITE
-            for i in range(N_STATE):
+            for i in range(n_state):
                 f2[i] -= 2.0 * k1[i]
             _w_solve(f2, gh, v, c_row, a_uu, k2)
-            for i in range(N_STATE):
+            for i in range(n_state):
                 ynew[i] = y[i] + h * (1.5 * k1[i] + 0.5 * k2[i])
                 err[i] = 0.5 * h * (k1[i] + k2[i])
-            e = _error_norm(err, scale)
+            e = _error_norm(err, scale, n_err)
             factor = 0.9 / math.sqrt(max(e, 1e-10))
-            if e <= 1.0 or h <= MIN_STEP:
-                break
-            h *= max(MIN_SHRINK, factor)
+            if e > 1.0 and h > MIN_STEP:
+                h *= max(MIN_SHRINK, factor)
+                continue
+            if two_runs and tries < MAX_EVENT_TRIES and h > MIN_STEP:
+                fast_rhs(ynew, p, geo, kind, rp, sigma, longitudinal, fi, auxi, wsi, mode)
+                fraction = _event_fraction(y, ynew, mode, tension, auxi[AUX_TENSION], p, geo)
+                if fraction < 1.0:
+                    h = max(h * fraction, MIN_STEP)
+                    tries += 1
+                    continue
+            break
         h_done = h
         t_old = t
         t = t_end if t_end - (t + h) <= 1e-12 * t_end else t + h
@@ -254,7 +321,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
         y_old[:] = y
         f_old[:] = f1
         y[:] = ynew
-        if fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, f1, aux, ws) != OK:
+        if fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, f1, aux, ws, mode) != OK:
             st[S_T] = t
             return NONFINITE
         # records at the new state and over the step
@@ -269,17 +336,39 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
             t_row = min(row * dt_out, t_end)
             if t - t_row <= 1e-9 * dt_out:
                 _record(row, t_row, y, aux, sigma, series)
-                states[row] = y[:2 * N_DOF]
+                _store(states, row, y)
             else:
                 _hermite(y_old, f_old, y, f1, h_done, (t_row - t_old) / h_done, yi)
-                fast_rhs(yi, p, geo, kind, rp, sigma, longitudinal, fi, auxi, wsi)
+                fast_rhs(yi, p, geo, kind, rp, sigma, longitudinal, fi, auxi, wsi, mode)
                 _record(row, t_row, yi, auxi, sigma, series)
-                states[row] = yi[:2 * N_DOF]
+                _store(states, row, yi)
             row += 1
+        if two_runs:
+            mode = _chain_after_step(y, mode, h_done, p, geo, ws, aux, ext, led)
+            if fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, f1, aux, ws, mode) != OK:
+                st[S_T] = t
+                return NONFINITE
+            st[S_PREV_TAUT], st[S_PREV_RATE] = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
         st[S_AIR_REAR] = st[S_AIR_REAR] + h_done if fz_rear <= 0.0 else 0.0
         st[S_AIR_FRONT] = st[S_AIR_FRONT] + h_done if fz_front <= 0.0 else 0.0
         if st[S_AIR_REAR] > max_air_time or st[S_AIR_FRONT] > max_air_time:
-            st[S_T], st[S_H], st[S_SIGMA], st[S_ROW] = t, h, sigma, row
+            st[S_T], st[S_H], st[S_SIGMA], st[S_ROW], st[S_MODE] = t, h, sigma, row, mode
             return REAR_AIRBORNE if st[S_AIR_REAR] > max_air_time else FRONT_AIRBORNE
-    st[S_T], st[S_H], st[S_SIGMA], st[S_ROW] = t, h, sigma, row
+    st[S_T], st[S_H], st[S_SIGMA], st[S_ROW], st[S_MODE] = t, h, sigma, row, mode
     return OK
+
+
+@jit
+def _chain_after_step(y, mode, h, p, geo, ws, aux, ext, led):
+    """Two-run chain, after a step of length h taken in mode: a free step counts as overrun and ends
+    in the impact of a run whose gap closed (its loss into led[L_IMPACT]); an engaged step's e and
+    alpha' are projected onto the run. Returns the mode for the next step."""
+    if mode != FREE:
+        project(y, mode, aux[AUX_ALPHA_DOT], p, geo)
+        return mode
+    ext[E_CHAIN_COMPRESSION] += h
+    run, g = closing_run(y, p, geo)
+    if g >= 0.0:
+        return FREE
+    led[L_IMPACT] += engage(y, run, p, geo, ws)
+    return run

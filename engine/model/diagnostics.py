@@ -48,9 +48,10 @@ from finaldrive.engine.model.tyre import low_speed_factor, magic_formula_slope
  E_TAUT_MAX) = range(14)
 N_EXT = 14
 
-# Integrated powers of the ledger [J] (led), and the smallest tyre dissipation rate seen [W].
-L_DRIVE, L_DAMPERS, L_SLIP, L_CARCASS, L_TYRE_DISSIPATION, L_LEVER, L_DISSIPATION_MIN = range(7)
-N_LED = 7
+# Integrated powers of the ledger [J] (led), the smallest tyre dissipation rate seen [W], and the
+# kinetic energy the two-run chain's re-engagement impacts took [J] (engine.fast.chain_runs).
+L_DRIVE, L_DAMPERS, L_SLIP, L_CARCASS, L_TYRE_DISSIPATION, L_LEVER, L_DISSIPATION_MIN, L_IMPACT = range(8)
+N_LED = 8
 # Powers at one state (pw), in the ledger's order.
 N_POWERS = 6
 

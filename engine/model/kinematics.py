@@ -3,7 +3,9 @@ the chain length (69) and the squat ratio.
 
 Given the six independent coordinates (x1, y1, theta, phi, fs, beta) and alpha, every other
 coordinate follows in closed form from eqs. (1)-(33) (the upper chain run is the common
-external tangent of the pitch circles, eqs. 24-29 and 31).
+external tangent of the pitch circles, eqs. 24-29 and 31). The lower run, used by the two-run
+chain (docs/engine.md#chain-overrun), is the other common external tangent: the mirror of
+eqs. (24)-(29) and (31) about the line of centres.
 """
 
 from __future__ import annotations
@@ -83,6 +85,41 @@ def _tangent_angle(x2: float, y2: float, x6: float, y6: float, res: float, rws: 
     return math.atan2(math.sin(gamma), math.cos(gamma))
 
 
+def lower_tangent_angle(x2: float, y2: float, x6: float, y6: float, res: float, rws: float) -> float:
+    """gamma_l: angle of the radii to the lower run's tangent points, the mirror of eqs. (24)-(29), (31)
+    about the line of centres: the other root of |r_2->6| cos(gamma - delta) = R_ES - R_WS,
+    gamma_l = delta + acos(.); NaN when no chain fits."""
+    dx, dy = x6 - x2, y6 - y2
+    dist = math.hypot(dx, dy)
+    if dist <= abs(rws - res):
+        return math.nan
+    gamma = math.atan2(dy, dx) + math.acos((res - rws) / dist)
+    return math.atan2(math.sin(gamma), math.cos(gamma))
+
+
+@jit
+def loop_length(dist: float, res: float, rws: float) -> float:
+    """Length of the chain's closed loop with both runs taut, sprocket centres dist apart: both
+    straight runs (eqs. 24-29 and their mirror, sqrt(dist^2 - k^2) each) and both wraps,
+    pi (R_ES + R_WS) + 2 k asin(k / dist), k = R_ES - R_WS (the open-belt length)."""
+    k = res - rws
+    return math.pi * (res + rws) + 2.0 * k * math.asin(k / dist) + 2.0 * math.sqrt(dist * dist - k * k)
+
+
+def free_play_slack(taut: float, free_play: float) -> float:
+    """How much longer the chain is than its loop of two taut runs when its slack run of length taut
+    moves free_play up and down at its midpoint: sqrt(taut^2 + free_play^2) - taut (the run pushed to
+    either side of its straight line becomes two straight halves)."""
+    return math.sqrt(taut * taut + free_play * free_play) - taut
+
+
+def whole_chain_length(q: np.ndarray, p: np.ndarray) -> float:
+    """The two-run chain's whole length at pose q: the loop of both taut runs and the slack of the
+    vehicle's chain_free_play measured at that pose."""
+    dist = math.hypot(q[X6] - q[X2], q[Y6] - q[Y2])
+    return float(loop_length(dist, p[P.R_ES], p[P.R_WS])) + free_play_slack(taut_length(q), p[P.CHAIN_FREE_PLAY])
+
+
 @jit
 def fill_pose(p: np.ndarray, kind: int, rp: np.ndarray, x1: float, y1: float, theta: float, phi: float,
               fs: float, beta: float, alpha: float, q: np.ndarray) -> bool:
@@ -129,14 +166,15 @@ def assemble(p: np.ndarray, road: Road, x1: float, y1: float, theta: float, phi:
     return q
 
 
-def pose_from_minimal(z: np.ndarray, p: np.ndarray, road: Road) -> np.ndarray:
+def pose_from_minimal(z: np.ndarray, p: np.ndarray, road: Road, play: float = 0.0) -> np.ndarray:
     """All 39 coordinates from z = (x1, y1, theta, phi, fs, beta), alpha from the chain
-    length P[L_CHAIN] through eq. (30)."""
+    length P[L_CHAIN] through eq. (30), turned by play (the two-run chain's e: the engine
+    sprocket's turn beyond the upper run's engagement)."""
     x1, y1, theta, phi, fs, beta = (float(v) for v in z[:6])
     q = assemble(p, road, x1, y1, theta, phi, fs, beta, 0.0)
     gamma = q[GAMMA]
     alpha = gamma - (p[P.L_CHAIN] - taut_length(q) - (beta - gamma) * p[P.R_WS]) / p[P.R_ES]
-    return assemble(p, road, x1, y1, theta, phi, fs, beta, alpha)
+    return assemble(p, road, x1, y1, theta, phi, fs, beta, alpha + play)
 
 
 def taut_length(q: np.ndarray) -> float:

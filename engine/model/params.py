@@ -75,14 +75,17 @@ EPS2 = 63
 SR_OPTIMUM = 64
 FLOOR = 65
 SQUAT_K = 66
-A2 = 67  # design: angle a2 of r_1->2 in the chassis frame [rad]
-L2 = 68  # design: pivot to engine sprocket axis [m]
-R_WS = 69  # design: wheel sprocket pitch radius [m]
-R_ES = 70  # design: engine sprocket pitch radius R_WS / sprocket_ratio [m]
-L_CHAIN = 71  # chain length L of eq. (69), set at t = 0 [m]
-AL_ALPHA = 72  # augmented Lagrangian penalty alpha, eqs. (57)-(58)
-AL_XI = 73  # Baumgarte xi, eq. (57)
-AL_OMEGA = 74  # Baumgarte omega, eq. (57)
+CHAIN_RUNS = 67
+CHAIN_FREE_PLAY = 68
+A2 = 69  # design: angle a2 of r_1->2 in the chassis frame [rad]
+L2 = 70  # design: pivot to engine sprocket axis [m]
+R_WS = 71  # design: wheel sprocket pitch radius [m]
+R_ES = 72  # design: engine sprocket pitch radius R_WS / sprocket_ratio [m]
+L_CHAIN = 73  # chain length L of eq. (69), set at t = 0 [m]
+L_LOOP = 74  # two chain runs: the whole chain's length, both runs and both wraps, set at t = 0 [m]
+AL_ALPHA = 75  # augmented Lagrangian penalty alpha, eqs. (57)-(58)
+AL_XI = 76  # Baumgarte xi, eq. (57)
+AL_OMEGA = 77  # Baumgarte omega, eq. (57)
 
 VEHICLE_KEYS: tuple[str, ...] = (
     'L3',
@@ -152,6 +155,8 @@ VEHICLE_KEYS: tuple[str, ...] = (
     'sr_optimum',
     'floor',
     'squat_K',
+    'chain_runs',
+    'chain_free_play',
 )
-N_VEHICLE = 67
-N_PARAMS = 75
+N_VEHICLE = 69
+N_PARAMS = 78

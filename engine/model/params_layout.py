@@ -20,6 +20,7 @@ DESIGN_SLOTS: tuple[tuple[str, str], ...] = (
     ("R_WS", "design: wheel sprocket pitch radius [m]"),
     ("R_ES", "design: engine sprocket pitch radius R_WS / sprocket_ratio [m]"),
     ("L_CHAIN", "chain length L of eq. (69), set at t = 0 [m]"),
+    ("L_LOOP", "two chain runs: the whole chain's length, both runs and both wraps, set at t = 0 [m]"),
     ("AL_ALPHA", "augmented Lagrangian penalty alpha, eqs. (57)-(58)"),
     ("AL_XI", "Baumgarte xi, eq. (57)"),
     ("AL_OMEGA", "Baumgarte omega, eq. (57)"),
