@@ -48,9 +48,7 @@ def prepare(design: Design, road: Road, settings: SimSettings, vehicle: Vehicle)
     runs also the whole chain's length). Each method finds the equilibrium of its own model (the
     reference in its 39 natural coordinates). Raises DesignError for a design beyond the vehicle's
     limits (Vehicle.check_design), ValueError for the two-run chain with the reference method."""
-    if vehicle["chain_runs"] == 2 and settings.method == "reference":
-        raise ValueError("vehicle chain_runs = 2 (both chain runs) is supported by the fast method only; "
-                         "the reference method models the paper's upper run (chain_runs = 1)")
+    vehicle.check_method(settings.method)
     vehicle.check_design(design)
     p = pack_parameters(vehicle, design, settings)
     pose = design_pose(p)

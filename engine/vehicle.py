@@ -125,6 +125,13 @@ class Vehicle:
                               f"rt0 = {self['rt0']:g} m less rws_tyre_margin = {self['rws_tyre_margin']:g} m "
                               "(vehicle file)")
 
+    def check_method(self, method: str) -> None:
+        """Raise ValueError if the solver ``method`` cannot simulate this vehicle (the two-run chain
+        is modelled by the fast method only)."""
+        if self["chain_runs"] == 2 and method == "reference":
+            raise ValueError("vehicle chain_runs = 2 (both chain runs) is supported by the fast method only; "
+                             "the reference method models the paper's upper run (chain_runs = 1)")
+
     def to_dict(self) -> dict[str, Any]:
         units, sources, groups = dict(self.units), dict(self.sources), dict(self.groups)
         out: dict[str, Any] = {"name": self.name, "parameters": {}}

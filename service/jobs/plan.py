@@ -58,4 +58,9 @@ def build_plan(spec: JobSpec, *, profiles: ProfileResolver | None = None,
                                max_wall_s=max_simulation_s)
     except ValueError as exc:
         raise PlanError(("settings",), str(exc)) from None
+    if vehicle is not None:
+        try:
+            vehicle.check_method(settings.method)
+        except ValueError as exc:
+            raise PlanError(("settings", "method"), str(exc)) from None
     return JobPlan(study, settings, vehicle)

@@ -9,6 +9,7 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 
+from finaldrive.engine import default_vehicle
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
 from tests.service.svc_helpers import DE, SWEEP, ToyTask
@@ -135,3 +136,11 @@ def test_recorded_designs_are_held_to_the_vehicle(client: TestClient) -> None:
         "designs": [{"a2_deg": 0, "l2_m": 0.1, "rws_m": 0.09}, {"a2_deg": 0, "l2_m": 0.1, "rws_m": 0.25}]}),
         422)
     assert "designs.1" in body["detail"] and "rws = 0.25 m: must be <= 0.2 m" in body["detail"]
+
+
+def test_a_vehicle_the_method_cannot_simulate_is_422(client: TestClient) -> None:
+    vehicle = default_vehicle().replace(chain_runs=2).to_dict()
+    body = assert_problem(client.post("/v1/jobs", json={
+        **SWEEP, "vehicle": vehicle, "settings": {"method": "reference"}}), 422)
+    assert "settings.method" in body["detail"] and "chain_runs = 2" in body["detail"], body["detail"]
+    assert client.post("/v1/jobs", json={**SWEEP, "vehicle": vehicle}).status_code == 201  # the fast method can
