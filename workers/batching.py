@@ -11,13 +11,14 @@ The rule (docs/workers.md, "Batching"):
    least-queued task; cold-start tasks only overestimate it, and later tasks lower it).
 3. **Size.** Overhead fraction ``o / (b c) <= 0.05`` needs ``b >= o / (0.05 c)``; take the
    smallest such ``b``, but at most ``remaining // (num_workers * 4)`` (at least 1), so at
-   least four waves remain: every worker gets work, the tail balances, and progress streams
-   (``remaining``: the designs that go before or with the request being cut, so a DE
-   generation beside a sweep is cut for the generations); and at most ``MAX_TASK_S / c``
-   (at least 1), so no task runs much longer than half a second: a cancel waits for little, a
-   DE generation is not held by one long task, and a queueing delay mistaken for overhead
-   cannot grow batches without bound. When the rules cannot all hold, giving every worker
-   work wins.
+   least four waves remain: every worker gets work, the tail balances, and progress streams;
+   at most ``ceil(first / num_workers)``, so the work that starts first (``first``: the designs
+   of the requests that go before or with this one, e.g. the DE generations waiting beside a
+   sweep) spreads over every worker in one wave rather than queueing behind itself; and at most
+   ``MAX_TASK_S / c`` (at least 1), so no task runs much longer than half a second: a cancel
+   waits for little, a DE generation is not held by one long task, and a queueing delay
+   mistaken for overhead cannot grow batches without bound. When the rules cannot all hold,
+   giving every worker work wins.
 4. **Keep up.** The thread that dispatches spends ``d`` seconds of its own on each task
    (submitting it, taking its result, handing it on: measured by the dispatcher as its time spent
    starting tasks and handling results, over finished tasks). ``N`` workers finishing a task every ``b c`` seconds
@@ -46,20 +47,24 @@ def batch_size(
     per_design_s: float,
     overhead_s: float,
     driver_s: float = 0.0,
+    first: int | None = None,
     target: float = TARGET_OVERHEAD,
     min_waves: int = MIN_WAVES,
 ) -> int:
     """Designs for the next batch (>= 1 while ``remaining`` > 0; 0 when nothing remains);
-    ``driver_s``: the dispatching thread's own time a task (rule 4)."""
+    ``driver_s``: the dispatching thread's own time a task (rule 4); ``first``: the designs that
+    start before or with this batch's request (rule 3's spread; default ``remaining``)."""
     if remaining <= 0:
         return 0
-    waves = max(1, remaining // (max(1, num_workers) * min_waves))
+    workers = max(1, num_workers)
+    waves = max(1, remaining // (workers * min_waves))
+    spread = math.ceil((remaining if first is None else first) / workers)
     if per_design_s <= 0.0:
-        return waves
+        return min(waves, spread)
     longest = max(1, int(MAX_TASK_S / per_design_s))
     needed = math.ceil(max(0.0, overhead_s) / (target * per_design_s))
-    keep_up = math.ceil(max(1, num_workers) * max(0.0, driver_s) / (DRIVER_SHARE * per_design_s))
-    size = max(1, min(needed, waves, longest), min(keep_up, longest))
+    keep_up = math.ceil(workers * max(0.0, driver_s) / (DRIVER_SHARE * per_design_s))
+    size = max(1, min(needed, waves, longest, spread), min(keep_up, longest))
     return min(size, remaining)
 
 
@@ -79,8 +84,9 @@ class BatchSizer:
         self.compute_s += compute_s
         self.overhead_s = min(self.overhead_s, max(0.0, round_trip_s - busy_s))
 
-    def next_size(self, remaining: int, driver_s: float = 0.0) -> int:
-        """Designs for the next batch; ``driver_s``: the dispatcher's own time a task."""
+    def next_size(self, remaining: int, driver_s: float = 0.0, first: int | None = None) -> int:
+        """Designs for the next batch; ``driver_s``: the dispatcher's own time a task; ``first``:
+        the designs that start before or with the batch's request."""
         if self.designs_done == 0:
             return min(self.probe_size, max(0, remaining))
         return batch_size(
@@ -89,4 +95,5 @@ class BatchSizer:
             per_design_s=self.compute_s / self.designs_done,
             overhead_s=self.overhead_s,
             driver_s=driver_s,
+            first=first,
         )

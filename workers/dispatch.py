@@ -193,7 +193,7 @@ class Dispatcher:
             at, ahead = work.next_request()
             request = work.queue[at]
             assert work.sizer is not None
-            size = self._batch_size or work.sizer.next_size(ahead, self.driver_s)
+            size = self._batch_size or work.sizer.next_size(work.queued(), self.driver_s, first=ahead)
             if size >= len(request):
                 part = request
                 del work.queue[at]

@@ -18,7 +18,7 @@ from sqlalchemy.orm import Session
 
 from finaldrive.engine import DIAGNOSTICS
 from finaldrive.service.db.leases import db_now
-from finaldrive.service.db.models import EvalStatus, Evaluation, Generation, Job, JobRoad, JobState
+from finaldrive.service.db.models import EvalStatus, Evaluation, Generation, Job, JobState
 
 #: Rows per ``IN (...)`` query, well under SQLite's variable limit.
 _IN_CHUNK = 500
@@ -173,7 +173,8 @@ def _recount(session: Session, job_id: int) -> None:
 
 
 def _update_best(session: Session, job_id: int, rows: Sequence[Row]) -> None:
-    """Each road's best evaluation, if one of ``rows`` beats it."""
+    """Each road's best evaluation, if one of ``rows`` beats it (plain SQL through the driver: the
+    writer runs this with every batch of rows it stores)."""
     best: dict[int, Row] = {}
     for row in rows:
         current = best.get(row[ROAD])
@@ -181,14 +182,17 @@ def _update_best(session: Session, job_id: int, rows: Sequence[Row]) -> None:
             best[row[ROAD]] = row
     if not best:
         return
-    roads = session.scalars(select(JobRoad).where(JobRoad.job_id == job_id, JobRoad.road_index.in_(list(best))))
-    for road in roads:
-        row = best[road.road_index]
-        if road.best_fitness_m is None or _better(row[FITNESS], road.best_fitness_m):
-            road.best_fitness_m = row[FITNESS]
-            road.best_evaluation_id = session.execute(select(Evaluation.id).where(
-                Evaluation.job_id == job_id, Evaluation.road_index == row[ROAD], Evaluation.step == row[STEP],
-                Evaluation.candidate == row[CANDIDATE])).scalar_one()
+    marker = "?" if session.get_bind().dialect.paramstyle == "qmark" else "%s"
+    connection = session.connection()
+    stored = dict(connection.exec_driver_sql(
+        f"SELECT road_index, best_fitness_m FROM job_roads WHERE job_id = {marker}", (job_id,)).all())
+    better = [row for road, row in best.items() if road in stored and _better(row[FITNESS], stored[road])]
+    if better:
+        connection.exec_driver_sql(
+            f"UPDATE job_roads SET best_fitness_m = {marker}, best_evaluation_id = (SELECT id FROM evaluations "
+            f"WHERE job_id = {marker} AND road_index = {marker} AND step = {marker} AND candidate = {marker}) "
+            f"WHERE job_id = {marker} AND road_index = {marker}",
+            [(row[FITNESS], job_id, row[ROAD], row[STEP], row[CANDIDATE], job_id, row[ROAD]) for row in better])
 
 
 def _better(a: float | None, b: float | None) -> bool:

@@ -30,6 +30,18 @@ def test_cap_leaves_four_waves_for_every_worker() -> None:
     assert b == 400 // (2 * 4)
 
 
+def test_the_work_that_starts_first_spreads_over_every_worker() -> None:
+    """23 DE generations of 50 beside a sweep on 256 workers: one wave of 5 designs a task, not
+    tasks sized for the sweep; on 2 workers the same generations are not cut for latency."""
+    def size(num_workers: int, first: int | None) -> int:
+        return batch_size(remaining=46_690, num_workers=num_workers, per_design_s=0.005, overhead_s=0.01,
+                          first=first)
+
+    assert size(256, first=1150) == 5
+    assert size(256, first=None) == 40  # sized for the overhead alone
+    assert size(2, first=1150) == 40
+
+
 @pytest.mark.parametrize("remaining", [1, 2, 7])
 def test_few_designs_still_give_batches_of_one(remaining: int) -> None:
     assert batch_size(remaining=remaining, num_workers=8, per_design_s=1e-6, overhead_s=1.0) == 1

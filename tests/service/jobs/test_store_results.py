@@ -7,9 +7,10 @@ import math
 
 import numpy as np
 
-from finaldrive.engine import DIAGNOSTICS, Request, Road
+from finaldrive.engine import DIAGNOSTICS, BatchResult, Request, Road
 from finaldrive.service.config import Settings
 from finaldrive.service.db.leases import claim_jobs, register_scheduler
+from finaldrive.service.db.models import Evaluation, JobRoad
 from finaldrive.service.db.results import CACHED_COLUMNS, cached_evaluations, store_results
 from finaldrive.service.jobs.scheduler import _rows_from_results
 from finaldrive.service.jobs.submit import submit_job
@@ -18,7 +19,7 @@ from finaldrive.service.services import open_database
 from tests.service.svc_helpers import SWEEP, toy_batch
 
 
-def test_cache_hits_are_the_stored_values_and_transient_failures_are_never_hits(store_url: str) -> None:
+def test_rows_are_stored_once_with_the_roads_best_and_read_back_as_cache_hits(store_url: str) -> None:
     db = open_database(Settings(db_url=store_url))
     try:
         job, _ = submit_job(db, JobSpec.model_validate(SWEEP), idempotency_key=None, max_evaluations=1000,
@@ -33,7 +34,7 @@ def test_cache_hits_are_the_stored_values_and_transient_failures_are_never_hits(
         road = Road.parse("sine:0.025:3")
         first, last = part.split(2)
         batch = toy_batch(first.designs, road, fail_above_l2=0.15)  # the second design fails
-        again = toy_batch(last.designs, road)
+        again = BatchResult.failed(last.designs, "worker lost: its process died repeatedly while simulating")
         stable, lost = (_rows_from_results([finished]) for finished in (
             (first, batch, batch.fitness_m, [k0, k1], False), (last, again, again.fitness_m, [k2], True)))
         with db.write() as session:
@@ -42,6 +43,9 @@ def test_cache_hits_are_the_stored_values_and_transient_failures_are_never_hits(
             assert store_results(session, "s1", job.id, stable, []) == 0
         with db.read() as session:
             hits = cached_evaluations(session, [k0, k1, k2, k3])
+            job_road = session.get(JobRoad, (job.id, 1))
+            assert job_road is not None and job_road.best_evaluation_id is not None
+            best = session.get(Evaluation, job_road.best_evaluation_id)
     finally:
         db.dispose()
     assert set(hits) == {k0, k1}  # k2's worker was lost (transient); k3 was never stored
@@ -51,3 +55,4 @@ def test_cache_hits_are_the_stored_values_and_transient_failures_are_never_hits(
     assert hits[k1]["fitness_m"] is None and hits[k1]["status"] == "failed"
     assert hits[k1]["reason"] == "fake divergence"
     assert all(hits[k0][name] is None for name in DIAGNOSTICS)  # NaN stored as NULL
+    assert best is not None and best.candidate == 0 and job_road.best_fitness_m == batch.fitness_m[0]
