@@ -184,7 +184,7 @@ def _update_best(session: Session, job_id: int, rows: Sequence[Row]) -> None:
         return
     marker = "?" if session.get_bind().dialect.paramstyle == "qmark" else "%s"
     connection = session.connection()
-    stored = dict(connection.exec_driver_sql(
+    stored: dict[int, float | None] = dict(connection.exec_driver_sql(
         f"SELECT road_index, best_fitness_m FROM job_roads WHERE job_id = {marker}", (job_id,)).all())
     better = [row for road, row in best.items() if road in stored and _better(row[FITNESS], stored[road])]
     if better:

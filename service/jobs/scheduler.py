@@ -28,7 +28,7 @@ import threading
 import time
 import uuid
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
 from typing import Any
@@ -36,10 +36,8 @@ from typing import Any
 import numpy as np
 
 from finaldrive.engine import (
-    DIAGNOSTICS,
     ENGINE_VERSION,
     PAPER_SWEEP_STEP,
-    STATUS_OK,
     BatchResult,
     DERun,
     PlanError,
@@ -51,14 +49,11 @@ from finaldrive.engine import (
 from finaldrive.service.config import Settings
 from finaldrive.service.db.engine import Database
 from finaldrive.service.db.leases import beat, claim_jobs, finish_job, register_scheduler, stop_scheduler
-from finaldrive.service.db.models import EvalStatus, Job, JobState
+from finaldrive.service.db.models import Job, JobState
 from finaldrive.service.db.repository import profile_roads
 from finaldrive.service.db.results import (
     FITNESS,
-    ROW_COLUMNS,
-    Row,
     cached_evaluations,
-    key_hash,
     last_generations,
     stored_fitness,
     stored_slots,
@@ -66,6 +61,7 @@ from finaldrive.service.db.results import (
 from finaldrive.service.jobs.cache import context_prefix, design_keys
 from finaldrive.service.jobs.plan import JobPlan, build_plan
 from finaldrive.service.jobs.recordings import RecordingProducer
+from finaldrive.service.jobs.rows import CACHED, WALL, nullable, row_from_cache, rows_from_results
 from finaldrive.service.jobs.writer import Guard, Writer, Writes
 from finaldrive.service.profiles import profile_ids, resolver
 from finaldrive.service.schemas import JobSpec
@@ -75,8 +71,6 @@ from finaldrive.workers.evaluate import run_engine_on_roads, warm_up_engine
 
 log = logging.getLogger(__name__)
 
-#: How the engine's reason for a simulation stopped by its wall-time limit begins (not reused from the cache).
-TIME_LIMIT = "time limit"
 #: A scheduler's transactions wait this long for a lock, then retry later (the loop keeps dispatching).
 SCHEDULER_LOCK_TIMEOUT_S = 2.0
 #: Designs of a job looked up in the store a turn (the rest wait for the next turns).
@@ -109,8 +103,6 @@ class ActiveJob:
         self.resumed = resumed
         self.intake: deque[Request] = deque()
         self.writes = Writes()
-        self.finished: list[Finished] = []   # results whose rows are built in bulk when handed to the writer
-        self._finished_rows = 0
         self.copies: dict[tuple[int, int, int], list[int]] = {}   # (road, step, first candidate) -> duplicates
         self.keys: dict[tuple[int, int, int], str] = {}           # dispatched (road, step, candidate) -> key
         self.prefixes = [context_prefix(r.road, plan.settings, plan.vehicle, engine_version)
@@ -123,19 +115,11 @@ class ActiveJob:
                 and all(run.done for run in self.runs.values()))
 
     def finish(self, part: Request, batch: BatchResult, fitness: np.ndarray, keys: list[str], transient: bool) -> None:
-        """A finished part, stored with the next writes."""
-        self.finished.append((part, batch, fitness, keys, transient))
-        self._finished_rows += len(part)
-
-    def backlog(self) -> int:
-        """Results and generations waiting to be handed to the writer."""
-        return len(self.writes) + self._finished_rows
+        """A finished part, stored with the next writes (its rows built by the writer's thread)."""
+        self.writes.finish((part, batch, fitness, keys, transient))
 
     def take_writes(self) -> Writes | None:
-        """What waits to be stored (the finished results made rows, all at once), or None."""
-        if self.finished:
-            self.writes.rows += _rows_from_results(self.finished)
-            self.finished, self._finished_rows = [], 0
+        """What waits to be stored, or None."""
         if not self.writes:
             return None
         writes, self.writes = self.writes, Writes()
@@ -184,7 +168,9 @@ class Scheduler:
     def turn(self, timeout: float) -> int:
         """One turn of the loop (tests drive it step by step); returns how many tasks finished."""
         now = time.monotonic()
-        if now >= self._next_beat:
+        # the heartbeat is a write transaction: taken while the writer is idle, it does not wait behind
+        # the writer's (which held the loop ~50 ms a beat on SQLite), unless it is half a beat late
+        if now >= self._next_beat and (not self.writer.busy() or now >= self._next_beat + self.config.heartbeat_s / 2):
             self._next_beat = now + self.config.heartbeat_s
             self._maintain()
         self._intake()
@@ -276,7 +262,7 @@ class Scheduler:
                     for request, (stored, keys) in zip(requests, found[0], strict=True):
                         self._admit(job, request, stored, keys, hits)
             assert job.work is not None
-            job.work.paused = job.backlog() + self.writer.pending(job.id) > self.config.max_backlog_rows
+            job.work.paused = len(job.writes) + self.writer.pending(job.id) > self.config.max_backlog_rows
 
     def _admit(self, job: ActiveJob, request: Request, stored: dict[int, float], keys: list[str],
                hits: dict[str, dict[str, Any]]) -> None:
@@ -301,7 +287,7 @@ class Scheduler:
                 job.keys[slot] = key
         if hit:
             part = request.part(np.array(hit))
-            rows = [_row_from_cache(hits[keys[i]], part.road, part.step, int(part.candidates[j]), part.designs[j],
+            rows = [row_from_cache(hits[keys[i]], part.road, part.step, int(part.candidates[j]), part.designs[j],
                                     keys[i]) for j, i in enumerate(hit)]
             job.writes.rows += rows
             self._tell(job, part, np.array([math.nan if r[FITNESS] is None else r[FITNESS] for r in rows]))
@@ -320,11 +306,11 @@ class Scheduler:
             self._tell(job, part, fitness)
             return
         # designs that were duplicates of one in this part: the same result, told and stored as cached
-        rows = _rows_from_results([(part, batch, fitness, keys, transient)])
+        rows = rows_from_results([(part, batch, fitness, keys, transient)])
         told_candidates, told_fitness, told_designs = list(part.candidates), list(fitness), list(part.designs)
         for j, duplicates in enumerate(copies):
             for copy in duplicates or ():
-                rows.append((part.road, part.step, copy, *rows[j][3:_WALL], 0.0, True, *rows[j][_CACHED + 1:]))
+                rows.append((part.road, part.step, copy, *rows[j][3:WALL], 0.0, True, *rows[j][CACHED + 1:]))
                 told_candidates.append(copy)
                 told_fitness.append(fitness[j])
                 told_designs.append(part.designs[j])
@@ -345,8 +331,8 @@ class Scheduler:
             de = run.de
             job.writes.generations.append({
                 "run": run.index, "generation": run.generation, "state": de.state(),
-                "population": de.population.tolist(), "fitness_m": _nullable(de.fitness),
-                "best_fitness_m": _nullable([de.best_f])[0], "n_evals": de.n_evals,
+                "population": de.population.tolist(), "fitness_m": nullable(de.fitness),
+                "best_fitness_m": nullable([de.best_f])[0], "n_evals": de.n_evals,
             })
 
     def _finish_ready(self) -> None:
@@ -414,65 +400,6 @@ def _lookup(session: Any, job: ActiveJob, requests: list[Request]
                                      dtype=int))
         out.append((stored, design_keys(job.prefixes[request.road], rest.designs)))
     return out, cached_evaluations(session, [key for _, keys in out for key in keys])
-
-
-_OK, _FAILED = EvalStatus.ok.value, EvalStatus.failed.value
-#: where the wall time and the cached flag sit in a row (a copy of a duplicate: 0 s, cached)
-_WALL, _CACHED = ROW_COLUMNS.index("wall_s"), ROW_COLUMNS.index("cached")
-
-
-#: A finished part of a request: (part, its results, their fitness, their cache keys, transient).
-Finished = tuple[Request, BatchResult, np.ndarray, list[str], bool]
-
-
-def _rows_from_results(finished: list[Finished]) -> list[Row]:
-    """The rows of finished parts (NaN stored as NULL), the numbers of all of them converted in one block."""
-    counts = [len(part) for part, *_ in finished]
-    fitness = np.concatenate([f for _, _, f, _, _ in finished])
-    batches = [batch for _, batch, *_ in finished]
-    ok = np.isfinite(fitness).tolist()
-    reasons = [reason or ("" if good else f"non-finite fitness ({value})") for reason, good, value in zip(
-        (r for b in batches for r in b.reason), ok, (v for b in batches for v in b.fitness_m.tolist()), strict=True)]
-    transient = np.repeat([t for *_, t in finished], counts).tolist()
-    failed_for_now = [lost or (status != STATUS_OK and reason.startswith(TIME_LIMIT)) for lost, status, reason
-                      in zip(transient, (s for b in batches for s in b.status), reasons, strict=True)]
-    designs = np.concatenate([part.designs for part, *_ in finished]).T
-
-    def joined(name: str) -> np.ndarray:
-        return np.concatenate([getattr(b, name) for b in batches])
-
-    numbers = _nullable_columns(np.array([
-        np.degrees(designs[0]), designs[1], designs[2], joined("distance_m"), joined("squat_ratio"),
-        joined("slack_m"), fitness, joined("chain_length_m"), *(joined(name) for name in DIAGNOSTICS)], dtype=float))
-    keys = [key for *_, part_keys, _ in finished for key in part_keys]
-    n = len(keys)
-    columns = [
-        np.repeat([part.road for part, *_ in finished], counts).tolist(),
-        np.repeat([part.step for part, *_ in finished], counts).tolist(),
-        np.concatenate([part.candidates for part, *_ in finished]).tolist(), *numbers[:8],
-        [_OK if good else _FAILED for good in ok], reasons, joined("wall_s").tolist(), [False] * n, keys,
-        [key_hash(key) for key in keys], failed_for_now, *numbers[8:],
-    ]
-    return list(zip(*columns, strict=True))
-
-
-def _row_from_cache(hit: dict[str, Any], road: int, step: int, candidate: int, design: np.ndarray, key: str) -> Row:
-    values = hit | {"wall_s": 0.0, "cached": True, "cache_key": key, "cache_hash": key_hash(key), "transient": False}
-    a2, l2, rws = (c[0] for c in _nullable_columns(np.array([[np.degrees(design[0])], [design[1]], [design[2]]])))
-    return (road, step, candidate, a2, l2, rws, *(values[name] for name in ROW_COLUMNS[6:]))
-
-
-def _nullable_columns(columns: np.ndarray) -> list[list[float | None]]:
-    """Columns given as the rows of a float block, as plain floats, None for NaN and infinities."""
-    out = columns.astype(object)
-    out[~np.isfinite(columns)] = None
-    plain: list[list[float | None]] = out.tolist()
-    return plain
-
-
-def _nullable(values: Sequence[float] | np.ndarray) -> list[float | None]:
-    """Plain floats, None for NaN and infinities."""
-    return _nullable_columns(np.asarray(values, dtype=float)[None, :])[0]
 
 
 def run_scheduler(settings: Settings, stop: threading.Event, *, scheduler_id: str | None = None,

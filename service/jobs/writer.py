@@ -21,6 +21,7 @@ from sqlalchemy.exc import SQLAlchemyError
 
 from finaldrive.service.db.engine import Database
 from finaldrive.service.db.results import LeaseLost, Row, store_results
+from finaldrive.service.jobs.rows import Finished, rows_from_results
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -28,17 +29,29 @@ T = TypeVar("T")
 
 @dataclass
 class Writes:
-    """What a job has to store, in order: evaluations, then each completed DE generation."""
+    """What a job has to store, in order: evaluations (rows, and finished results whose rows the
+    writer's thread builds, in bulk), then each completed DE generation."""
 
     rows: list[Row] = field(default_factory=list)
+    finished: list[Finished] = field(default_factory=list)
     generations: list[dict[str, Any]] = field(default_factory=list)
+    finished_rows: int = 0
 
     def __len__(self) -> int:
-        return len(self.rows) + len(self.generations)
+        return len(self.rows) + self.finished_rows + len(self.generations)
+
+    def finish(self, result: Finished) -> None:
+        self.finished.append(result)
+        self.finished_rows += len(result[0])
 
     def extend(self, later: Writes) -> None:
         self.rows += later.rows
+        self.finished += later.finished
+        self.finished_rows += later.finished_rows
         self.generations += later.generations
+
+    def all_rows(self) -> list[Row]:
+        return self.rows + rows_from_results(self.finished) if self.finished else self.rows
 
 
 class Guard:
@@ -111,6 +124,11 @@ class Writer:
             waiting = self._waiting.get(job_id)
             return (len(waiting) if waiting else 0) + self._busy.get(job_id, 0)
 
+    def busy(self) -> bool:
+        """Whether anything is being stored or waits to be (a write transaction may hold the store)."""
+        with self._cond:
+            return bool(self._busy or self._queue)
+
     def lost(self) -> list[int]:
         """Jobs whose lease was found lost when their results were written (each reported once);
         their results were dropped."""
@@ -168,7 +186,8 @@ class Writer:
     def _store(self, job_id: int, writes: Writes) -> bool:
         """True when stored, or dropped because the job is no longer ours."""
         try:
-            done = self._guard(lambda s: store_results(s, self.scheduler_id, job_id, writes.rows, writes.generations),
+            rows = writes.all_rows()
+            done = self._guard(lambda s: store_results(s, self.scheduler_id, job_id, rows, writes.generations),
                                f"store results of job {job_id}")
         except LeaseLost:
             log.info("scheduler %s: lost job %s before storing its results", self.scheduler_id, job_id)

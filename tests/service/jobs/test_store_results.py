@@ -12,7 +12,7 @@ from finaldrive.service.config import Settings
 from finaldrive.service.db.leases import claim_jobs, register_scheduler
 from finaldrive.service.db.models import Evaluation, JobRoad
 from finaldrive.service.db.results import CACHED_COLUMNS, cached_evaluations, store_results
-from finaldrive.service.jobs.scheduler import _rows_from_results
+from finaldrive.service.jobs.rows import rows_from_results
 from finaldrive.service.jobs.submit import submit_job
 from finaldrive.service.schemas import JobSpec
 from finaldrive.service.services import open_database
@@ -35,7 +35,7 @@ def test_rows_are_stored_once_with_the_roads_best_and_read_back_as_cache_hits(st
         first, last = part.split(2)
         batch = toy_batch(first.designs, road, fail_above_l2=0.15)  # the second design fails
         again = BatchResult.failed(last.designs, "worker lost: its process died repeatedly while simulating")
-        stable, lost = (_rows_from_results([finished]) for finished in (
+        stable, lost = (rows_from_results([finished]) for finished in (
             (first, batch, batch.fitness_m, [k0, k1], False), (last, again, again.fitness_m, [k2], True)))
         with db.write() as session:
             assert store_results(session, "s1", job.id, stable + lost, []) == 3
