@@ -115,14 +115,16 @@ class ActiveJob:
                 and all(run.done for run in self.runs.values()))
 
     def finish(self, part: Request, batch: BatchResult, fitness: np.ndarray, keys: list[str], transient: bool) -> None:
-        """A finished part, stored with the next writes (its rows built by the writer's thread)."""
+        """A finished part, stored with the next writes."""
         self.writes.finish((part, batch, fitness, keys, transient))
 
     def take_writes(self) -> Writes | None:
-        """What waits to be stored, or None."""
+        """What waits to be stored, its rows built here in bulk (in the writer's thread they slowed
+        the store: 5,200-5,800 evaluations/s at 0 ms against 6,200-6,500), or None."""
         if not self.writes:
             return None
         writes, self.writes = self.writes, Writes()
+        writes.make_rows()
         return writes
 
 

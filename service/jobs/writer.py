@@ -29,8 +29,8 @@ T = TypeVar("T")
 
 @dataclass
 class Writes:
-    """What a job has to store, in order: evaluations (rows, and finished results whose rows the
-    writer's thread builds, in bulk), then each completed DE generation."""
+    """What a job has to store, in order: evaluations (rows, and finished results not yet made rows),
+    then each completed DE generation."""
 
     rows: list[Row] = field(default_factory=list)
     finished: list[Finished] = field(default_factory=list)
@@ -50,8 +50,11 @@ class Writes:
         self.finished_rows += later.finished_rows
         self.generations += later.generations
 
-    def all_rows(self) -> list[Row]:
-        return self.rows + rows_from_results(self.finished) if self.finished else self.rows
+    def make_rows(self) -> None:
+        """The finished results made rows, all at once (the numbers of all converted in one block)."""
+        if self.finished:
+            self.rows += rows_from_results(self.finished)
+            self.finished, self.finished_rows = [], 0
 
 
 class Guard:
@@ -186,8 +189,8 @@ class Writer:
     def _store(self, job_id: int, writes: Writes) -> bool:
         """True when stored, or dropped because the job is no longer ours."""
         try:
-            rows = writes.all_rows()
-            done = self._guard(lambda s: store_results(s, self.scheduler_id, job_id, rows, writes.generations),
+            writes.make_rows()
+            done = self._guard(lambda s: store_results(s, self.scheduler_id, job_id, writes.rows, writes.generations),
                                f"store results of job {job_id}")
         except LeaseLost:
             log.info("scheduler %s: lost job %s before storing its results", self.scheduler_id, job_id)
