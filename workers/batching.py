@@ -21,8 +21,8 @@ The rule (docs/workers.md, "Batching"):
    giving every worker work wins.
 4. **Keep up.** The thread that dispatches spends ``d`` seconds of its own on each task
    (submitting it, taking its result, handing it on: measured by the dispatcher as its time spent
-   starting tasks and handling results, over finished tasks). ``N`` workers finishing a task every ``b c`` seconds
-   keep it busy ``N d / (b c)`` of the time; batches hold at least ``N d / (DRIVER_SHARE c)``
+   starting tasks and handling results, over finished tasks). ``N`` workers finishing a task every
+   ``b c`` seconds keep it busy ``N d / (b c)`` of the time; batches hold at least ``N d / (DRIVER_SHARE c)``
    designs so that stays under ``DRIVER_SHARE``. On a big cluster with short simulations the
    dispatcher, not the workers, would otherwise set the pace, and no number of waves helps then:
    this rule overrides rule 3's waves, not its longest task.

@@ -10,9 +10,9 @@ source as each batch completes, in any order.
 Latency where it matters: within a source the **smallest request goes first**. A DE generation
 (tens of designs, the next one waits for it) thus overtakes a sweep's road (thousands, which
 nothing waits for), and the sweep fills the CPUs the generations leave idle. For the same reason
-only a few tasks beyond one a worker are kept in flight (:func:`in_flight_limit`): executors
-start tasks first-in first-out, and a deep queue of long tasks would hold every generation
-behind it.
+only about 50 ms of work beyond one task a worker is kept in flight (:func:`in_flight_limit`):
+executors start tasks first-in first-out, and a deep queue of long tasks would hold every
+generation behind it.
 
 Batch sizes adapt per source (:mod:`finaldrive.workers.batching`): a source's estimates of
 per-design time and per-task overhead last as long as the source, not one request.

@@ -59,6 +59,7 @@ def rows_from_results(finished: list[Finished]) -> list[Row]:
 
 
 def row_from_cache(hit: dict[str, Any], road: int, step: int, candidate: int, design: np.ndarray, key: str) -> Row:
+    """The row of a slot whose design is a result-cache hit: the stored result, marked cached, 0 s."""
     values = hit | {"wall_s": 0.0, "cached": True, "cache_key": key, "cache_hash": key_hash(key), "transient": False}
     a2, l2, rws = (c[0] for c in nullable_columns(np.array([[np.degrees(design[0])], [design[1]], [design[2]]])))
     return (road, step, candidate, a2, l2, rws, *(values[name] for name in ROW_COLUMNS[6:]))

@@ -41,6 +41,7 @@ class Writes:
         return len(self.rows) + self.finished_rows + len(self.generations)
 
     def finish(self, result: Finished) -> None:
+        """A finished part of a request, made a row later (:meth:`make_rows`)."""
         self.finished.append(result)
         self.finished_rows += len(result[0])
 
@@ -189,7 +190,6 @@ class Writer:
     def _store(self, job_id: int, writes: Writes) -> bool:
         """True when stored, or dropped because the job is no longer ours."""
         try:
-            writes.make_rows()
             done = self._guard(lambda s: store_results(s, self.scheduler_id, job_id, writes.rows, writes.generations),
                                f"store results of job {job_id}")
         except LeaseLost:
