@@ -177,7 +177,7 @@ def main() -> None:
           "lever")
     print(f"arm rt; wheel torque {2 * v['torque']:.1f} N m at the fixed ratio 2.0), calibrated with the reference")
     print(f"method. Table 11 flat optimum (195.3 deg, 0.037 m, 0.088 m): d = {r11.distance_m:.4f} m (fast: "
-          f"{r11f.distance_m:.4f} m; paper fitness 20.708 m), slack {r11.slack_mm:.3f} mm (paper 0.132 "
+          f"{r11f.distance_m:.4f} m; paper fitness 20.708 m), slack {r11.slack_m * 1e3:.3f} mm (paper 0.132 "
           f"mm), SR {r11.squat_ratio:.4f} (paper 1.000). A calibration target met after calibrating is not a")
     print("validation; the rows below are.\n")
 
@@ -216,8 +216,8 @@ def main() -> None:
         for k, (label, paper) in labels.items():
             r, b = t14[m][k], BEFORE["t14"][m][k]
             pd, ps, psr = (paper["d_m"], paper["slack_mm"], paper["SR"]) if paper else ("", "", "")
-            print(f"| {label}, {m} | {pd} | {b[0]:.3f} | {r.distance_m:.3f} | {ps} | {b[1]:.3f} | {r.slack_mm:.3f} | "
-                  f"{psr} | {r.squat_ratio:.3f} |")
+            print(f"| {label}, {m} | {pd} | {b[0]:.3f} | {r.distance_m:.3f} | {ps} | {b[1]:.3f} | "
+                  f"{r.slack_m * 1e3:.3f} | {psr} | {r.squat_ratio:.3f} |")
     gap = {m: (t14[m]["g1"].distance_m - t14[m]["g2"].distance_m) / t14[m]["g2"].distance_m * 100
            for m in ("reference", "fast")}
     gap_before = (BEFORE["t14"]["reference"]["g1"][0] - BEFORE["t14"]["reference"]["g2"][0]) \
@@ -272,7 +272,7 @@ def main() -> None:
         x = simulate(Design.from_deg(r["a2_deg"], r["L2_m"], r["R_WS_m"]), Road.parse(spec), fast)
         moves.append((x.fitness_m - bf) * 1e3)
         print(f"| {spec} | {r['a2_deg']} | {r['L2_m']} | {r['R_WS_m']} | {r['fitness_m']} | {bf:.3f} | "
-              f"{x.fitness_m:.3f} | {moves[-1]:+.0f} | {bs:.3f} / {x.slack_mm:.3f} |")
+              f"{x.fitness_m:.3f} | {moves[-1]:+.0f} | {bs:.3f} / {x.slack_m * 1e3:.3f} |")
     print(f"\nThe rough-road rows moved by {min(moves[1:]):+.0f} to {max(moves[1:]):+.0f} mm (mean "
           f"{np.mean(moves[1:]):+.0f} mm); the paper's fitness values lie below ours on the roughest roads both")
     print("before and after (its torque is not published; ours is calibrated on the flat road only).\n")
