@@ -55,5 +55,6 @@ def prepare(design: Design, road: Road, settings: SimSettings, vehicle: Vehicle)
     equilibrium = reference_equilibrium if settings.method == "reference" else static_equilibrium
     q0 = equilibrium(p, road, pose)
     p[P.L_CHAIN] = chain_length(q0, p)
-    p[P.L_LOOP] = whole_chain_length(q0, p)
+    if vehicle["chain_runs"] == 2:  # only the two-run chain reads the whole chain's length
+        p[P.L_LOOP] = whole_chain_length(q0, p)
     return Setup(p=p, q0=q0, squat_ratio=float(design_squat_ratio(p, pose)))

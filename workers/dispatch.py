@@ -66,16 +66,13 @@ class Work:
     #: the source's tasks started and not yet returned (kept by the dispatcher)
     in_flight: int = 0
 
-    def queued(self) -> int:
-        """Designs waiting to be started."""
-        return sum(len(q) for q in self.queue) + len(self.alone)
-
-    def next_request(self) -> tuple[int, int]:
-        """Position in ``queue`` of the request to start next, the smallest (the first of equals),
-        and the designs queued that go before or with it (its requests' sizes and ``alone``)."""
+    def next_request(self) -> tuple[int, int, int]:
+        """Position in ``queue`` of the request to start next, the smallest (the first of equals);
+        the designs queued that go before or with it (its requests' sizes and ``alone``); and all
+        designs waiting to be started."""
         sizes = [len(q) for q in self.queue]
         at = min(range(len(sizes)), key=sizes.__getitem__)
-        return at, sum(n for n in sizes if n <= sizes[at]) + len(self.alone)
+        return at, sum(n for n in sizes if n <= sizes[at]) + len(self.alone), sum(sizes) + len(self.alone)
 
 
 #: Work queued in the executor beyond one task a worker, in seconds of the cluster's time.
@@ -190,10 +187,10 @@ class Dispatcher:
         if work.alone:
             part = work.alone.popleft()
         else:
-            at, ahead = work.next_request()
+            at, ahead, queued = work.next_request()
             request = work.queue[at]
             assert work.sizer is not None
-            size = self._batch_size or work.sizer.next_size(work.queued(), self.driver_s, first=ahead)
+            size = self._batch_size or work.sizer.next_size(queued, self.driver_s, first=ahead)
             if size >= len(request):
                 part = request
                 del work.queue[at]

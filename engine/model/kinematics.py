@@ -70,30 +70,20 @@ class GeometryError(ValueError):
 
 
 @jit
-def _tangent_angle(x2: float, y2: float, x6: float, y6: float, res: float, rws: float) -> float:
-    """gamma: angle of the radii to the upper run's tangent points (eqs. 24-29, 31); NaN when the
-    sprockets' centres are too close to carry a chain.
+def tangent_angle(x2: float, y2: float, x6: float, y6: float, res: float, rws: float, run: int = 1) -> float:
+    """gamma: angle of the radii to the tangent points of the upper run (run = 1, eqs. 24-29, 31) or of
+    the lower run (run = -1, their mirror about the line of centres); NaN when the sprockets' centres
+    are too close to carry a chain.
 
     Eq. (31) with points 10, 11 at angle gamma gives |r_2->6| cos(gamma - delta) = R_ES - R_WS,
-    delta the direction of r_2->6; the upper run is the root gamma = delta - acos(.).
+    delta the direction of r_2->6; the upper run is the root gamma = delta - acos(.), the lower
+    run the other root, delta + acos(.).
     """
     dx, dy = x6 - x2, y6 - y2
     dist = math.hypot(dx, dy)
     if dist <= abs(rws - res):
         return math.nan
-    gamma = math.atan2(dy, dx) - math.acos((res - rws) / dist)
-    return math.atan2(math.sin(gamma), math.cos(gamma))
-
-
-def lower_tangent_angle(x2: float, y2: float, x6: float, y6: float, res: float, rws: float) -> float:
-    """gamma_l: angle of the radii to the lower run's tangent points, the mirror of eqs. (24)-(29), (31)
-    about the line of centres: the other root of |r_2->6| cos(gamma - delta) = R_ES - R_WS,
-    gamma_l = delta + acos(.); NaN when no chain fits."""
-    dx, dy = x6 - x2, y6 - y2
-    dist = math.hypot(dx, dy)
-    if dist <= abs(rws - res):
-        return math.nan
-    gamma = math.atan2(dy, dx) + math.acos((res - rws) / dist)
+    gamma = math.atan2(dy, dx) - run * math.acos((res - rws) / dist)
     return math.atan2(math.sin(gamma), math.cos(gamma))
 
 
@@ -142,7 +132,7 @@ def fill_pose(p: np.ndarray, kind: int, rp: np.ndarray, x1: float, y1: float, th
     q[X15], q[Y15] = q[X13], road_height(kind, rp, q[X13])[0]           # (19), (33)
     q[RT] = q[Y6] - q[Y14]                                              # (20)
     q[FT] = q[Y13] - q[Y15]                                             # (21)
-    gamma = _tangent_angle(q[X2], q[Y2], q[X6], q[Y6], p[P.R_ES], p[P.R_WS])
+    gamma = tangent_angle(q[X2], q[Y2], q[X6], q[Y6], p[P.R_ES], p[P.R_WS])
     q[GAMMA] = gamma
     res, rws = p[P.R_ES], p[P.R_WS]
     q[X8], q[Y8] = q[X2] + res * math.cos(alpha), q[Y2] + res * math.sin(alpha)    # (22)-(29)

@@ -114,10 +114,6 @@ class ActiveJob:
         return (not self.intake and self.work is not None and not self.work.queue
                 and all(run.done for run in self.runs.values()))
 
-    def finish(self, part: Request, batch: BatchResult, fitness: np.ndarray, keys: list[str], transient: bool) -> None:
-        """A finished part, stored with the next writes."""
-        self.writes.finish((part, batch, fitness, keys, transient))
-
     def take_writes(self) -> Writes | None:
         """What waits to be stored, its rows built here in bulk (in the writer's thread they slowed
         the store: 5,200-5,800 evaluations/s at 0 ms against 6,200-6,500), or None."""
@@ -304,7 +300,7 @@ class Scheduler:
         keys = [job.keys.pop((part.road, part.step, int(c))) for c in part.candidates]
         copies = [job.copies.pop((part.road, part.step, int(c)), None) for c in part.candidates] if job.copies else []
         if not any(copies):
-            job.finish(part, batch, fitness, keys, transient)
+            job.writes.finish((part, batch, fitness, keys, transient))
             self._tell(job, part, fitness)
             return
         # designs that were duplicates of one in this part: the same result, told and stored as cached

@@ -33,8 +33,8 @@ from finaldrive.engine.model.kinematics import (
     design_pose,
     free_play_slack,
     loop_length,
-    lower_tangent_angle,
     pose_from_minimal,
+    tangent_angle,
     taut_length,
 )
 from finaldrive.engine.outcome import N_SERIES, OK
@@ -66,7 +66,7 @@ def test_lower_run_is_the_mirrored_tangent_and_the_loop_is_the_convex_hull(vehic
     q = design_pose(p)
     c2, c6 = _centres(q)
     res, rws = p[P.R_ES], p[P.R_WS]
-    gamma_l = lower_tangent_angle(*c2, *c6, res, rws)
+    gamma_l = tangent_angle(*c2, *c6, res, rws, -1)
     e = np.array([math.cos(gamma_l), math.sin(gamma_l)])
     p10, p11 = c2 + res * e, c6 + rws * e                   # the lower run's tangent points
     assert np.dot(c6 - p11, p11 - p10) == pytest.approx(0.0, abs=1e-12)  # mirror of eq. (31)
@@ -88,7 +88,7 @@ def _lower_alpha(z, p, road):
     c2, c6 = _centres(q)
     res, rws = p[P.R_ES], p[P.R_WS]
     ref = z[bodies.ZPHI] + math.pi / 2  # gamma_l is about a right angle from the line of centres (~phi)
-    gamma_l = ref + math.remainder(lower_tangent_angle(*c2, *c6, res, rws) - ref, 2.0 * math.pi)  # continuous
+    gamma_l = ref + math.remainder(tangent_angle(*c2, *c6, res, rws, -1) - ref, 2.0 * math.pi)  # continuous
     e = np.array([math.cos(gamma_l), math.sin(gamma_l)])
     taut = float(np.hypot(*(c6 + rws * e - c2 - res * e)))
     return gamma_l - (taut + (gamma_l - q[BETA]) * rws) / res
