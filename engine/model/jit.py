@@ -10,7 +10,10 @@ engine's source files: any change to any of them compiles everything afresh. A N
 set by the user is respected as it is.
 
 ``@jit`` makes a :class:`Kernel`: numba is imported, and the function compiled (or loaded from the
-cache), at its first call, not when the engine is imported. Inside :func:`interpreted`, kernels not
+cache), at its first call, not when the engine is imported. Called from compiled code, a kernel is
+compiled for the plain types of its arguments only: numba would otherwise compile one more
+specialisation for every constant argument (``gap(y, 1, ...)``, ``False``) and every omitted
+default, each optimising its callees again (fast_rhs was compiled five times). Inside :func:`interpreted`, kernels not
 compiled yet run as plain Python: the static geometry (one equilibrium, tens of milliseconds) needs
 neither numba nor its cache.
 """
@@ -30,10 +33,10 @@ from typing import Any
 _ENGINE = Path(__file__).resolve().parents[1]
 _lock = threading.Lock()
 _local = threading.local()
-#: numba's options for the kernels: cached on disk; fast math off so the results are bit-reproducible
+#: numba's options for the kernels (cached on disk besides): fast math off so the results are bit-reproducible
 #: across runs on one machine; numpy's error model (a division by zero gives inf or nan, which the
 #: loops report as NONFINITE) spares a zero test per division.
-_OPTIONS: dict[str, Any] = {"cache": True, "nogil": True, "error_model": "numpy"}
+_OPTIONS: dict[str, Any] = {"nogil": True, "error_model": "numpy"}
 
 
 def _source_fingerprint() -> str:
@@ -63,6 +66,26 @@ def _configure() -> None:
         config.CACHE_DIR = str(cache_dir())  # type: ignore[attr-defined]
 
 
+def _plain_dispatcher(fn: Callable[..., Any]) -> Any:
+    """numba's CPU dispatcher of ``fn`` with the engine's options, typing calls from compiled code
+    with the plain types of the arguments (no literals, omitted defaults as the default's type)."""
+    from numba import typeof, types
+    from numba.core.registry import CPUDispatcher
+
+    def plain(t: Any) -> Any:
+        return types.unliteral(typeof(t.value) if isinstance(t, types.Omitted) else t)
+
+    class PlainDispatcher(CPUDispatcher):
+        def get_call_template(self, args: Any, kws: Any) -> Any:
+            _, folded = self._compiler.fold_argument_types(args, kws)
+            return super().get_call_template([plain(t) for t in folded], {})
+
+    _configure()
+    dispatcher = PlainDispatcher(py_func=fn, targetoptions={"nopython": True, **_OPTIONS})
+    dispatcher.enable_caching()
+    return dispatcher
+
+
 def njit(**options: Any) -> Callable[[Callable[..., Any]], Any]:
     """numba's njit with the engine's cache directory (for functions built at run time)."""
     import numba
@@ -88,7 +111,7 @@ class Kernel:
         if self._dispatcher is None:
             with _lock:
                 if self._dispatcher is None:
-                    self._dispatcher = njit(**_OPTIONS)(self.py_func)
+                    self._dispatcher = _plain_dispatcher(self.py_func)
         return self._dispatcher
 
     @property
