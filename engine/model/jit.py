@@ -77,7 +77,7 @@ def _plain_dispatcher(fn: Callable[..., Any]) -> Any:
 
     class PlainDispatcher(CPUDispatcher):
         def get_call_template(self, args: Any, kws: Any) -> Any:
-            _, folded = self._compiler.fold_argument_types(args, kws)
+            _, folded = self._compiler.fold_argument_types(args, kws)  # type: ignore[attr-defined]
             return super().get_call_template([plain(t) for t in folded], {})
 
     _configure()
@@ -98,11 +98,16 @@ class Kernel:
     """A compiled model or solver function: numba's dispatcher, made at the first call.
 
     Kernels call each other in compiled code as dispatchers do (numba reads ``_numba_type_``).
+    ``prepare`` runs once before numba first compiles the function (to bind what it needs of
+    numba); ``python`` runs instead of ``fn`` inside :func:`interpreted` (default: ``fn``).
     """
 
-    def __init__(self, fn: Callable[..., Any]) -> None:
+    def __init__(self, fn: Callable[..., Any], prepare: Callable[[], None] | None = None,
+                 python: Callable[..., Any] | None = None) -> None:
         functools.update_wrapper(self, fn)
         self.py_func = fn
+        self._prepare = prepare
+        self._python = python or fn
         self._dispatcher: Any = None
 
     @property
@@ -111,6 +116,8 @@ class Kernel:
         if self._dispatcher is None:
             with _lock:
                 if self._dispatcher is None:
+                    if self._prepare is not None:
+                        self._prepare()
                     self._dispatcher = _plain_dispatcher(self.py_func)
         return self._dispatcher
 
@@ -120,7 +127,7 @@ class Kernel:
 
     def __call__(self, *args: Any) -> Any:
         if self._dispatcher is None and getattr(_local, "interpreted", False):
-            return self.py_func(*args)
+            return self._python(*args)
         return self.dispatcher(*args)
 
 
