@@ -13,9 +13,9 @@ set by the user is respected as it is.
 cache), at its first call, not when the engine is imported. Called from compiled code, a kernel is
 compiled for the plain types of its arguments only: numba would otherwise compile one more
 specialisation for every constant argument (``gap(y, 1, ...)``, ``False``) and every omitted
-default, each optimising its callees again (fast_rhs was compiled five times). Inside :func:`interpreted`, kernels not
-compiled yet run as plain Python: the static geometry (one equilibrium, tens of milliseconds) needs
-neither numba nor its cache.
+default, each optimising its callees again (fast_rhs was compiled five times). Inside
+:func:`interpreted`, kernels not compiled yet run as plain Python: the static geometry (one
+equilibrium, tens of milliseconds) needs neither numba nor its cache.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from typing import Any
 _ENGINE = Path(__file__).resolve().parents[1]
 _lock = threading.Lock()
 _local = threading.local()
-#: numba's options for the kernels (cached on disk besides): fast math off so the results are bit-reproducible
+#: numba's options for the kernels (besides the on-disk cache): fast math off so the results are bit-reproducible
 #: across runs on one machine; numpy's error model (a division by zero gives inf or nan, which the
 #: loops report as NONFINITE) spares a zero test per division.
 _OPTIONS: dict[str, Any] = {"nogil": True, "error_model": "numpy"}
@@ -66,9 +66,10 @@ def _configure() -> None:
         config.CACHE_DIR = str(cache_dir())  # type: ignore[attr-defined]
 
 
-def _plain_dispatcher(fn: Callable[..., Any]) -> Any:
-    """numba's CPU dispatcher of ``fn`` with the engine's options, typing calls from compiled code
-    with the plain types of the arguments (no literals, omitted defaults as the default's type)."""
+@functools.cache
+def _dispatcher_class() -> Any:
+    """numba's CPU dispatcher, typing calls from compiled code with the plain types of the arguments
+    (a literal as its type, an omitted default as its value's type)."""
     from numba import typeof, types
     from numba.core.registry import CPUDispatcher
 
@@ -80,10 +81,7 @@ def _plain_dispatcher(fn: Callable[..., Any]) -> Any:
             _, folded = self._compiler.fold_argument_types(args, kws)  # type: ignore[attr-defined]
             return super().get_call_template([plain(t) for t in folded], {})
 
-    _configure()
-    dispatcher = PlainDispatcher(py_func=fn, targetoptions={"nopython": True, **_OPTIONS})
-    dispatcher.enable_caching()
-    return dispatcher
+    return PlainDispatcher
 
 
 def njit(**options: Any) -> Callable[[Callable[..., Any]], Any]:
@@ -118,7 +116,10 @@ class Kernel:
                 if self._dispatcher is None:
                     if self._prepare is not None:
                         self._prepare()
-                    self._dispatcher = _plain_dispatcher(self.py_func)
+                    _configure()
+                    self._dispatcher = _dispatcher_class()(py_func=self.py_func,
+                                                           targetoptions={"nopython": True, **_OPTIONS})
+                    self._dispatcher.enable_caching()
         return self._dispatcher
 
     @property
