@@ -6,6 +6,7 @@ once, loading it in a fresh process, `finaldrive geometry`); 2-process throughpu
 
     taskset -c 1 python bench/bench_engine.py [--repeat 5] [--methods fast,reference] [--designs 401]
         [--roads sine:0.04:3,sine:0.04:2] [--compare fast_tolerance=1e-4] [--quick]
+    python bench/bench_engine.py --cold-start [--repeat 5]    # the cold start alone, `finaldrive demo` too
 
 Prints the machine it ran on and its load average. The machine is shared and noisy: compare
 methods (or, with --compare, the default settings and changed ones) by the ratio measured in the
@@ -125,12 +126,16 @@ def two_process_throughput(method: str, n: int) -> tuple[float, float]:
 
 
 _COMPILE = """
-import time, sys
-t0 = time.perf_counter()
+import resource, time, sys
+def cpu():
+    use = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return use.ru_utime + use.ru_stime
 sys.path.insert(0, {repo!r})
 from finaldrive.engine import compile_engine
-print(compile_engine(now=("fast",), later=())(), compile_engine(now=("reference",), later=())())
-print(time.perf_counter() - t0)
+fast = compile_engine(now=("fast",), later=())()
+fast_cpu = cpu()
+reference = compile_engine(now=("reference",), later=())()
+print(fast, fast_cpu, reference, cpu() - fast_cpu)
 """
 
 _FIRST_CALL = """
@@ -158,9 +163,11 @@ def cold_start(repeat: int) -> dict[str, float]:
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
         done = subprocess.run([sys.executable, "-c", _COMPILE.format(repo=str(REPO))], env=env, check=True,
                               capture_output=True, text=True)
-        fast, reference = (float(v) for v in done.stdout.split()[-2:])
+        fast, fast_cpu, reference, reference_cpu = (float(v) for v in done.stdout.split()[-4:])
         out["compile_engine, empty cache: fast method"] = fast
+        out["compile_engine, empty cache: fast method, CPU s"] = fast_cpu
         out["compile_engine, empty cache: reference method"] = reference
+        out["compile_engine, empty cache: reference method, CPU s"] = reference_cpu
         for method in ("fast", "reference"):
             code = _FIRST_CALL.format(repo=str(REPO), method=method)
             walls = []
@@ -177,6 +184,25 @@ def cold_start(repeat: int) -> dict[str, float]:
                        capture_output=True)
         walls.append(time.perf_counter() - t0)
     out["finaldrive geometry"] = statistics.median(walls)
+    return out
+
+
+def demo_walls(repeat: int) -> dict[str, float]:
+    """Seconds of `finaldrive demo` (Ray) in an empty directory: with an empty numba cache (once; the
+    reference method's background compilation is waited for before the next run), then with the
+    cache filled (median of `repeat`)."""
+    out: dict[str, float] = {}
+    with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as work:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+        walls = []
+        for i in range(repeat + 1):
+            t0 = time.perf_counter()
+            subprocess.run([finaldrive_command(), "demo"], cwd=work, env=env, check=True, capture_output=True)
+            walls.append(time.perf_counter() - t0)
+            while i == 0 and not (Path(cache) / "compiled-reference").exists():
+                time.sleep(1.0)
+        out["finaldrive demo, empty cache"] = walls[0]
+        out["finaldrive demo, cache filled"] = statistics.median(walls[1:])
     return out
 
 
@@ -213,7 +239,15 @@ def main() -> None:
     ap.add_argument("--roads", default="sine:0.04:3,sine:0.04:2", help="roads of the random-design distributions")
     ap.add_argument("--compare", default="", help="fast settings to compare with the default, e.g. fast_tolerance=1e-4")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--cold-start", action="store_true",
+                    help="only the cold start, `finaldrive demo` with an empty and a filled cache included")
     args = ap.parse_args()
+    if args.cold_start:
+        print(f"machine: {describe()}\nload average before: {os.getloadavg()[0]:.2f}")
+        for key, value in {**cold_start(args.repeat), **demo_walls(args.repeat)}.items():
+            print(f"cold start: {key}: {value:.2f} s")
+        print(f"load average after: {os.getloadavg()[0]:.2f}")
+        return
     n_batch = 20 if args.quick else args.batch
     n_designs = 21 if args.quick else args.designs
     report: dict[str, object] = {"machine": describe(), "methods": {}}

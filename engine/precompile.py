@@ -11,20 +11,25 @@ only load the cache.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 from finaldrive.engine.model.jit import cache_dir
 
 #: Simulated time of the runs that compile a method's kernels (with series) [s].
 _SIMULATED_S = 0.02
-#: A background compilation younger than this [s] is taken as still running.
+#: A compilation whose lock is older than this [s] is taken as dead.
 _LOCK_S = 600.0
-#: Added to the niceness of a method compiled in the background.
-_BACKGROUND_NICENESS = 10
+#: How often a process waiting for another's compilation looks at the cache [s].
+_POLL_S = 0.1
+#: The niceness of a method compiled in the background: the lowest priority, below Ray's workers
+#: (15), so it takes only idle time.
+_BACKGROUND_NICENESS = 19
 
 
 def is_compiled(method: str) -> bool:
@@ -32,35 +37,61 @@ def is_compiled(method: str) -> bool:
     return (cache_dir() / f"compiled-{method}").exists()
 
 
-def _command(method: str) -> list[str]:
-    return [sys.executable, "-m", "finaldrive.engine.precompile", method]
+def _lock(method: str) -> Path:
+    return cache_dir() / f"compiling-{method}"
+
+
+def _compiling_elsewhere(method: str) -> bool:
+    """Whether a process (this one's or another's) is compiling the method now: its lock is fresh."""
+    with contextlib.suppress(FileNotFoundError):
+        return time.time() - _lock(method).stat().st_mtime < _LOCK_S
+    return False
+
+
+def _start(method: str, nice: bool = False) -> subprocess.Popen[bytes]:
+    """Lock the method and compile it in a child process (which removes the lock when it ends)."""
+    cache_dir().mkdir(parents=True, exist_ok=True)
+    _lock(method).touch()
+    command = [sys.executable, "-m", "finaldrive.engine.precompile", method, *(["--nice"] if nice else [])]
+    return subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL if nice else subprocess.PIPE,
+                            start_new_session=nice)
+
+
+def _wait_for(method: str, child: subprocess.Popen[bytes] | None) -> None:
+    """Wait until the method is compiled: by ``child``, else by another process (if that one ends
+    without the method compiled, compile it here)."""
+    while child is None:
+        if is_compiled(method):
+            return
+        if not _compiling_elsewhere(method):
+            child = _start(method)
+        else:
+            time.sleep(_POLL_S)
+    _, err = child.communicate()
+    if child.returncode != 0:
+        raise RuntimeError(f"compiling the engine failed: {err.decode(errors='replace')[-2000:]}")
 
 
 def compile_engine(now: tuple[str, ...] = ("fast",),
                    later: tuple[str, ...] = ("reference",)) -> Callable[[], float]:
     """Start compiling the kernels of the methods ``now`` into the on-disk cache, unless already
-    there, and those of ``later`` in a niced background process; return ``wait``, which waits for
-    ``now`` (the seconds since the start) and raises RuntimeError if a compilation failed.
+    there or being compiled by another process, and those of ``later`` in a background process at
+    the lowest priority; return ``wait``, which waits for ``now`` (the seconds since the start) and
+    raises RuntimeError if a compilation failed.
 
-    The caller may start its workers' pool meanwhile, as long as no task runs before ``wait()``.
-    A reference run that starts before its background compilation has finished compiles for itself."""
+    Callers may call it as early as they like (``finaldrive demo`` and ``serve`` do, at their
+    start, so the compilation overlaps their imports and Ray's start); ``make_executor`` waits
+    for it. A reference run that starts before its background compilation has finished compiles
+    for itself."""
     start = time.perf_counter()
-    children = [subprocess.Popen(_command(m), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-                for m in now if not is_compiled(m)]
+    children = {m: None if _compiling_elsewhere(m) else _start(m) for m in now if not is_compiled(m)}
     for method in later:
-        lock = cache_dir() / f"compiling-{method}"
-        if is_compiled(method) or (lock.exists() and time.time() - lock.stat().st_mtime < _LOCK_S):
-            continue
-        cache_dir().mkdir(parents=True, exist_ok=True)
-        lock.touch()
-        subprocess.Popen([*_command(method), "--nice"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                         start_new_session=True)
+        if not is_compiled(method) and not _compiling_elsewhere(method):
+            _start(method, nice=True)
 
     def wait() -> float:
-        for child in children:
-            _, err = child.communicate()
-            if child.returncode != 0:
-                raise RuntimeError(f"compiling the engine failed: {err.decode(errors='replace')[-2000:]}")
+        for method, child in children.items():
+            _wait_for(method, child)
         return time.perf_counter() - start
 
     return wait
@@ -87,4 +118,7 @@ if __name__ == "__main__":
         os.nice(_BACKGROUND_NICENESS)
     for name in sys.argv[1:]:
         if name != "--nice":
-            _compile_here(name)
+            try:
+                _compile_here(name)
+            finally:
+                _lock(name).unlink(missing_ok=True)

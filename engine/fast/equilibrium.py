@@ -23,6 +23,7 @@ from finaldrive.engine.model.coordinates import FT, GAMMA, RT
 from finaldrive.engine.model.elements import N_AUX
 from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.kinematics import assemble, first_guess
+from finaldrive.engine.model.linalg import solve
 from finaldrive.engine.model.road import Road
 
 #: Newton stops when the update is below this [m, rad].
@@ -62,6 +63,7 @@ def _newton(free, p0, kind, rp, xtol, max_iter, fd):
     gp = np.empty(4)
     gm = np.empty(4)
     K = np.empty((4, 4))
+    step = np.empty(4)
     for _ in range(max_iter):
         _rest_forces(free, p0, geo, kind, rp, g)
         for k in range(4):
@@ -70,9 +72,11 @@ def _newton(free, p0, kind, rp, xtol, max_iter, fd):
             free[k] -= 2.0 * fd
             _rest_forces(free, p0, geo, kind, rp, gm)
             free[k] += fd
-            K[:, k] = (gp - gm) / (2.0 * fd)
-        step = np.linalg.solve(K, g)
-        free -= step
+            for i in range(4):   # loops, not array expressions: no compiled shape checks
+                K[i, k] = (gp[i] - gm[i]) / (2.0 * fd)
+        solve(K, g, step)
+        for i in range(4):
+            free[i] -= step[i]
         if not np.all(np.isfinite(free)):
             return free, False
         if np.max(np.abs(step)) < xtol:

@@ -10,9 +10,12 @@ engine's source files: any change to any of them compiles everything afresh. A N
 set by the user is respected as it is.
 
 ``@jit`` makes a :class:`Kernel`: numba is imported, and the function compiled (or loaded from the
-cache), at its first call, not when the engine is imported. Inside :func:`interpreted`, kernels not
-compiled yet run as plain Python: the static geometry (one equilibrium, tens of milliseconds) needs
-neither numba nor its cache.
+cache), at its first call, not when the engine is imported. Called from compiled code, a kernel is
+compiled for the plain types of its arguments only: numba would otherwise compile one more
+specialisation for every constant argument (``gap(y, 1, ...)``, ``False``) and every omitted
+default, each optimising its callees again (fast_rhs was compiled five times). Inside
+:func:`interpreted`, kernels not compiled yet run as plain Python: the static geometry (one
+equilibrium, tens of milliseconds) needs neither numba nor its cache.
 """
 
 from __future__ import annotations
@@ -30,10 +33,10 @@ from typing import Any
 _ENGINE = Path(__file__).resolve().parents[1]
 _lock = threading.Lock()
 _local = threading.local()
-#: numba's options for the kernels: cached on disk; fast math off so the results are bit-reproducible
+#: numba's options for the kernels (besides the on-disk cache): fast math off so the results are bit-reproducible
 #: across runs on one machine; numpy's error model (a division by zero gives inf or nan, which the
 #: loops report as NONFINITE) spares a zero test per division.
-_OPTIONS: dict[str, Any] = {"cache": True, "nogil": True, "error_model": "numpy"}
+_OPTIONS: dict[str, Any] = {"nogil": True, "error_model": "numpy"}
 
 
 def _source_fingerprint() -> str:
@@ -63,6 +66,24 @@ def _configure() -> None:
         config.CACHE_DIR = str(cache_dir())  # type: ignore[attr-defined]
 
 
+@functools.cache
+def _dispatcher_class() -> Any:
+    """numba's CPU dispatcher, typing calls from compiled code with the plain types of the arguments
+    (a literal as its type, an omitted default as its value's type)."""
+    from numba import typeof, types
+    from numba.core.registry import CPUDispatcher
+
+    def plain(t: Any) -> Any:
+        return types.unliteral(typeof(t.value) if isinstance(t, types.Omitted) else t)
+
+    class PlainDispatcher(CPUDispatcher):
+        def get_call_template(self, args: Any, kws: Any) -> Any:
+            _, folded = self._compiler.fold_argument_types(args, kws)  # type: ignore[attr-defined]
+            return super().get_call_template([plain(t) for t in folded], {})
+
+    return PlainDispatcher
+
+
 def njit(**options: Any) -> Callable[[Callable[..., Any]], Any]:
     """numba's njit with the engine's cache directory (for functions built at run time)."""
     import numba
@@ -75,11 +96,16 @@ class Kernel:
     """A compiled model or solver function: numba's dispatcher, made at the first call.
 
     Kernels call each other in compiled code as dispatchers do (numba reads ``_numba_type_``).
+    ``prepare`` runs once before numba first compiles the function (to bind what it needs of
+    numba); ``python`` runs instead of ``fn`` inside :func:`interpreted` (default: ``fn``).
     """
 
-    def __init__(self, fn: Callable[..., Any]) -> None:
+    def __init__(self, fn: Callable[..., Any], prepare: Callable[[], None] | None = None,
+                 python: Callable[..., Any] | None = None) -> None:
         functools.update_wrapper(self, fn)
         self.py_func = fn
+        self._prepare = prepare
+        self._python = python or fn
         self._dispatcher: Any = None
 
     @property
@@ -88,7 +114,12 @@ class Kernel:
         if self._dispatcher is None:
             with _lock:
                 if self._dispatcher is None:
-                    self._dispatcher = njit(**_OPTIONS)(self.py_func)
+                    if self._prepare is not None:
+                        self._prepare()
+                    _configure()
+                    self._dispatcher = _dispatcher_class()(py_func=self.py_func,
+                                                           targetoptions={"nopython": True, **_OPTIONS})
+                    self._dispatcher.enable_caching()
         return self._dispatcher
 
     @property
@@ -97,7 +128,7 @@ class Kernel:
 
     def __call__(self, *args: Any) -> Any:
         if self._dispatcher is None and getattr(_local, "interpreted", False):
-            return self.py_func(*args)
+            return self._python(*args)
         return self.dispatcher(*args)
 
 

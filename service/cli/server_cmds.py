@@ -138,19 +138,23 @@ class SchedulerChild:
 
 
 def run_serve(args: argparse.Namespace) -> int:
-    import uvicorn
-
-    from finaldrive.service.main import create_app
-
     settings = _settings(args)
     _check_store(settings)
     child = None
     if not args.no_scheduler:
+        if settings.executor != "serial":
+            from finaldrive.engine import compile_engine
+
+            compile_engine()   # now, so it overlaps the start of the app and of the scheduler's pool
         # the same id across restarts: a restarted scheduler takes its jobs back at once
         env = {**os.environ, "FINALDRIVE_DB_URL": settings.db_url, "FINALDRIVE_EXECUTOR": settings.executor}
         child = SchedulerChild(["--id", f"serve-{os.uname().nodename}-{os.getpid()}",
                                 "--exit-with-parent"], env).start()
     try:
+        import uvicorn  # after the scheduler's start, which takes longer (Ray's start)
+
+        from finaldrive.service.main import create_app
+
         uvicorn.run(create_app(settings), host=settings.host, port=settings.port, workers=1)
     finally:
         if child is not None:

@@ -1,0 +1,120 @@
+"""The compiled-code plumbing: kernels typed with plain argument types, the LAPACK solve, and
+compile_engine's coordination between processes."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from finaldrive.engine import precompile
+from finaldrive.engine.model.jit import Kernel, interpreted, jit
+from finaldrive.engine.model.linalg import solve
+
+
+@jit
+def _scaled(x, k=1):
+    return x * k
+
+
+@jit
+def _caller(x):
+    return _scaled(x, 2) + _scaled(x)
+
+
+def test_kernels_called_from_compiled_code_are_typed_with_plain_types() -> None:
+    from numba import types
+
+    assert _caller(1.5) == 4.5
+    typed = [list(_scaled.dispatcher.get_call_template(args, {})[2])
+             for args in ([types.float64, types.IntegerLiteral(2)], [types.float64])]   # a constant; the default
+    assert typed == [[types.float64, types.int64]] * 2
+
+
+def _matrices(rng: np.random.Generator) -> list[np.ndarray]:
+    out = []
+    for n in (1, 2, 4, 6):
+        for _ in range(40):
+            out.append(rng.normal(size=(n, n)))
+            u, _, vt = np.linalg.svd(rng.normal(size=(n, n)))  # condition numbers up to 1e14
+            out.append(u @ np.diag(np.logspace(0, -rng.uniform(6, 14), n)) @ vt)
+    return out
+
+
+def test_solve_is_numbas_np_linalg_solve_bit_for_bit() -> None:
+    import numba
+
+    reference = numba.njit(lambda a, b: np.linalg.solve(a, b))
+    rng = np.random.default_rng(5)
+    for a in _matrices(rng):
+        b = rng.normal(size=a.shape[0])
+        x = np.empty_like(b)
+        solve(a.copy(), b, x)
+        np.testing.assert_array_equal(x, reference(a, b))
+        assert np.allclose(a @ x, b, rtol=0, atol=1e-6 * np.linalg.cond(a) * np.abs(b).max())
+
+
+def test_solve_raises_as_np_linalg_solve_does() -> None:
+    x = np.empty(2)
+    with pytest.raises(np.linalg.LinAlgError):
+        solve(np.array([[1.0, 2.0], [2.0, 4.0]]), np.ones(2), x)
+    with pytest.raises(np.linalg.LinAlgError):
+        solve(np.array([[1.0, np.nan], [0.0, 1.0]]), np.ones(2), x)
+
+
+def test_interpreted_kernels_run_their_python_version() -> None:
+    kernel = Kernel(lambda x: x + 1, python=lambda x: x - 1)
+    with interpreted():
+        assert kernel(1) == 0
+    assert kernel(1) == 2
+
+
+class _Child:
+    returncode = 0
+
+    def communicate(self) -> tuple[bytes, bytes]:
+        return b"", b""
+
+
+@pytest.fixture
+def cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """An empty cache directory; compilations recorded instead of run."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    started: list[str] = []
+
+    def start(method: str, nice: bool = False) -> subprocess.Popen[bytes]:
+        started.append(method + " nice" * nice)
+        (tmp_path / f"compiling-{method}").touch()
+        return _Child()  # type: ignore[return-value]
+
+    monkeypatch.setattr(precompile, "_start", start)
+    monkeypatch.setattr(precompile, "_POLL_S", 0.01)
+    return started
+
+
+def test_compile_engine_compiles_what_is_missing(cache: list[str], tmp_path: Path) -> None:
+    precompile.compile_engine()()
+    assert cache == ["fast", "reference nice"]
+    cache.clear()
+    (tmp_path / "compiled-fast").touch()
+    (tmp_path / "compiled-reference").touch()
+    precompile.compile_engine()()
+    assert cache == []
+
+
+def test_compile_engine_waits_for_another_process_compiling(cache: list[str], tmp_path: Path) -> None:
+    (tmp_path / "compiling-fast").touch()
+    wait = precompile.compile_engine(later=())
+    (tmp_path / "compiled-fast").touch()      # the other process finishes
+    wait()
+    assert cache == []
+
+
+def test_compile_engine_compiles_if_the_other_process_failed(cache: list[str], tmp_path: Path) -> None:
+    (tmp_path / "compiling-fast").touch()
+    wait = precompile.compile_engine(later=())
+    (tmp_path / "compiling-fast").unlink()    # the other process ended without the marker
+    wait()
+    assert cache == ["fast"]
