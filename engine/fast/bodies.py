@@ -51,7 +51,7 @@ W_C = 12
 N_WS = 39
 
 
-@jit
+@jit(allocates=True)
 def design_constants(p: np.ndarray) -> np.ndarray:
     """Chassis-frame vectors from point 1 (the chassis centre of mass, points 2, 3, 4; the unit
     vector of the fork axis r_4->5, eqs. 1-8, 14-15) and the mass moments of the bodies."""

@@ -76,7 +76,7 @@ def closing_run(y: np.ndarray, p: np.ndarray, geo: np.ndarray) -> tuple[int, flo
     return (UPPER, g_u) if g_u <= g_l else (LOWER, g_l)
 
 
-@jit
+@jit(allocates=True)
 def engage(y: np.ndarray, run: int, p: np.ndarray, geo: np.ndarray, ws: np.ndarray) -> float:
     """The plastic impact of run re-engaging at the state y (FREE mode; ws: its mass factors, the
     engine sprocket's inertia out of M). Returns the kinetic energy it takes [J].

@@ -37,7 +37,7 @@ class EquilibriumError(RuntimeError):
     """No static equilibrium found (the bike cannot stand on this road)."""
 
 
-@jit
+@jit(allocates=True)
 def _rest_forces(free, p0, geo, kind, rp, out):
     """Generalized forces at rest on (y1, theta, phi + x1 with it, fs), over the chassis weight."""
     y = np.zeros(N_STATE)
@@ -55,7 +55,7 @@ def _rest_forces(free, p0, geo, kind, rp, out):
     out[3] = F[ZFS] / w
 
 
-@jit
+@jit(allocates=True)
 def _newton(free, p0, kind, rp, xtol, max_iter, fd):
     """Newton's method on _rest_forces = 0; returns (free, converged)."""
     geo = design_constants(p0)

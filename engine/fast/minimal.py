@@ -224,7 +224,7 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
     return 0
 
 
-@jit
+@jit(allocates=True)
 def kinetic_energy(y, p, kind, rp, run=UPPER):
     """1/2 z'^T M(z) z' [J] at the state y, with the mass matrix of fast_rhs in the chain's mode run
     (FREE: the engine sprocket's 1/2 I alpha'^2 added, its inertia being out of M)."""

@@ -123,7 +123,7 @@ def _record(row, t, y, aux, sigma, out):
     out[row, 14] = 0.0  # no constraint residual in minimal coordinates
 
 
-@jit
+@jit(allocates=True)
 def _store(states, row, y):
     """A row of the recorded states: z, z' and, in a third column block of one, the two-run chain's e."""
     for i in range(2 * N_DOF):   # a loop, not a slice: no compiled shape check
@@ -193,7 +193,7 @@ def _event_fraction(y, ynew, mode, tension, tension_end, p, geo):
     return g0 / (g0 - g1)
 
 
-@jit
+@jit(allocates=True)
 def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_time, keep_series,
              st, ext, led, series, states, max_steps):
     """Integrate y = (z, z', u), or (z, z', u, e, alpha') with the two-run chain, from rest to t_end
@@ -361,7 +361,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
     return OK
 
 
-@jit
+@jit(allocates=True)
 def _chain_after_step(y, mode, h, p, geo, ws, aux, ext, led):
     """Two-run chain, after a step of length h taken in mode: a free step counts as overrun and ends
     in the impact of a run whose gap closed (its loss into led[L_IMPACT]); an engaged step's e and

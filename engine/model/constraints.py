@@ -116,7 +116,7 @@ def _distance_sq_jac(q, r, ix, iy, jx, jy, J):
     J[r, jy] -= 2.0 * dy
 
 
-@jit
+@jit(allocates=True)
 def jacobian(q: np.ndarray, p: np.ndarray, kind: int, rp: np.ndarray, J: np.ndarray) -> None:
     """Phi_q, the 33 x 39 Jacobian of eqs. (1)-(33). J is overwritten."""
     J[:, :] = 0.0
@@ -185,7 +185,7 @@ def jacobian(q: np.ndarray, p: np.ndarray, kind: int, rp: np.ndarray, J: np.ndar
     J[32, X15] = -road_height(kind, rp, q[X15])[1]
 
 
-@jit
+@jit(allocates=True)
 def phiq_dot_qdot(q: np.ndarray, qd: np.ndarray, p: np.ndarray, kind: int, rp: np.ndarray,
                   out: np.ndarray) -> None:
     """(d/dt Phi_q) q-dot: the part of Phi-double-dot that does not depend on q-double-dot."""

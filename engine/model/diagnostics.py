@@ -56,7 +56,7 @@ N_LED = 8
 N_POWERS = 6
 
 
-@jit
+@jit(allocates=True)
 def start_records(ext: np.ndarray, led: np.ndarray) -> None:
     """Empty extremes (max -inf, min +inf), zero durations and integrals."""
     ext[:] = 0.0

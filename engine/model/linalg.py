@@ -67,4 +67,4 @@ def _solve_python(A: np.ndarray, b: np.ndarray, x: np.ndarray) -> None:
 #: LAPACK call (the same x, bit for bit), and raise numpy's LinAlgError where it does (a non-finite
 #: entry, a singular A), but without the array checks whose compiled error messages were a sixth
 #: of the fast method's compilation. Plain numpy inside engine.model.jit.interpreted.
-solve = Kernel(_solve, prepare=_bind_gesv, python=_solve_python)
+solve = Kernel(_solve, prepare=_bind_gesv, python=_solve_python, allocates=True)

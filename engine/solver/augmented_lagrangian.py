@@ -18,7 +18,7 @@ from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.linalg import cholesky_solve
 
 
-@jit
+@jit(allocates=True)
 def accelerations(q: np.ndarray, qd: np.ndarray, Q: np.ndarray, p: np.ndarray, kind: int,
                   rp: np.ndarray, M: np.ndarray, lam: np.ndarray, tol: float, max_iter: int,
                   qdd: np.ndarray) -> tuple[float, int]:

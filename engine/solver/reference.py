@@ -59,7 +59,7 @@ S_STEP, S_T, S_AIR_REAR, S_AIR_FRONT, S_ROW, S_SIGMA_PREV, S_STARTED = range(7)
 N_ST = 7
 
 
-@jit
+@jit(allocates=True)
 def motorcycle_rhs(t, y, ctx, out) -> int:
     """y' = f(t, y) for the motorcycle; returns a failure code (0 = ok)."""
     p, kind, rp, M, qg, longitudinal, lam, sigma, aux, lam_tol, lam_max, qdd = ctx
@@ -83,7 +83,7 @@ def motorcycle_rhs(t, y, ctx, out) -> int:
 _trapezoidal_step, _abm_step = make_steppers(motorcycle_rhs)
 
 
-@jit
+@jit(allocates=True)
 def _record(row, t, y, sigma, aux, out):
     q = y[:N_COORDS]
     out[row, 0] = t
@@ -103,7 +103,7 @@ def _record(row, t, y, sigma, aux, out):
     out[row, 14] = aux[AUX_RESID]
 
 
-@jit
+@jit(allocates=True)
 def run_reference(y, p, kind, rp, M, qg, longitudinal, dt, n_steps, n_trap, nu, tol, max_iter,
                   lam_tol, lam_max, max_resid, max_air_steps, stride, keep_series,
                   st, hist, lam, sigma, aux, ext, led, series, q_samples, max_steps):

@@ -33,6 +33,34 @@ def test_kernels_called_from_compiled_code_are_typed_with_plain_types() -> None:
     assert typed == [[types.float64, types.int64]] * 2
 
 
+@jit
+def _fill(x):
+    for i in range(x.shape[0]):
+        x[i] = i
+
+
+@jit
+def _makes_an_array(n):
+    return np.zeros(n)
+
+
+@jit(allocates=True)
+def _marked_as_making_one(n):
+    x = np.zeros(n)
+    _fill(x)
+    return x
+
+
+def test_kernels_run_without_numbas_runtime_unless_they_make_arrays() -> None:
+    from numba.core.errors import NumbaError
+
+    assert _marked_as_making_one(3).tolist() == [0.0, 1.0, 2.0]   # a runtime-less kernel called from one with it
+    assert _fill.dispatcher.targetoptions["_nrt"] is False
+    assert "_nrt" not in _marked_as_making_one.dispatcher.targetoptions
+    with pytest.raises(NumbaError):   # refused, loudly, rather than leaking or crashing
+        _makes_an_array(3)
+
+
 def _matrices(rng: np.random.Generator) -> list[np.ndarray]:
     out = []
     for n in (1, 2, 4, 6):
