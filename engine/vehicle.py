@@ -13,7 +13,7 @@ import hashlib
 import json
 import math
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -91,13 +91,22 @@ class Vehicle:
     sources: tuple[tuple[str, str], ...]
     groups: tuple[tuple[str, str], ...]
 
+    @cached_property
+    def _by_key(self) -> dict[str, float]:
+        """The values by name (built once: a run's setup reads several)."""
+        return dict(self.values)
+
+    @cached_property
+    def _packed(self) -> np.ndarray:
+        v = self._by_key
+        return np.array([v[k] for k, _ in PARAMETERS], dtype=float)
+
     def __getitem__(self, key: str) -> float:
-        return dict(self.values)[key]
+        return self._by_key[key]
 
     def packed(self) -> np.ndarray:
-        """The vehicle part of the model's parameter vector P (see engine.model.params)."""
-        v = dict(self.values)
-        return np.array([v[k] for k, _ in PARAMETERS], dtype=float)
+        """The vehicle part of the model's parameter vector P (see engine.model.params), a new array."""
+        return self._packed.copy()
 
     def replace(self, **changes: float) -> Vehicle:
         """A copy with some values changed (validated)."""

@@ -158,24 +158,25 @@ def mass_factor(geo: np.ndarray, ws: np.ndarray) -> None:
 
 
 @jit
-def mass_solve(geo: np.ndarray, ws: np.ndarray, r: np.ndarray, x: np.ndarray) -> None:
-    """x = M^-1 r with the factors of mass_factor (r and x: 6-vectors, distinct)."""
+def mass_solve(geo: np.ndarray, ws: np.ndarray, r: np.ndarray, x: np.ndarray, r0: int = 0, x0: int = 0) -> None:
+    """x[x0:x0 + 6] = M^-1 r[r0:r0 + 6] with the factors of mass_factor (distinct 6-vectors; offsets instead
+    of slices, which would cost a reference count each in the right-hand side)."""
     m = geo[G_MASS]
     mxt, myt, mxp, myp, mxs, mys = ws[W_MXT], ws[W_MYT], ws[W_MXP], ws[W_MYP], ws[W_MXS], ws[W_MYS]
-    rx, ry, rb = r[ZX1] / m, r[ZY1] / m, r[ZBETA] / ws[W_MBB]
-    g1 = r[ZTHETA] - mxt * rx - myt * ry - ws[W_MTB] * rb
-    g2 = r[ZPHI] - mxp * rx - myp * ry - ws[W_MPB] * rb
-    g3 = r[ZFS] - mxs * rx - mys * ry
+    rx, ry, rb = r[r0 + ZX1] / m, r[r0 + ZY1] / m, r[r0 + ZBETA] / ws[W_MBB]
+    g1 = r[r0 + ZTHETA] - mxt * rx - myt * ry - ws[W_MTB] * rb
+    g2 = r[r0 + ZPHI] - mxp * rx - myp * ry - ws[W_MPB] * rb
+    g3 = r[r0 + ZFS] - mxs * rx - mys * ry
     l21, l31, l32 = ws[W_L21], ws[W_L31], ws[W_L32]
     g2 -= l21 * g1
     g3 -= l31 * g1 + l32 * g2
     a3 = g3 * ws[W_D3]
     a2 = g2 * ws[W_D2] - l32 * a3
     a1 = g1 * ws[W_D1] - l21 * a2 - l31 * a3
-    x[ZTHETA], x[ZPHI], x[ZFS] = a1, a2, a3
-    x[ZX1] = rx - (mxt * a1 + mxp * a2 + mxs * a3) / m
-    x[ZY1] = ry - (myt * a1 + myp * a2 + mys * a3) / m
-    x[ZBETA] = rb - ws[W_KT] * a1 - ws[W_KP] * a2
+    x[x0 + ZTHETA], x[x0 + ZPHI], x[x0 + ZFS] = a1, a2, a3
+    x[x0 + ZX1] = rx - (mxt * a1 + mxp * a2 + mxs * a3) / m
+    x[x0 + ZY1] = ry - (myt * a1 + myp * a2 + mys * a3) / m
+    x[x0 + ZBETA] = rb - ws[W_KT] * a1 - ws[W_KP] * a2
 
 
 @jit

@@ -204,8 +204,8 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
     ws[W_Q + ZPHI], ws[W_Q + ZFS], ws[W_Q + ZBETA] = q_p, q_s, q_b
     # M z'' = F - h
     mass_factor(geo, ws)
-    mass_solve(geo, ws, ws[W_Q:W_Q + N_DOF], out[N_DOF:ZU])
-    for i in range(N_DOF):   # a loop, not a slice: no compiled shape check
+    mass_solve(geo, ws, ws, out, W_Q, N_DOF)
+    for i in range(N_DOF):
         out[i] = y[N_DOF + i]
     out[ZU] = aux[AUX_DUDT]                                            # (42)
     alpha_dd = alpha_c + ja_t * out[N_DOF + ZTHETA] + ja_p * out[N_DOF + ZPHI] + rho * out[N_DOF + ZBETA]

@@ -89,9 +89,9 @@ N_ST = 10
 def _w_solve(r, gh, v, c_row, a_uu, k):
     """k = W^-1 r for W = I - gh J with J's nonzero blocks dz''/du = v, du'/dz' = c_row,
     du'/du = a_uu (rows of z and of the two-run chain's e, alpha': identity)."""
-    for i in range(N_DOF):   # loops, not slices: no compiled shape checks
+    for i in range(N_DOF):
         k[i] = r[i]
-    for i in range(ZU + 1, k.shape[0]):
+    for i in range(ZU + 1, r.shape[0]):
         k[i] = r[i]
     cr = 0.0
     cv = 0.0
@@ -272,7 +272,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
                 return NONFINITE
         # eq. (41) closed with this state's values; f1 and the tyre's outputs moved to the new sigma*
         new_sigma = relaxation_length(aux[AUX_FX], aux[AUX_KAPPA], aux[AUX_FZ_REAR], p)
-        mass_solve(geo, ws, ws[W_B:W_B + N_DOF], v)   # M^-1 b
+        mass_solve(geo, ws, ws, v, W_B)               # M^-1 b
         for i in range(N_DOF):
             c_row[i] = ws[W_C + i]
         if new_sigma != sigma:
@@ -322,8 +322,10 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
         t = t_end if t_end - (t + h) <= 1e-12 * t_end else t + h
         h *= min(MAX_GROWTH, factor)
         steps += 1
-        for i in range(y.shape[0]):
-            y_old[i], f_old[i], y[i] = y[i], f1[i], ynew[i]
+        for i in range(n_state):
+            y_old[i] = y[i]
+            f_old[i] = f1[i]
+            y[i] = ynew[i]
         if fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, f1, aux, ws, mode) != OK:
             st[S_T] = t
             return NONFINITE
