@@ -14,7 +14,7 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 #: Bumped whenever a change alters simulation results (part of the result-cache key).
-ENGINE_VERSION = "0.2.0"
+ENGINE_VERSION = "0.3.0"
 
 #: Public name -> module that defines it.
 _EXPORTS: dict[str, str] = {

@@ -119,8 +119,8 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
         def chunk() -> int:
             return int(run_fast(y, p, kind, rp, settings.tyre_longitudinal, settings.duration,
                                 settings.duration / n_out, settings.fast_tolerance, settings.fast_max_step,
-                                settings.max_airborne_time, settings.series, st, ext, led, series, states,
-                                FAST_CHUNK_STEPS))
+                                settings.fast_ros2, settings.max_airborne_time, settings.series, st, ext, led, series,
+                                states, FAST_CHUNK_STEPS))
 
         code, stopped = _run_chunks(chunk, settings, should_stop)
         reached = float(st[S_T])

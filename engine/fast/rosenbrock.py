@@ -1,5 +1,11 @@
 """Linearly implicit integration of the minimal-coordinate model, with step-size control.
 
+Two Rosenbrock-W methods; high_order (the one place that chooses) takes ROS34PW2 (order 3,
+engine.fast.wstep) on smooth roads (flat, sine, bump) with the paper's single chain run, and ROS2
+elsewhere: on piecewise-linear profiles, whose slope kinks inside a step ROS34PW2's embedded
+estimate does not see (it does not converge there), and with the two-run chain, whose events are
+located in ROS2's loop below (ros2_only, SimSettings.fast_ros2: ROS2 everywhere, for verification).
+
 ROS2 (Verwer, Spee, Blom & Hundsdorfer 1999), a Rosenbrock-W method: L-stable and of order 2
 for any matrix W = I - gamma h J, gamma = 1 + 1/sqrt(2):
     W k1 = f(y_n),   W k2 = f(y_n + h k1) - 2 k1,   y_{n+1} = y_n + h (3/2 k1 + 1/2 k2).
@@ -36,6 +42,7 @@ from finaldrive.engine.fast.chain_runs import (
     run_tension,
 )
 from finaldrive.engine.fast.minimal import FREE, N_STATE, N_STATE_TWO_RUNS, UPPER, ZALPHA_DOT, ZPLAY, ZU, fast_rhs
+from finaldrive.engine.fast.wstep import ERROR_ORDER, N_STAGES, attempt, w_solve
 from finaldrive.engine.model.diagnostics import (
     E_CHAIN_COMPRESSION,
     E_TAUT_MAX,
@@ -65,6 +72,7 @@ from finaldrive.engine.model.elements import (
     N_AUX,
 )
 from finaldrive.engine.model.jit import jit
+from finaldrive.engine.model.road import PROFILE
 from finaldrive.engine.model.tyre import relaxation_length
 from finaldrive.engine.outcome import FRONT_AIRBORNE, NONFINITE, OK, PAUSED, REAR_AIRBORNE
 
@@ -86,22 +94,10 @@ N_ST = 10
 
 
 @jit
-def _w_solve(r, gh, v, c_row, a_uu, k):
-    """k = W^-1 r for W = I - gh J with J's nonzero blocks dz''/du = v, du'/dz' = c_row,
-    du'/du = a_uu (rows of z and of the two-run chain's e, alpha': identity)."""
-    for i in range(N_DOF):
-        k[i] = r[i]
-    for i in range(ZU + 1, r.shape[0]):
-        k[i] = r[i]
-    cr = 0.0
-    cv = 0.0
-    for i in range(N_DOF):
-        cr += c_row[i] * r[N_DOF + i]
-        cv += c_row[i] * v[i]
-    ku = (r[ZU] + gh * cr) / (1.0 - gh * a_uu - gh * gh * cv)
-    for i in range(N_DOF):
-        k[N_DOF + i] = r[N_DOF + i] + gh * v[i] * ku
-    k[ZU] = ku
+def high_order(kind: int, two_runs: bool) -> bool:
+    """Whether run_fast steps with ROS34PW2 (else ROS2, with half its largest step h_max): on a
+    smooth road (not a piecewise-linear profile) with the paper's single chain run."""
+    return kind != PROFILE and not two_runs
 
 
 @jit
@@ -194,7 +190,7 @@ def _event_fraction(y, ynew, mode, tension, tension_end, p, geo):
 
 
 @jit(allocates=True)
-def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_time, keep_series,
+def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only, max_air_time, keep_series,
              st, ext, led, series, states, max_steps):
     """Integrate y = (z, z', u), or (z, z', u, e, alpha') with the two-run chain, from rest to t_end
     with step-size control; returns a code.
@@ -204,16 +200,22 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
     loop returns PAUSED and, called again with the same arrays, continues exactly where it stopped
     (the result is bit-identical to an uninterrupted run). Steps never land on output times: the
     series rows, every dt_out, come from cubic Hermite interpolation inside the steps (dense
-    output), so the series changes nothing of the run. The local error estimate is
-    y_{n+1} - (y_n + h k1), ROS2's embedded first-order solution, in a weighted RMS norm with
-    absolute scales tol * (1 m, 1 m, 1 rad, 1 rad, 1 m, 1 rad; x 10 /s for rates; 1 for u; with a
-    free engine sprocket also 1 rad for e, 10 /s for alpha'). Extremes and the energy ledger are
+    output), so the series changes nothing of the run. The step is ROS34PW2's where
+    high_order(kind, two_runs) and not ros2_only, else ROS2's. The local error estimate (ROS34PW2:
+    engine.fast.wstep; ROS2: y_{n+1} - (y_n + h k1), its embedded first-order solution, and steps
+    of at most h_max / 2) is measured in a weighted RMS norm with absolute scales tol * (1 m, 1 m,
+    1 rad, 1 rad, 1 m, 1 rad; x 10 /s for rates; 1 for u; with a free engine sprocket also 1 rad
+    for e, 10 /s for alpha'). Extremes and the energy ledger are
     tracked at every accepted step (the extremes of L_taut also inside steps, from its rate at both
     ends). Codes: OK, PAUSED, NONFINITE, REAR_AIRBORNE, FRONT_AIRBORNE; st[S_T] is the time reached.
     """
     geo = design_constants(p)
     n_state = y.shape[0]
     two_runs = n_state == N_STATE_TWO_RUNS
+    order3 = high_order(kind, two_runs) and not ros2_only
+    if not order3:
+        h_max *= 0.5  # ROS2's largest step: half of ROS34PW2's
+    stages = np.zeros((N_STAGES, n_state))
     ws = np.zeros(N_WS)
     c_row = np.zeros(N_DOF)
     v = np.zeros(N_DOF)
@@ -291,21 +293,29 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, max_air_ti
         tries = 0
         while True:
             h = min(h, h_max, t_end - t)
-            gh = GAMMA * h
-            _w_solve(f1, gh, v, c_row, a_uu, k1)
-            for i in range(n_state):
-                y2[i] = y[i] + h * k1[i]
-            if fast_rhs(y2, p, geo, kind, rp, sigma, longitudinal, f2, aux, ws, mode) != OK:
-                st[S_T] = t
-                return NONFINITE
-            for i in range(n_state):
-                f2[i] -= 2.0 * k1[i]
-            _w_solve(f2, gh, v, c_row, a_uu, k2)
-            for i in range(n_state):
-                ynew[i] = y[i] + h * (1.5 * k1[i] + 0.5 * k2[i])
-                err[i] = 0.5 * h * (k1[i] + k2[i])
-            e = _error_norm(err, scale, n_err)
-            factor = 0.9 / math.sqrt(max(e, 1e-10))
+            if order3:
+                if attempt(y, f1, h, sigma, v, c_row, a_uu, p, geo, kind, rp, longitudinal, stages, y2, f2, aux,
+                           ws, ynew, err) != OK:
+                    st[S_T] = t
+                    return NONFINITE
+                e = _error_norm(err, scale, n_err)
+                factor = 0.9 * max(e, 1e-10) ** (-1.0 / ERROR_ORDER)
+            else:
+                gh = GAMMA * h
+                w_solve(f1, gh, v, c_row, a_uu, k1)
+                for i in range(n_state):
+                    y2[i] = y[i] + h * k1[i]
+                if fast_rhs(y2, p, geo, kind, rp, sigma, longitudinal, f2, aux, ws, mode) != OK:
+                    st[S_T] = t
+                    return NONFINITE
+                for i in range(n_state):
+                    f2[i] -= 2.0 * k1[i]
+                w_solve(f2, gh, v, c_row, a_uu, k2)
+                for i in range(n_state):
+                    ynew[i] = y[i] + h * (1.5 * k1[i] + 0.5 * k2[i])
+                    err[i] = 0.5 * h * (k1[i] + k2[i])
+                e = _error_norm(err, scale, n_err)
+                factor = 0.9 / math.sqrt(max(e, 1e-10))
             if e > 1.0 and h > MIN_STEP:
                 h *= max(MIN_SHRINK, factor)
                 continue

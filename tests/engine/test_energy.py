@@ -144,7 +144,9 @@ def test_dropped_bike_keeps_its_energy_reference(vehicle):
 
 def test_dropped_bike_keeps_its_energy_fast(vehicle):
     """The same in minimal coordinates: T from the model's own M(z), V from the pose rebuilt in
-    natural coordinates: an independent check of the reduced equations."""
+    natural coordinates: an independent check of the reduced equations. ROS34PW2 (the flat road's
+    method) damps some of the drop energy of its own, less at a tighter tolerance: 0.54 % at 5e-6,
+    0.46 % at 2e-6, 0.30 % at 1e-6 (ROS2: 0.005 % at 5e-6)."""
     road = Road.parse("flat")
     setup = prepare(TABLE11, road, SimSettings(), _conservative(vehicle))
     p = setup.p
@@ -154,7 +156,7 @@ def test_dropped_bike_keeps_its_energy_fast(vehicle):
     y[:minimal.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
     y[minimal.ZY1] += DROP
     series, states = np.zeros((n + 1, N_SERIES)), np.zeros((n + 1, 2 * minimal.N_DOF))
-    code = run_fast(y, p, kind, rp, False, 1.0, 1e-3, 5e-6, 1e-3, 10.0, True, np.zeros(FAST_N_ST),
+    code = run_fast(y, p, kind, rp, False, 1.0, 1e-3, 1e-6, 1e-3, False, 10.0, True, np.zeros(FAST_N_ST),
                     np.zeros(D.N_EXT), np.zeros(D.N_LED), series, states, 10**9)
     assert code == OK
     assert states[0][minimal.ZY1] == setup.q0[Y1] + DROP

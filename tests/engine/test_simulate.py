@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from finaldrive.engine import STATUS_FAILED, Design, Road, SimSettings, evaluate, simulate
+from finaldrive.engine.fast.rosenbrock import high_order
 
 TABLE11 = Design.from_deg(195.3, 0.037, 0.088)
 
@@ -57,6 +58,15 @@ def test_fast_path_tolerance_quartered_changes_distance_by_less_than_1_mm(vehicl
     d1 = simulate(TABLE11, road, SimSettings(method="fast"), vehicle).distance_m
     d2 = simulate(TABLE11, road, SimSettings(method="fast", fast_tolerance=1.25e-5), vehicle).distance_m
     assert abs(d1 - d2) < 1e-3
+
+
+def test_the_fast_path_steps_with_ros34pw2_on_smooth_roads_with_one_chain_run_only():
+    """ROS34PW2 where the road is smooth and the chain is the paper's; ROS2 on piecewise-linear
+    profiles (ROS34PW2's estimate does not see their kinks) and with two chain runs."""
+    for spec in ("flat", "sine:0.04:3", "sine:0.04:2", "bump:0.04:0.2"):
+        assert high_order(Road.parse(spec).code, False)
+        assert not high_order(Road.parse(spec).code, True)
+    assert not high_order(Road.from_points([0.0, 1.0, 2.0], [0.0, 0.01, 0.0]).code, False)
 
 
 def test_chain_tension_multiplier_carries_the_drive_torque(vehicle):
