@@ -209,7 +209,7 @@ def demo_walls(repeat: int) -> dict[str, float]:
 def cli_evaluate_cost(n_extra: int = 100, repeat: int = 3) -> tuple[float, float]:
     """(median wall s of `finaldrive evaluate` on 1 design, on 1 + n_extra designs)."""
     rng = np.random.default_rng(7)
-    rows = ["a2_deg,l2,rws", "195.3,0.037,0.088"]
+    rows = ["a2_deg,l2_m,rws_m", "195.3,0.037,0.088"]
     rows += [
         f"{rng.uniform(0, 360):.3f},{rng.uniform(0, 0.2):.4f},{rng.uniform(0.05, 0.15):.4f}" for _ in range(n_extra)
     ]
