@@ -119,7 +119,7 @@ def _record(row, t, y, aux, sigma, out):
     out[row, 14] = 0.0  # no constraint residual in minimal coordinates
 
 
-@jit(allocates=True)
+@jit
 def _store(states, row, y):
     """A row of the recorded states: z, z' and, in a third column block of one, the two-run chain's e."""
     for i in range(2 * N_DOF):   # a loop, not a slice: no compiled shape check

@@ -110,7 +110,7 @@ def whole_chain_length(q: np.ndarray, p: np.ndarray) -> float:
     return float(loop_length(dist, p[P.R_ES], p[P.R_WS])) + free_play_slack(taut_length(q), p[P.CHAIN_FREE_PLAY])
 
 
-@jit(allocates=True)
+@jit
 def fill_pose(p: np.ndarray, kind: int, rp: np.ndarray, x1: float, y1: float, theta: float, phi: float,
               fs: float, beta: float, alpha: float, q: np.ndarray) -> bool:
     """assemble's body, compiled (the road packed); False if no chain fits between the sprockets."""

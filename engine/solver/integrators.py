@@ -30,7 +30,7 @@ NOT_CONVERGED = -1
 RHS_FAILED = -2
 
 
-@jit(allocates=True)
+@jit
 def _error(a: np.ndarray, b: np.ndarray, n_err: int) -> float:
     """Eq. (66): Euclidean norm of the change of the first n_err components."""
     s = 0.0

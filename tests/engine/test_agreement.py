@@ -19,8 +19,8 @@ from finaldrive.engine import Design, Road, SimSettings, simulate
 
 N_DESIGNS = 20
 TIGHT = 2.5e-4
-#: The finest reference step tried is TIGHT / MAX_HALVINGS.
-MAX_HALVINGS = 8
+#: The finest reference step tried (three halvings of TIGHT).
+FINEST = TIGHT / 8
 DISTANCE_TOL = 2e-3
 SLACK_TOL = {"flat": 1e-5, "bump:0.04:0.2": 1e-5, "sine:0.04:2": 1e-4}
 
@@ -58,7 +58,7 @@ def test_fast_path_matches_reference(vehicle, spec):
             continue
         misses = _misses(fast, ref, DISTANCE_TOL, SLACK_TOL[spec])
         dt = TIGHT
-        while misses and dt > TIGHT / MAX_HALVINGS:  # is the reference converged at this step?
+        while misses and dt > FINEST:  # is the reference converged at this step?
             dt /= 2
             finer = simulate(d, road, SimSettings(method="reference", dt=dt), vehicle)
             own_d = abs(finer.distance_m - ref.distance_m)
