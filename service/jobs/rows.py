@@ -7,6 +7,8 @@ infinities are stored as NULL.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
+from itertools import chain
 from typing import Any
 
 import numpy as np
@@ -27,35 +29,73 @@ WALL, CACHED = ROW_COLUMNS.index("wall_s"), ROW_COLUMNS.index("cached")
 Finished = tuple[Request, BatchResult, np.ndarray, list[str], bool]
 
 
-def rows_from_results(finished: list[Finished]) -> list[Row]:
-    """The rows of finished parts (NaN stored as NULL), the numbers of all of them converted in one block."""
+@dataclass
+class Block:
+    """Finished parts' results as concatenated columns: built with a few array operations a part,
+    cheap to pickle (a writer process receives these), made rows by :func:`rows_from_block`."""
+
+    roads: np.ndarray
+    steps: np.ndarray
+    candidates: np.ndarray
+    designs: np.ndarray       # (n, 3): a2 [rad], L2 [m], R_WS [m]
+    fitness: np.ndarray       # the job's fitness (Finished's), NaN when failed
+    numbers: np.ndarray       # (len(_NUMBERS), n): the batches' values
+    status: list[str]
+    reason: list[str]
+    keys: list[str]
+    transient: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.keys)
+
+
+#: The batches' values a row holds besides the design and the job's fitness, in ROW_COLUMNS' order.
+_NUMBERS = ("distance_m", "squat_ratio", "slack_m", "fitness_m", "chain_length_m", "wall_s", *DIAGNOSTICS)
+
+
+def block_from_results(finished: list[Finished]) -> Block:
+    """The finished parts' results concatenated column by column."""
     counts = [len(part) for part, *_ in finished]
-    fitness = np.concatenate([f for _, _, f, _, _ in finished])
     batches = [batch for _, batch, *_ in finished]
-    ok = np.isfinite(fitness).tolist()
-    reasons = [reason or ("" if good else f"non-finite fitness ({value})") for reason, good, value in zip(
-        (r for b in batches for r in b.reason), ok, (v for b in batches for v in b.fitness_m.tolist()), strict=True)]
-    transient = np.repeat([t for *_, t in finished], counts).tolist()
+    return Block(
+        roads=np.repeat([part.road for part, *_ in finished], counts),
+        steps=np.repeat([part.step for part, *_ in finished], counts),
+        candidates=np.concatenate([part.candidates for part, *_ in finished]),
+        designs=np.concatenate([part.designs for part, *_ in finished]),
+        fitness=np.concatenate([f for _, _, f, _, _ in finished]),
+        numbers=np.array([np.concatenate([getattr(b, name) for b in batches]) for name in _NUMBERS], dtype=float),
+        status=list(chain.from_iterable(b.status for b in batches)),
+        reason=list(chain.from_iterable(b.reason for b in batches)),
+        keys=list(chain.from_iterable(keys for *_, keys, _ in finished)),
+        transient=np.repeat([t for *_, t in finished], counts),
+    )
+
+
+def rows_from_block(block: Block) -> list[Row]:
+    """The rows of a block (NaN stored as NULL), each column converted at once."""
+    values = dict(zip(_NUMBERS, block.numbers, strict=True))
+    ok = np.isfinite(block.fitness).tolist()
+    reasons = [reason or ("" if good else f"non-finite fitness ({value})")
+               for reason, good, value in zip(block.reason, ok, values["fitness_m"].tolist(), strict=True)]
     failed_for_now = [lost or (status != STATUS_OK and reason.startswith(TIME_LIMIT)) for lost, status, reason
-                      in zip(transient, (s for b in batches for s in b.status), reasons, strict=True)]
-    designs = np.concatenate([part.designs for part, *_ in finished]).T
-
-    def joined(name: str) -> np.ndarray:
-        return np.concatenate([getattr(b, name) for b in batches])
-
+                      in zip(block.transient.tolist(), block.status, reasons, strict=True)]
+    designs = block.designs.T
     numbers = nullable_columns(np.array([
-        np.degrees(designs[0]), designs[1], designs[2], joined("distance_m"), joined("squat_ratio"),
-        joined("slack_m"), fitness, joined("chain_length_m"), *(joined(name) for name in DIAGNOSTICS)], dtype=float))
-    keys = [key for *_, part_keys, _ in finished for key in part_keys]
-    n = len(keys)
+        np.degrees(designs[0]), designs[1], designs[2], values["distance_m"], values["squat_ratio"],
+        values["slack_m"], block.fitness, values["chain_length_m"], *(values[name] for name in DIAGNOSTICS)],
+        dtype=float))
+    n = len(block)
     columns = [
-        np.repeat([part.road for part, *_ in finished], counts).tolist(),
-        np.repeat([part.step for part, *_ in finished], counts).tolist(),
-        np.concatenate([part.candidates for part, *_ in finished]).tolist(), *numbers[:8],
-        [_OK if good else _FAILED for good in ok], reasons, joined("wall_s").tolist(), [False] * n, keys,
-        [key_hash(key) for key in keys], failed_for_now, *numbers[8:],
+        block.roads.tolist(), block.steps.tolist(), block.candidates.tolist(), *numbers[:8],
+        [_OK if good else _FAILED for good in ok], reasons, values["wall_s"].tolist(), [False] * n, block.keys,
+        [key_hash(key) for key in block.keys], failed_for_now, *numbers[8:],
     ]
     return list(zip(*columns, strict=True))
+
+
+def rows_from_results(finished: list[Finished]) -> list[Row]:
+    """The rows of finished parts (NaN stored as NULL)."""
+    return rows_from_block(block_from_results(finished))
 
 
 def row_from_cache(hit: dict[str, Any], road: int, step: int, candidate: int, design: np.ndarray, key: str) -> Row:

@@ -3,8 +3,8 @@
 :class:`Guard` runs a transaction and turns a database error (locked past the busy timeout, disk
 full, connection lost) into ``None`` with back-off, logged once per outage, so the caller keeps
 its data and tries again later. :class:`Writer` stores each job's results in order in its own
-thread, so the scheduler's loop keeps dispatching while a write waits for the disk or a lock
-(the database drivers release the GIL while they work).
+thread, so its caller keeps going while a write waits for the disk or a lock. A scheduler runs it
+in a process of its own (finaldrive.service.jobs.writer_process), off the dispatching loop's GIL.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from sqlalchemy.exc import SQLAlchemyError
 
 from finaldrive.service.db.engine import Database
 from finaldrive.service.db.results import LeaseLost, Row, store_results
-from finaldrive.service.jobs.rows import Finished, rows_from_results
+from finaldrive.service.jobs.rows import Block, Finished, block_from_results, rows_from_block
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -29,13 +29,16 @@ T = TypeVar("T")
 
 @dataclass
 class Writes:
-    """What a job has to store, in order: evaluations (rows, and finished results not yet made rows),
-    then each completed DE generation."""
+    """What a job has to store, in order: evaluations (rows; finished results, packed into blocks,
+    not yet made rows), then each completed DE generation; ``seq`` numbers it (the latest merged
+    in) for acknowledgements."""
 
     rows: list[Row] = field(default_factory=list)
     finished: list[Finished] = field(default_factory=list)
+    blocks: list[Block] = field(default_factory=list)
     generations: list[dict[str, Any]] = field(default_factory=list)
     finished_rows: int = 0
+    seq: int = 0
 
     def __len__(self) -> int:
         return len(self.rows) + self.finished_rows + len(self.generations)
@@ -47,15 +50,26 @@ class Writes:
 
     def extend(self, later: Writes) -> None:
         self.rows += later.rows
-        self.finished += later.finished
+        self.pack()
+        later.pack()
+        self.blocks += later.blocks
         self.finished_rows += later.finished_rows
         self.generations += later.generations
+        self.seq = max(self.seq, later.seq)
+
+    def pack(self) -> None:
+        """The finished results concatenated into a block (a few array operations a result; the
+        rows' per-value work is left to :meth:`make_rows`, in the writer)."""
+        if self.finished:
+            self.blocks.append(block_from_results(self.finished))
+            self.finished = []
 
     def make_rows(self) -> None:
-        """The finished results made rows, all at once (the numbers of all converted in one block)."""
-        if self.finished:
-            self.rows += rows_from_results(self.finished)
-            self.finished, self.finished_rows = [], 0
+        """The finished results made rows, all at once."""
+        self.pack()
+        for block in self.blocks:
+            self.rows += rows_from_block(block)
+        self.blocks, self.finished_rows = [], 0
 
 
 class Guard:
@@ -96,12 +110,17 @@ class Guard:
         return result
 
 
+#: Called with (job, the ``seq`` of the writes, whether the job was found lost) once they are stored or dropped.
+Stored = Callable[[int, int, bool], None]
+
+
 class Writer:
     """Stores jobs' :class:`Writes` in a thread, each job's in the order given, one transaction a
-    job at a time (what queued meanwhile is merged into it)."""
+    job at a time (what queued meanwhile is merged into it); finished results are made rows there."""
 
-    def __init__(self, db: Database, scheduler_id: str) -> None:
+    def __init__(self, db: Database, scheduler_id: str, on_stored: Stored | None = None) -> None:
         self.scheduler_id = scheduler_id
+        self._on_stored = on_stored
         self._guard = Guard(db, f"scheduler {scheduler_id} (writer)")
         self._cond = threading.Condition()
         self._queue: deque[int] = deque()           # jobs with writes waiting, oldest first
@@ -189,6 +208,7 @@ class Writer:
 
     def _store(self, job_id: int, writes: Writes) -> bool:
         """True when stored, or dropped because the job is no longer ours."""
+        writes.make_rows()
         try:
             done = self._guard(lambda s: store_results(s, self.scheduler_id, job_id, writes.rows, writes.generations),
                                f"store results of job {job_id}")
@@ -196,5 +216,9 @@ class Writer:
             log.info("scheduler %s: lost job %s before storing its results", self.scheduler_id, job_id)
             with self._cond:
                 self._lost.append(job_id)
+            if self._on_stored is not None:
+                self._on_stored(job_id, writes.seq, True)
             return True
+        if done is not None and self._on_stored is not None:
+            self._on_stored(job_id, writes.seq, False)
         return done is not None

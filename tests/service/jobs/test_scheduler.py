@@ -6,6 +6,8 @@ Both stores where it matters: a SQLite file and a real PostgreSQL server (tests/
 
 from __future__ import annotations
 
+import os
+import signal
 import sqlite3
 import time
 from pathlib import Path
@@ -20,6 +22,7 @@ from finaldrive.service.config import Settings
 from finaldrive.service.db.leases import claim_jobs
 from finaldrive.service.db.models import Evaluation, Generation, Job
 from finaldrive.service.jobs.scheduler import Scheduler, SchedulerConfig
+from finaldrive.service.jobs.writer_process import WriterProcess
 from finaldrive.service.main import create_app
 from finaldrive.service.services import open_database
 from finaldrive.workers import SerialExecutor
@@ -192,6 +195,25 @@ def test_a_store_locked_for_a_while_delays_the_job_but_never_fails_it(settings: 
         job = wait_done(c, job_id)
         assert c.get("/v1/health").status_code == 200
     assert job["state"] == "succeeded" and job["error"] is None and job["done"] == 6 * 13
+
+
+def test_a_killed_writer_process_is_replaced_and_nothing_is_lost_or_stored_twice(settings: Settings) -> None:
+    with TestClient(create_app(settings)) as c, running_scheduler(settings, ToyTask(delay=0.03)) as scheduler:
+        writer = scheduler.writer
+        assert isinstance(writer, WriterProcess)
+        job_id = c.post("/v1/jobs", json={**DE, "de": {"np": 6, "iters": 12}}).json()["id"]
+        killed: list[int] = []
+        for done in (12, 50):  # mid-job, the second time on the first one's replacement
+            while (job := c.get(f"/v1/jobs/{job_id}").json())["done"] < done:
+                time.sleep(0.005)
+            pid = writer.pid
+            assert pid is not None and pid not in killed and job["state"] == "running" and job["done"] < 6 * 13
+            os.kill(pid, signal.SIGKILL)
+            killed.append(pid)
+        job = wait_done(c, job_id)
+    assert job["state"] == "succeeded" and job["done"] == 6 * 13
+    slots = _slots(settings, job_id)
+    assert len(slots) == len(set(slots)) == 6 * 13
 
 
 def test_health_reports_each_scheduler_and_is_503_without_one(settings: Settings) -> None:
