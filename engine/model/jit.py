@@ -22,9 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import hashlib
 import os
-import tempfile
 import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -46,6 +44,8 @@ _NO_RUNTIME: dict[str, Any] = {"_nrt": False}
 
 def _source_fingerprint() -> str:
     """sha256 (16 hex digits) of the engine's Python sources, path and content."""
+    import hashlib
+
     digest = hashlib.sha256()
     for path in sorted(_ENGINE.rglob("*.py")):
         digest.update(path.relative_to(_ENGINE).as_posix().encode())
@@ -58,6 +58,8 @@ def cache_dir() -> Path:
     the engine's sources> (in the temporary directory if the engine's folder is read-only)."""
     if os.environ.get("NUMBA_CACHE_DIR"):
         return Path(os.environ["NUMBA_CACHE_DIR"])
+    import tempfile  # here: it imports shutil, lzma, bz2 (~5 ms), which the static geometry never needs
+
     base = _ENGINE / "__pycache__" if os.access(_ENGINE, os.W_OK) else Path(tempfile.gettempdir()) / "finaldrive"
     return base / f"numba-{_source_fingerprint()}"
 
