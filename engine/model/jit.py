@@ -66,7 +66,11 @@ def cache_dir() -> Path:
 
 @functools.cache
 def _configure() -> None:
-    """Import numba and point its cache at cache_dir() (once)."""
+    """Import numba and point its cache at cache_dir() (once); SciPy's LAPACK for it without
+    scipy.linalg (engine.model.lapack)."""
+    from finaldrive.engine.model import lapack
+
+    lapack.load()
     from numba import config
 
     if not os.environ.get("NUMBA_CACHE_DIR"):
