@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import gc
 import os
 import threading
 from collections.abc import Callable, Iterator
@@ -66,15 +67,26 @@ def cache_dir() -> Path:
 
 @functools.cache
 def _configure() -> None:
-    """Import numba and point its cache at cache_dir() (once); SciPy's LAPACK for it without
-    scipy.linalg (engine.model.lapack)."""
+    """Import numba, point its cache at cache_dir() and load its registries (once); SciPy's LAPACK
+    for it without scipy.linalg (engine.model.lapack).
+
+    Then ``gc.freeze()``: numba's registries (loaded here rather than at the first compilation or
+    cache load, as numba would) are some 100k objects that live as long as the process, and every
+    full collection walks them again, the interpreter's at exit included (~0.5 s of a fresh
+    process's first result). Frozen, the collector skips them, and whatever else exists by then
+    (the process's imports, mostly): only a reference cycle among those objects that is dropped
+    later stays uncollected."""
     from finaldrive.engine.model import lapack
 
     lapack.load()
     from numba import config
+    from numba.core.registry import cpu_target
 
     if not os.environ.get("NUMBA_CACHE_DIR"):
         config.CACHE_DIR = str(cache_dir())  # type: ignore[attr-defined]
+    cpu_target.typing_context.refresh()
+    cpu_target.target_context.refresh()
+    gc.freeze()
 
 
 @functools.cache
