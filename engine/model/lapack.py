@@ -60,11 +60,14 @@ class _Rebind:
 
 def load() -> None:
     """Load scipy.linalg.cython_blas and cython_lapack without scipy.linalg's ``__init__``, unless
-    scipy.linalg is imported already (then nothing to save). Any failure leaves the plain import to
-    numba."""
+    scipy.linalg is imported already (then nothing to save). If SciPy or either module cannot be
+    found or loaded, numba is left to its plain import (and its own error)."""
     if _PACKAGE in sys.modules or all(f"{_PACKAGE}.{name}" in sys.modules for name in _MODULES):
         return
-    package = importlib.util.find_spec(_PACKAGE)  # imports scipy (numba does), not scipy.linalg
+    try:
+        package = importlib.util.find_spec(_PACKAGE)  # imports scipy (numba does), not scipy.linalg
+    except ImportError:
+        return
     if package is None or not package.submodule_search_locations:
         return
     loaded = []
