@@ -6,7 +6,7 @@ once, loading it in a fresh process, `finaldrive geometry`); 2-process throughpu
 
     taskset -c 1 python bench/bench_engine.py [--repeat 5] [--methods fast,reference] [--designs 401]
         [--roads sine:0.04:3,sine:0.04:2] [--compare fast_tolerance=1e-4] [--quick]
-    python bench/bench_engine.py --cold-start [--repeat 5]    # the cold start alone, `finaldrive demo` too
+    python bench/bench_engine.py --cold-start [--repeat 5] [--no-demo]   # the cold start alone, `finaldrive demo` too
 
 Prints the machine it ran on and its load average. The machine is shared and noisy: compare
 methods (or, with --compare, the default settings and changed ones) by the ratio measured in the
@@ -155,12 +155,26 @@ def finaldrive_command() -> str:
     return str(beside) if beside.exists() else shutil.which("finaldrive") or "finaldrive"
 
 
+def _median_wall(cmd: list[str], repeat: int, env: dict[str, str] | None = None) -> float:
+    """Median wall s of `repeat` runs of cmd, after one run that writes the bytecode caches."""
+    walls = []
+    for _ in range(repeat + 1):
+        t0 = time.perf_counter()
+        subprocess.run(cmd, env=env, check=True, capture_output=True)
+        walls.append(time.perf_counter() - t0)
+    return statistics.median(walls[1:])
+
+
 def cold_start(repeat: int) -> dict[str, float]:
     """Seconds: compile_engine into an empty cache directory (once per method); a fresh process's first
-    result with that cache, median of `repeat` per method; `finaldrive geometry`, median."""
+    result with that cache, median of `repeat` per method; `finaldrive geometry`, median, and numpy's
+    import alone (the floor under it). The processes read Python's bytecode caches, as an installed
+    package's do (PYTHONDONTWRITEBYTECODE, if set, is dropped for them: else every process compiles
+    finaldrive's sources, ~0.1-0.2 s)."""
     out: dict[str, float] = {}
+    base = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     with tempfile.TemporaryDirectory() as cache:
-        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+        env = {**base, "NUMBA_CACHE_DIR": cache}
         done = subprocess.run([sys.executable, "-c", _COMPILE.format(repo=str(REPO))], env=env, check=True,
                               capture_output=True, text=True)
         fast, fast_cpu, reference, reference_cpu = (float(v) for v in done.stdout.split()[-4:])
@@ -170,20 +184,12 @@ def cold_start(repeat: int) -> dict[str, float]:
         out["compile_engine, empty cache: reference method, CPU s"] = reference_cpu
         for method in ("fast", "reference"):
             code = _FIRST_CALL.format(repo=str(REPO), method=method)
-            walls = []
-            for _ in range(repeat):
-                t0 = time.perf_counter()
-                subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True)
-                walls.append(time.perf_counter() - t0)
-            out[f"first {method} result, fresh process, cached"] = statistics.median(walls)
-    exe = finaldrive_command()
-    walls = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        subprocess.run([exe, "geometry", "--a2-deg", "195.3", "--l2", "0.037", "--rws", "0.088"], check=True,
-                       capture_output=True)
-        walls.append(time.perf_counter() - t0)
-    out["finaldrive geometry"] = statistics.median(walls)
+            out[f"first {method} result, fresh process, cached"] = _median_wall([sys.executable, "-c", code], repeat,
+                                                                                env)
+    geometry = [finaldrive_command(), "geometry", "--a2-deg", "195.3", "--l2", "0.037", "--rws", "0.088"]
+    out["finaldrive geometry"] = _median_wall(geometry, repeat, base)
+    out["python -c 'import numpy' (the floor under finaldrive geometry)"] = _median_wall(
+        [sys.executable, "-c", "import numpy"], repeat, base)
     return out
 
 
@@ -241,10 +247,11 @@ def main() -> None:
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--cold-start", action="store_true",
                     help="only the cold start, `finaldrive demo` with an empty and a filled cache included")
+    ap.add_argument("--no-demo", action="store_true", help="--cold-start without `finaldrive demo` (Ray)")
     args = ap.parse_args()
     if args.cold_start:
         print(f"machine: {describe()}\nload average before: {os.getloadavg()[0]:.2f}")
-        for key, value in {**cold_start(args.repeat), **demo_walls(args.repeat)}.items():
+        for key, value in {**cold_start(args.repeat), **({} if args.no_demo else demo_walls(args.repeat))}.items():
             print(f"cold start: {key}: {value:.2f} s")
         print(f"load average after: {os.getloadavg()[0]:.2f}")
         return

@@ -34,7 +34,6 @@ from finaldrive.engine.model.kinematics import GeometryError, assemble, pose_fro
 from finaldrive.engine.model.mass import gravity_forces, mass_matrix, potential_energy
 from finaldrive.engine.model.road import Road
 from finaldrive.engine.setup import MINIMAL_COORDS, Setup, pack_parameters, prepare
-from finaldrive.engine.solver import reference
 from finaldrive.engine.solver.equilibrium import ReferenceEquilibriumError
 from finaldrive.engine.vehicle import Vehicle, default_vehicle
 
@@ -125,6 +124,9 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
         code, stopped = _run_chunks(chunk, settings, should_stop)
         reached = float(st[S_T])
     else:
+        # imported here: the reference's module builds its integrator steps (numba dispatchers) on import
+        from finaldrive.engine.solver import reference
+
         n_steps, dt = settings.steps()
         n_rows = (n_steps // settings.series_stride + 2) if settings.series else 0
         series = np.zeros((n_rows, outcome.N_SERIES))

@@ -9,12 +9,10 @@ naming the key. The file also bounds the designs it can carry (group ``design_li
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -151,6 +149,8 @@ class Vehicle:
 
     def fingerprint(self) -> str:
         """sha256 of the parameter values (not names or sources): a cache key."""
+        import hashlib  # here: OpenSSL's ~5 ms, which the static geometry never needs
+
         canon = json.dumps(sorted(self.values), separators=(",", ":"))
         return hashlib.sha256(canon.encode()).hexdigest()
 
@@ -239,5 +239,7 @@ def load_vehicle(path: str | Path) -> Vehicle:
 @lru_cache(maxsize=1)
 def default_vehicle() -> Vehicle:
     """The paper's motorcycle (engine/data/vehicle.json)."""
-    text = resources.files("finaldrive.engine").joinpath("data/vehicle.json").read_text()
+    # read beside this module, not by importlib.resources (~10 ms of imports for `finaldrive geometry`): the
+    # package is always installed as files
+    text = (Path(__file__).parent / "data" / "vehicle.json").read_text()
     return load_vehicle_dict(json.loads(text))

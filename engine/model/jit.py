@@ -22,9 +22,8 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import hashlib
+import gc
 import os
-import tempfile
 import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -46,6 +45,8 @@ _NO_RUNTIME: dict[str, Any] = {"_nrt": False}
 
 def _source_fingerprint() -> str:
     """sha256 (16 hex digits) of the engine's Python sources, path and content."""
+    import hashlib
+
     digest = hashlib.sha256()
     for path in sorted(_ENGINE.rglob("*.py")):
         digest.update(path.relative_to(_ENGINE).as_posix().encode())
@@ -58,17 +59,34 @@ def cache_dir() -> Path:
     the engine's sources> (in the temporary directory if the engine's folder is read-only)."""
     if os.environ.get("NUMBA_CACHE_DIR"):
         return Path(os.environ["NUMBA_CACHE_DIR"])
+    import tempfile  # here: it imports shutil, lzma, bz2 (~5 ms), which the static geometry never needs
+
     base = _ENGINE / "__pycache__" if os.access(_ENGINE, os.W_OK) else Path(tempfile.gettempdir()) / "finaldrive"
     return base / f"numba-{_source_fingerprint()}"
 
 
 @functools.cache
 def _configure() -> None:
-    """Import numba and point its cache at cache_dir() (once)."""
+    """Import numba, point its cache at cache_dir() and load its registries (once); SciPy's LAPACK
+    for it without scipy.linalg (engine.model.lapack).
+
+    Then ``gc.freeze()``: numba's registries (loaded here rather than at the first compilation or
+    cache load, as numba would) are some 100k objects that live as long as the process, and every
+    full collection walks them again, the interpreter's at exit included (~0.5 s of a fresh
+    process's first result). Frozen, the collector skips them, and whatever else exists by then
+    (the process's imports, mostly): only a reference cycle among those objects that is dropped
+    later stays uncollected."""
+    from finaldrive.engine.model import lapack
+
+    lapack.load()
     from numba import config
+    from numba.core.registry import cpu_target
 
     if not os.environ.get("NUMBA_CACHE_DIR"):
         config.CACHE_DIR = str(cache_dir())  # type: ignore[attr-defined]
+    cpu_target.typing_context.refresh()
+    cpu_target.target_context.refresh()
+    gc.freeze()
 
 
 @functools.cache

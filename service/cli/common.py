@@ -11,14 +11,14 @@ import csv
 import io
 import json
 import math
-import signal
-import subprocess
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 if TYPE_CHECKING:
+    import subprocess
+
     from finaldrive.engine import Design, Road, SimSettings, Vehicle
 
 ROAD_HELP = ("a preset name (finaldrive roads), a spec (flat, sine:H:LAMBDA, bump:H:SIGMA[:MU], metres) "
@@ -209,6 +209,9 @@ def read_designs_csv(path: str) -> np.ndarray:
 
 def stop_process(proc: subprocess.Popen[bytes], timeout: float) -> None:
     """SIGTERM ``proc`` and wait up to ``timeout`` s for it, then kill it."""
+    import signal
+    import subprocess
+
     if proc.poll() is None:
         proc.send_signal(signal.SIGTERM)
         try:

@@ -4,6 +4,7 @@ compile_engine's coordination between processes."""
 from __future__ import annotations
 
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -90,6 +91,35 @@ def test_solve_raises_as_np_linalg_solve_does() -> None:
         solve(np.array([[1.0, 2.0], [2.0, 4.0]]), np.ones(2), x)
     with pytest.raises(np.linalg.LinAlgError):
         solve(np.array([[1.0, np.nan], [0.0, 1.0]]), np.ones(2), x)
+
+
+#: A fresh process's fast result, then its values (the wall time aside) printed as hex floats.
+_FAST_RESULT = ("import sys; from finaldrive.engine import Design, Road, SimSettings, simulate; "
+                "r = simulate(Design.from_deg(195.3, 0.037, 0.088), Road.parse('sine:0.04:3'), "
+                "SimSettings(duration=0.5)); "
+                "assert r.ok, r.reason; ")
+_PRINT_RESULT = "print([v.hex() for k, v in vars(r).items() if isinstance(v, float) and k != 'wall_s'])"
+
+
+def test_a_fast_result_loads_neither_scipy_linalg_nor_the_reference_solver() -> None:
+    """Nor does it leave numba's registries to the garbage collector's walks (jit._configure freezes them)."""
+    code = _FAST_RESULT + ("heavy = {'scipy.linalg', 'finaldrive.engine.solver.reference'} & set(sys.modules); "
+                           "assert not heavy, sorted(heavy); import gc; "
+                           "assert gc.get_freeze_count() > 10 * len(gc.get_objects()), gc.get_freeze_count()")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_scipy_linalg_imported_after_its_lapack_was_loaded_alone_is_whole() -> None:
+    """engine.model.lapack loads SciPy's LAPACK without scipy.linalg: the same functions (results
+    bit-identical to a process that imported scipy.linalg first), and scipy.linalg imported later
+    as after a plain import (its LAPACK modules its attributes)."""
+    later = ("import scipy.linalg.cython_lapack, scipy.linalg.cython_blas; "
+             "assert scipy.linalg.cython_lapack is sys.modules['scipy.linalg.cython_lapack']; "
+             "assert scipy.linalg.cython_blas is sys.modules['scipy.linalg.cython_blas']; "
+             "assert scipy.linalg.solve([[2.0]], [1.0]).tolist() == [0.5]; ")
+    outs = [subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True).stdout
+            for code in ("import scipy.linalg; " + _FAST_RESULT + _PRINT_RESULT, _FAST_RESULT + later + _PRINT_RESULT)]
+    assert outs[0] == outs[1] and outs[0].count("0x") > 20
 
 
 def test_interpreted_kernels_run_their_python_version() -> None:
