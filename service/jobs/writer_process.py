@@ -16,6 +16,7 @@ by the store). The child ends when the scheduler's process does: its pipe closes
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import multiprocessing
 import queue
@@ -31,7 +32,8 @@ from finaldrive.service.jobs.writer import Writer, Writes
 
 log = logging.getLogger(__name__)
 
-#: Pause before a child that died is replaced [s] (doubled while it keeps dying, up to the second value).
+#: Pause before a child that died is replaced [s]: the first, doubled each time a child dies within the
+#: second, up to the second.
 RESTART_BACKOFF_S = (0.5, 10.0)
 #: A closing child gets this long to stop before it is killed [s].
 _CLOSE_S = 5.0
@@ -59,6 +61,7 @@ class WriterProcess:
         self._seq = 0
         self._epoch = 0
         self._closed = False
+        self._backoff = RESTART_BACKOFF_S[0] / 2
         self._outbox: queue.SimpleQueue[tuple[int, tuple[Any, ...]]] = queue.SimpleQueue()
         self._link = self._start()
         threading.Thread(target=self._send, name="finaldrive-writer-send", daemon=True).start()
@@ -148,15 +151,15 @@ class WriterProcess:
                 if epoch != self._epoch:  # sent again to a new child from what is unacknowledged
                     continue
                 pipe = self._link[1]
-            try:
+            with contextlib.suppress(OSError):  # the child is gone: it is replaced and sent what is unacknowledged
                 pipe.send(message)
-            except OSError:
-                pass  # the child is gone: the acknowledging thread replaces it and sends what is unacknowledged
             if message[0] == "stop":
                 return
 
     def _receive(self, process: Any, pipe: Connection) -> None:
-        backoff = RESTART_BACKOFF_S[0]
+        """Take the child's acknowledgements; when it ends unasked, start another and send it what
+        is unacknowledged."""
+        started = time.monotonic()
         while True:
             try:
                 job_id, seq, lost = pipe.recv()
@@ -165,20 +168,25 @@ class WriterProcess:
             with self._cond:
                 self._acknowledge(job_id, seq, lost)
         process.join()
-        with self._cond:
-            if self._closed or not threading.main_thread().is_alive():  # closed, or the interpreter exits
-                return
+        if not self._replacing():
+            return
+        quick = time.monotonic() - started < RESTART_BACKOFF_S[1]  # it keeps dying: wait longer each time
+        self._backoff = min(2 * self._backoff, RESTART_BACKOFF_S[1]) if quick else RESTART_BACKOFF_S[0]
         log.error("scheduler %s: the writer process ended (exit code %s); starting another in %.1f s",
-                  self.scheduler_id, process.exitcode, backoff)
-        time.sleep(backoff)
+                  self.scheduler_id, process.exitcode, self._backoff)
+        time.sleep(self._backoff)
         with self._cond:
-            if self._closed:
+            if not self._replacing():
                 return
             self._epoch += 1
             self._link = self._start()
             for job_id, entries in self._unacked.items():  # in order: seq grows within each job
                 for _, writes in entries:
                     self._outbox.put((self._epoch, ("put", job_id, writes)))
+
+    def _replacing(self) -> bool:
+        """Whether a child that ended is to be replaced: not closed, and the interpreter not exiting."""
+        return not self._closed and threading.main_thread().is_alive()
 
     def _acknowledge(self, job_id: int, seq: int, lost: bool) -> None:
         entries = self._unacked.get(job_id)
