@@ -167,14 +167,8 @@ class Writer:
 
     def drain(self, timeout: float) -> bool:
         """Wait until everything queued is stored (or ``timeout`` s); True if it was."""
-        deadline = time.monotonic() + timeout
         with self._cond:
-            while self._waiting or self._busy:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return False
-                self._cond.wait(left)
-            return True
+            return self._cond.wait_for(lambda: not (self._waiting or self._busy), timeout)
 
     def close(self) -> None:
         """Stop the thread; what still waits is dropped (the jobs resume from what is stored)."""

@@ -103,14 +103,8 @@ class WriterProcess:
 
     def drain(self, timeout: float) -> bool:
         """Wait until everything handed over is stored (or ``timeout`` s); True if it was."""
-        deadline = time.monotonic() + timeout
         with self._cond:
-            while self._unacked:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return False
-                self._cond.wait(left)
-            return True
+            return self._cond.wait_for(lambda: not self._unacked, timeout)
 
     def close(self) -> None:
         """Stop the child; what it has not stored is dropped (the jobs resume from what is stored)."""
