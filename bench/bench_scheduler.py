@@ -41,6 +41,7 @@ from finaldrive.service.schemas import JobSpec
 from finaldrive.service.services import open_database
 from finaldrive.workers import make_executor
 from finaldrive.workers.base import Done, ExecutorMixin, Shared
+from finaldrive.workers.evaluate import by_road
 
 PLANS = {"paper": {"kind": "paper-study", "roads": ["paper"]}}
 
@@ -55,14 +56,16 @@ class SleepTask:
                  vehicle: Vehicle | None) -> list[tuple[int, BatchResult]]:
         if self.sleep:
             time.sleep(self.ms * 1e-3 * len(rows))
-        x = rows[:, 1:]
+        return [(road, self._results(x)) for road, x in by_road(rows)]
+
+    def _results(self, x: np.ndarray) -> BatchResult:
         n = len(x)
         fitness = 20.0 - np.cos(x[:, 0]) * 0.01 - (x[:, 1] - 0.05) ** 2 - (x[:, 2] - 0.09) ** 2
         ones, nan = np.ones(n), np.full(n, np.nan)
-        return [(int(rows[0, 0]), BatchResult(
+        return BatchResult(
             designs=x, distance_m=fitness, squat_ratio=ones, slack_m=0.0 * ones, fitness_m=fitness,
             chain_length_m=ones, wall_s=np.full(n, self.ms * 1e-3), status=("ok",) * n, reason=("",) * n,
-            **dict.fromkeys(DIAGNOSTICS, nan)))]
+            **dict.fromkeys(DIAGNOSTICS, nan))
 
 
 class VirtualCluster(ExecutorMixin):

@@ -307,6 +307,10 @@ class BatchResult:
                    slack_m=np.full(n, np.nan), fitness_m=np.full(n, np.nan), chain_length_m=np.full(n, np.nan),
                    wall_s=np.zeros(n), status=(STATUS_FAILED,) * n, reason=(reason,) * n)
 
+    def rows(self, index: slice) -> BatchResult:
+        """The results of a range of rows, in order."""
+        return BatchResult(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+
     @classmethod
     def concat(cls, parts: list[BatchResult]) -> BatchResult:
         """Join batches in the given order."""

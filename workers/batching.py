@@ -5,10 +5,14 @@ The rule (docs/workers.md, "Batching"):
 1. **Probe.** Until a batch has come back, batches hold ``probe_size`` designs (1), so the
    first wave gives every worker a small task.
 2. **Measure.** For each finished batch of ``n`` designs: ``compute`` is the time ``fn`` ran
-   in the worker, ``busy`` adds the one-off warm-up, and ``round_trip`` runs from handing the
-   batch to the executor to receiving its result. Per-design time ``c`` is total compute over
-   total designs; per-task overhead ``o`` is the *smallest* ``round_trip - busy`` seen (the
-   least-queued task; cold-start tasks only overestimate it, and later tasks lower it).
+   in the worker, ``busy`` adds the one-off warm-up, ``round_trip`` runs from handing the
+   batch to the executor to receiving its result, and ``idle`` is the worker's time from its
+   previous task's end to this one's start. Per-design time ``c`` is total compute over total
+   designs; per-task overhead ``o`` is the *smallest* ``round_trip - busy`` seen (the
+   least-queued task; cold-start tasks only overestimate it, and later tasks lower it), or the
+   median ``idle`` of the last :data:`IDLE_SAMPLES` tasks if larger: with work queued, a worker
+   waits that long between tasks (the result's way back and the next task's way out; 6-10 ms
+   on 2 loaded cores against ~4 ms for the smallest round trip, docs/performance.md).
 3. **Size.** Overhead fraction ``o / (b c) <= 0.02`` needs ``b >= o / (0.02 c)``; take the
    smallest such ``b``, but at most ``remaining // (num_workers * 4)`` (at least 1), so at
    least four waves remain: every worker gets work, the tail balances, and progress streams;
@@ -31,7 +35,9 @@ The rule (docs/workers.md, "Batching"):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import statistics
+from collections import deque
+from dataclasses import dataclass, field
 
 #: overhead / compute per task (was 0.05; with the faster engine of issue 13 the paper study on 2
 #: workers then lost 7-8 % between simulations: 1.118x its engine time against 1.101x at 0.02)
@@ -40,6 +46,7 @@ MIN_WAVES = 4            # batches per worker that must remain
 PROBE_SIZE = 1           # designs per batch before any measurement
 MAX_TASK_S = 0.5         # longest task aimed for [s]
 DRIVER_SHARE = 0.5       # largest share of the dispatching thread's time its task traffic may take
+IDLE_SAMPLES = 64        # recent tasks whose workers' idle gaps give the overhead (rule 2)
 
 
 def batch_size(
@@ -78,13 +85,24 @@ class BatchSizer:
     probe_size: int = PROBE_SIZE
     designs_done: int = 0
     compute_s: float = 0.0
-    overhead_s: float = math.inf
+    round_trip_s: float = math.inf  # the smallest round trip - busy seen
+    idle_s: deque[float] = field(default_factory=lambda: deque(maxlen=IDLE_SAMPLES))
 
-    def observe(self, n_designs: int, round_trip_s: float, busy_s: float, compute_s: float) -> None:
-        """Record one finished batch."""
+    def observe(self, n_designs: int, round_trip_s: float, busy_s: float, compute_s: float,
+                idle_s: float | None = None) -> None:
+        """Record one finished batch (``idle_s``: its worker's wait before it, if it had a task before)."""
         self.designs_done += n_designs
         self.compute_s += compute_s
-        self.overhead_s = min(self.overhead_s, max(0.0, round_trip_s - busy_s))
+        self.round_trip_s = min(self.round_trip_s, max(0.0, round_trip_s - busy_s))
+        if idle_s is not None:
+            self.idle_s.append(idle_s)
+
+    @property
+    def overhead_s(self) -> float:
+        """Per-task overhead (rule 2): the smallest round trip, or the workers' median idle gap if larger."""
+        if not self.idle_s:
+            return self.round_trip_s
+        return max(self.round_trip_s, float(statistics.median(self.idle_s)))
 
     def next_size(self, remaining: int, driver_s: float = 0.0, first: int | None = None) -> int:
         """Designs for the next batch; ``driver_s``: the dispatcher's own time a task; ``first``:

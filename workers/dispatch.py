@@ -15,7 +15,9 @@ executors start tasks first-in first-out, and a deep queue of long tasks would h
 generation behind it.
 
 Batch sizes adapt per source (:mod:`finaldrive.workers.batching`): a source's estimates of
-per-design time and per-task overhead last as long as the source, not one request.
+per-design time and per-task overhead last as long as the source, not one request. A request
+smaller than the batch size shares its task with the next smallest ones that fit whole (a few DE
+generations in one task rather than a task each).
 
 A batch whose task raised, or whose worker was lost for good, is tried again one design a
 task, so only the design at fault fails (``on_failure``), never its neighbours in the batch.
@@ -94,7 +96,7 @@ def in_flight_limit(num_workers: int, capacity: int, task_s: float | None = None
 @dataclass(frozen=True)
 class _Task:
     work: Work
-    part: Request
+    parts: tuple[Request, ...]  # consecutive in the task's rows
     handed_at: float
 
 
@@ -184,22 +186,35 @@ class Dispatcher:
         return started
 
     def _start(self, work: Work, handles: tuple[Any, ...]) -> None:
-        if work.alone:
-            part = work.alone.popleft()
-        else:
-            at, ahead, queued = work.next_request()
-            request = work.queue[at]
-            assert work.sizer is not None
-            size = self._batch_size or work.sizer.next_size(queued, self.driver_s, first=ahead)
-            if size >= len(request):
-                part = request
-                del work.queue[at]
-            else:
-                part, work.queue[at] = request.split(size)
-        rows = np.column_stack([np.full(len(part), float(part.road)), part.designs])
+        parts = [work.alone.popleft()] if work.alone else self._take(work)
+        rows = np.concatenate([np.column_stack([np.full(len(part), float(part.road)), part.designs])
+                               for part in parts])
         task_id = self.executor.submit(_apply, rows, self._fn, *handles)
-        self._tasks[task_id] = _Task(work, part, time.perf_counter())
+        self._tasks[task_id] = _Task(work, tuple(parts), time.perf_counter())
         work.in_flight += 1
+
+    def _take(self, work: Work) -> list[Request]:
+        """A task's requests: the smallest, cut to the batch size; then, while the size leaves room,
+        the next smallest whole (a few DE generations of different runs in one task rather than a
+        task each, where the per-task cost would weigh on each; rule 3's spread keeps them apart on
+        a big cluster)."""
+        at, ahead, queued = work.next_request()
+        assert work.sizer is not None
+        room = self._batch_size or work.sizer.next_size(queued, self.driver_s, first=ahead)
+        parts: list[Request] = []
+        while True:
+            request = work.queue[at]
+            if room < len(request):
+                if not parts:
+                    part, work.queue[at] = request.split(room)
+                    parts.append(part)
+                return parts
+            parts.append(request)
+            del work.queue[at]
+            room -= len(request)
+            if not work.queue or not room:
+                return parts
+            at = min(range(len(work.queue)), key=lambda i: len(work.queue[i]))
 
     def collect(self, timeout: float) -> int:
         """Deliver the results of finished tasks (waiting up to ``timeout`` s for the first)."""
@@ -216,20 +231,21 @@ class Dispatcher:
             task.work.in_flight -= 1
             if d.cancelled:
                 continue
-            work, part = task.work, task.part
-            if (d.lost or d.error is not None) and len(part) > 1:
-                work.alone.extend(part.part(np.array([i])) for i in range(len(part)))  # find the one at fault
+            work, parts = task.work, task.parts
+            designs = sum(len(part) for part in parts)
+            if (d.lost or d.error is not None) and designs > 1:  # find the one at fault
+                work.alone.extend(part.part(np.array([i])) for part in parts for i in range(len(part)))
             elif d.lost:
-                work.on_failure(part, "worker lost: its process died repeatedly while simulating")
+                work.on_failure(parts[0], "worker lost: its process died repeatedly while simulating")
             elif d.error is not None:
-                work.on_failure(part, f"error in the worker: {type(d.error).__name__}: {d.error}")
+                work.on_failure(parts[0], f"error in the worker: {type(d.error).__name__}: {d.error}")
             else:
                 timed: Timed = d.result
                 assert work.sizer is not None
-                work.sizer.observe(len(part), time.perf_counter() - task.handed_at, timed.busy_s, timed.compute_s)
+                work.sizer.observe(designs, time.perf_counter() - task.handed_at, timed.busy_s, timed.compute_s,
+                                   timed.idle_s)
                 self._task_s += 0.02 * (timed.busy_s - self._task_s) if self._task_s else timed.busy_s
-                ((_, batch),) = timed.result
-                work.on_result(part, batch)
+                _deliver(work, parts, timed.result)
         now = time.perf_counter()
         self._window_busy_s += now - begun
         self._measure(len(done), now)
@@ -249,6 +265,18 @@ class Dispatcher:
         """Remove every source (cancelling what runs); the executor stays open."""
         for key in list(self._works):
             self.remove(key)
+
+
+def _deliver(work: Work, parts: tuple[Request, ...], results: list[tuple[int, BatchResult]]) -> None:
+    """Each part's results to its source: a task's results come one batch a run of rows on one
+    road, so a batch holds one part or several consecutive parts on its road."""
+    queue = iter(parts)
+    for _, batch in results:
+        start = 0
+        while start < len(batch):
+            part = next(queue)
+            work.on_result(part, batch if len(part) == len(batch) else batch.rows(slice(start, start + len(part))))
+            start += len(part)
 
 
 def _apply(rows: np.ndarray, fn: Callable[..., Timed], *shared: Any) -> Timed:

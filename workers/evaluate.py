@@ -40,12 +40,14 @@ def run_engine_on_roads(
     rows: np.ndarray, roads: tuple[Road, ...], settings: SimSettings, vehicle: Vehicle | None
 ) -> list[tuple[int, BatchResult]]:
     """The task body: rows ``(road index, a2, L2, R_WS)``; one ``(road index, results)`` per run of a road."""
+    return [(road, run_engine(designs, roads[road], settings, vehicle)) for road, designs in by_road(rows)]
+
+
+def by_road(rows: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """A task's rows ``(road index, a2, L2, R_WS)`` as runs of one road: ``(road index, design rows)``."""
     index = rows[:, 0].astype(int)
     cuts = np.flatnonzero(np.diff(index)) + 1
-    return [
-        (int(index[part[0]]), run_engine(rows[part, 1:], roads[int(index[part[0]])], settings, vehicle))
-        for part in np.split(np.arange(len(rows)), cuts) if len(part)
-    ]
+    return [(int(index[part[0]]), rows[part, 1:]) for part in np.split(np.arange(len(rows)), cuts) if len(part)]
 
 
 def warm_up_engine(roads: tuple[Road, ...], settings: SimSettings, vehicle: Vehicle | None) -> None:
@@ -89,7 +91,7 @@ def stream_rows(
     with closing(executor.map_batches(partial(call_timed, fn, warmup), batches(), shared)) as stream:
         for index, out in stream:
             start, stop = spans[index]
-            sizer.observe(stop - start, time.perf_counter() - handed_at[index], out.busy_s, out.compute_s)
+            sizer.observe(stop - start, time.perf_counter() - handed_at[index], out.busy_s, out.compute_s, out.idle_s)
             yield np.arange(start, stop), out.result
 
 

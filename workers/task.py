@@ -11,15 +11,19 @@ from dataclasses import dataclass
 from typing import Any
 
 _warmed_up: set[str] = set()  # warm-ups already run in this process
+_last_end: list[float] = []    # when this process's previous task ended (perf_counter)
 
 
 @dataclass(frozen=True)
 class Timed:
-    """A batch's result with its in-worker times [s]; ``busy_s`` includes any warm-up."""
+    """A batch's result with its in-worker times [s]; ``busy_s`` includes any warm-up; ``idle_s``:
+    from the end of the process's previous task to this one's start (None for its first), the
+    per-task cost of the executor's round trip while work is queued (batching rule 2)."""
 
     result: Any
     busy_s: float
     compute_s: float
+    idle_s: float | None = None
 
 
 def call_timed(
@@ -36,4 +40,6 @@ def call_timed(
     begin = time.perf_counter()
     result = fn(batch, *shared)
     end = time.perf_counter()
-    return Timed(result, busy_s=end - start, compute_s=end - begin)
+    idle = start - _last_end[0] if _last_end else None
+    _last_end[:] = [end]
+    return Timed(result, busy_s=end - start, compute_s=end - begin, idle_s=idle)

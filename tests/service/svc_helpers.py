@@ -15,6 +15,7 @@ from finaldrive.service.config import Settings
 from finaldrive.service.jobs.scheduler import Scheduler, SchedulerConfig
 from finaldrive.service.services import open_database
 from finaldrive.workers import Executor, SerialExecutor
+from finaldrive.workers.evaluate import by_road
 
 TERMINAL = {"succeeded", "failed", "cancelled"}
 
@@ -37,8 +38,7 @@ def toy_batch(x: np.ndarray, road: Road, fail_above_l2: float | None = None) -> 
 def toy_rows(rows: np.ndarray, roads: tuple[Road, ...], settings: SimSettings,
              vehicle: Vehicle | None) -> list[tuple[int, BatchResult]]:
     """The worker task of the scheduler, with the toy fitness instead of the engine (picklable)."""
-    road = int(rows[0, 0])
-    return [(road, toy_batch(rows[:, 1:], roads[road]))]
+    return [(road, toy_batch(x, roads[road])) for road, x in by_road(rows)]
 
 
 class ToyTask:
@@ -57,8 +57,7 @@ class ToyTask:
         if self.delay:
             time.sleep(self.delay * len(rows))
         self.simulated += len(rows)
-        road = int(rows[0, 0])
-        return [(road, toy_batch(rows[:, 1:], roads[road], self.fail_above_l2))]
+        return [(road, toy_batch(x, roads[road], self.fail_above_l2)) for road, x in by_road(rows)]
 
 
 #: Fast pacing for tests: leases short enough to take over quickly, heartbeats and writes often.

@@ -67,6 +67,21 @@ def test_sizer_probes_then_sizes_from_measurements() -> None:
     assert sizer.next_size(1000) == 1
 
 
+def test_sizer_takes_the_workers_median_idle_gap_when_it_exceeds_the_smallest_round_trip() -> None:
+    """Round trips of queued tasks hide the overhead (their smallest is the least-queued one's); a
+    worker's wait between tasks shows it. A few long waits (no work queued) do not move the median."""
+    sizer = BatchSizer(num_workers=2)
+    sizer.observe(10, round_trip_s=0.104, busy_s=0.1, compute_s=0.1)          # a worker's first task
+    assert sizer.overhead_s == pytest.approx(0.004)
+    for idle in [0.008] * 7 + [2.0] * 3:
+        sizer.observe(10, round_trip_s=0.2, busy_s=0.1, compute_s=0.1, idle_s=idle)
+    assert sizer.overhead_s == pytest.approx(0.008)
+    assert sizer.next_size(10**6) == math.ceil(0.008 / (TARGET_OVERHEAD * sizer.compute_s / sizer.designs_done))
+    for _ in range(64):  # only the recent tasks count
+        sizer.observe(10, round_trip_s=0.2, busy_s=0.1, compute_s=0.1, idle_s=0.001)
+    assert sizer.overhead_s == pytest.approx(0.004)  # the smallest round trip is the floor
+
+
 def test_sizer_ignores_negative_overhead_from_clock_noise() -> None:
     sizer = BatchSizer(num_workers=1)
     sizer.observe(4, round_trip_s=0.99, busy_s=1.0, compute_s=1.0)

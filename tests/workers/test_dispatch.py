@@ -6,9 +6,10 @@ from typing import Any
 
 import numpy as np
 
-from finaldrive.engine import BatchResult, Request
+from finaldrive.engine import BatchResult, Request, Road
 from finaldrive.workers import ProcessExecutor, SerialExecutor
 from finaldrive.workers.dispatch import Dispatcher, Work, in_flight_limit
+from finaldrive.workers.evaluate import by_road
 from tests.service.svc_helpers import toy_batch
 
 
@@ -16,7 +17,7 @@ def task(rows: np.ndarray, roads: Any, *_: Any) -> list[tuple[int, BatchResult]]
     """The toy fitness; raises for a design with l2 > 0.15 (a bug in the worker)."""
     if (rows[:, 2] > 0.15).any():
         raise RuntimeError("boom")
-    return [(int(rows[0, 0]), toy_batch(rows[:, 1:], roads[int(rows[0, 0])]))]
+    return [(road, toy_batch(x, roads[road])) for road, x in by_road(rows)]
 
 
 def request(n: int, road: int = 0, run: int = 0, l2: float = 0.1) -> Request:
@@ -30,8 +31,6 @@ class Sink:
         self.failures: list[tuple[Request, str]] = []
 
     def work(self, key: str, *requests: Request) -> Work:
-        from finaldrive.engine import Road
-
         w = Work(key=key, shared=((Road(), Road.parse("sine:0.02:3")),),
                  on_result=lambda p, b: self.results.append((p, b)),
                  on_failure=lambda p, r: self.failures.append((p, r)))
@@ -107,6 +106,27 @@ def test_the_smallest_request_goes_first() -> None:
     runs = [part.run for part, _ in sink.results]
     assert runs[:4] == [2, 2, 1, 1] and set(runs[4:]) == {0}
     assert sum(len(part) for part, _ in sink.results) == 51
+
+
+def test_small_requests_share_a_task_up_to_the_batch_size() -> None:
+    """DE generations of different runs ride in one task while the size leaves room (the per-task
+    cost is paid once); each gets its own results back, on its own road."""
+    sink = Sink()
+    executor = SerialExecutor()
+    submitted: list[int] = []
+    submit = executor.submit
+    executor.submit = lambda fn, rows, *shared: submitted.append(len(rows)) or submit(fn, rows, *shared)  # type: ignore[method-assign]
+    dispatcher = Dispatcher(executor, task, batch_size=10)
+    work = sink.work("a", request(4, road=0, run=1), request(3, road=1, run=2), request(5, road=0, run=3))
+    dispatcher.add(work)
+    drain(dispatcher, work)
+    assert submitted == [7, 5]  # 3 + 4 (the 5 does not fit beside them), then the 5
+    assert [(part.run, len(part)) for part, _ in sink.results] == [(2, 3), (1, 4), (3, 5)]
+    roads = (Road(), Road.parse("sine:0.02:3"))
+    for part, batch in sink.results:
+        expected = toy_batch(part.designs, roads[part.road])
+        np.testing.assert_array_equal(batch.designs, part.designs)
+        np.testing.assert_array_equal(batch.fitness_m, expected.fitness_m)
 
 
 def test_about_50_ms_of_work_waits_beyond_one_task_a_worker() -> None:
