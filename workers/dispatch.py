@@ -73,8 +73,12 @@ class Work:
         the designs queued that go before or with it (its requests' sizes and ``alone``); and all
         designs waiting to be started."""
         sizes = [len(q) for q in self.queue]
-        at = min(range(len(sizes)), key=sizes.__getitem__)
+        at = self.smallest()
         return at, sum(n for n in sizes if n <= sizes[at]) + len(self.alone), sum(sizes) + len(self.alone)
+
+    def smallest(self) -> int:
+        """Position in ``queue`` of its smallest request (the first of equals)."""
+        return min(range(len(self.queue)), key=lambda i: len(self.queue[i]))
 
 
 #: Work queued in the executor beyond one task a worker, in seconds of the cluster's time.
@@ -214,7 +218,7 @@ class Dispatcher:
             room -= len(request)
             if not work.queue or not room:
                 return parts
-            at = min(range(len(work.queue)), key=lambda i: len(work.queue[i]))
+            at = work.smallest()
 
     def collect(self, timeout: float) -> int:
         """Deliver the results of finished tasks (waiting up to ``timeout`` s for the first)."""

@@ -74,6 +74,12 @@ class Database:
         self.engine.dispose()
 
 
+def in_memory(url: str) -> bool:
+    """Whether ``url`` is an in-memory SQLite database (seen by this process alone)."""
+    parsed = make_url(url)
+    return parsed.get_backend_name() == "sqlite" and parsed.database in (None, "", ":memory:")
+
+
 def make_engine(url: str, *, durable: bool = True, **kwargs: Any) -> Engine:
     """``create_engine`` with the SQLite connection set-up described in the module docstring."""
     backend = make_url(url).get_backend_name()
@@ -81,7 +87,7 @@ def make_engine(url: str, *, durable: bool = True, **kwargs: Any) -> Engine:
         kwargs = {"pool_pre_ping": True, "connect_args": {"connect_timeout": CONNECT_TIMEOUT_S}, **kwargs}
     if backend != "sqlite":
         return create_engine(url, **kwargs)
-    memory = make_url(url).database in (None, "", ":memory:")
+    memory = in_memory(url)
     if not memory:  # one pooled connection per API worker thread: no reconnect churn under load
         kwargs = {"pool_size": POOL_SIZE, "max_overflow": POOL_SIZE // 2, **kwargs}
     engine = create_engine(url, **kwargs)

@@ -47,7 +47,7 @@ from finaldrive.engine import (
     fitness_values,
 )
 from finaldrive.service.config import Settings
-from finaldrive.service.db.engine import Database
+from finaldrive.service.db.engine import Database, in_memory
 from finaldrive.service.db.leases import beat, claim_jobs, finish_job, register_scheduler, stop_scheduler
 from finaldrive.service.db.models import Job, JobState
 from finaldrive.service.db.repository import profile_roads
@@ -360,8 +360,7 @@ class Scheduler:
 def _writer(db: Database, scheduler_id: str) -> Writer | WriterProcess:
     """The scheduler's writer: in a process of its own, unless the store is an in-memory SQLite
     database (which only this process sees)."""
-    url = db.engine.url
-    if url.get_backend_name() == "sqlite" and url.database in (None, "", ":memory:"):
+    if in_memory(db.url):
         return Writer(db, scheduler_id)
     return WriterProcess(db, scheduler_id)
 
