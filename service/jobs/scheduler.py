@@ -63,7 +63,7 @@ from finaldrive.service.jobs.plan import JobPlan, build_plan
 from finaldrive.service.jobs.recordings import RecordingProducer
 from finaldrive.service.jobs.rows import CACHED, WALL, nullable, row_from_cache, rows_from_results
 from finaldrive.service.jobs.writer import Guard, Writer, Writes
-from finaldrive.service.jobs.writer_process import WriterProcess
+from finaldrive.service.jobs.writer_process import WriterProcess, start_fork_server
 from finaldrive.service.profiles import profile_ids, resolver
 from finaldrive.service.schemas import JobSpec
 from finaldrive.workers import Executor
@@ -417,6 +417,8 @@ def run_scheduler(settings: Settings, stop: threading.Event, *, scheduler_id: st
 
     db = open_database(settings, durable=False)  # results lost with the machine's power are recomputed
     db.lock_timeout_s = SCHEDULER_LOCK_TIMEOUT_S
+    if not in_memory(db.url):
+        start_fork_server()   # the writer's, while Ray starts and the engine compiles
     executor = make_executor(settings.executor, num_workers=settings.num_workers, address=settings.ray_address,
                              niceness=settings.niceness)
     config = SchedulerConfig(lease_s=settings.lease_seconds, heartbeat_s=settings.heartbeat_seconds,

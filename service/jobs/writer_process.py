@@ -47,6 +47,16 @@ def _context() -> Any:
     return context
 
 
+def start_fork_server() -> None:
+    """Start the fork server now (it imports this module and the store's, ~0.8 s of CPU), rather than
+    when the first writer starts: the scheduler calls it before Ray's start and the wait for the
+    engine's compilation, which it then overlaps."""
+    import multiprocessing.forkserver
+
+    _context()
+    multiprocessing.forkserver.ensure_running()
+
+
 class WriterProcess:
     """A :class:`Writer` in a child process: ``put``, ``pending``, ``busy``, ``lost``, ``forget``,
     ``drain`` and ``close`` as the thread's."""
