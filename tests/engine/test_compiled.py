@@ -176,3 +176,14 @@ def test_compile_engine_compiles_if_the_other_process_failed(cache: list[str], t
     (tmp_path / "compiling-fast").unlink()    # the other process ended without the marker
     wait()
     assert cache == ["fast"]
+
+
+@pytest.mark.skipif(not Path("/proc/self/autogroup").exists(), reason="no Linux autogroups on this machine")
+def test_the_background_compilation_runs_at_the_lowest_priority_its_session_included() -> None:
+    """With autogroups, niceness alone orders processes within a session only: the background
+    compilation's session of its own (``_start(nice=True)``) must be lowered too."""
+    code = ("import os; from finaldrive.engine.precompile import _lower_priority; _lower_priority(); "
+            "print(os.nice(0), open('/proc/self/autogroup').read().split()[-1])")
+    out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True,
+                         start_new_session=True).stdout.split()
+    assert out == ["19", "19"]
