@@ -6,6 +6,15 @@ method. :func:`compile_engine` instead compiles each method once, in child proce
 never imports numba), and leaves a marker per method in the cache directory; later processes
 only load the cache.
 
+With more than one CPU the fast method is compiled in stages, the second in two processes at once:
+first what a run's setup and its integration both call, the right-hand side (through the end
+state's kinetic energy, which calls it); then, from the cache, a run's setup (``prepare``: the
+pose, the static equilibrium) here and the integration in a child, whose own setup is computed as
+plain Python (``interpreted``); then one whole run here, which loads the child's kernels (and
+compiles anything missing) before the marker is written. Kernels the two halves would both
+compile (the right-hand side's) are in the cache before either starts, so no two processes write
+one kernel's cache index at once.
+
     python -m finaldrive.engine.precompile fast [reference] [--nice]    # what compile_engine runs
 """
 
@@ -104,18 +113,56 @@ def compile_engine(now: tuple[str, ...] = ("fast",),
     return wait
 
 
-def _compile_here(method: str) -> None:
-    """Simulate briefly (every kernel a run of the method calls gets compiled and cached), then
-    write the method's marker."""
+def _compile_here(method: str, part: str = "whole") -> None:
+    """Simulate briefly, so that every kernel the method's runs call gets compiled and cached;
+    ``part``: only the fast method's right-hand side ("rhs"), a run's setup ("setup"), or the run
+    from a setup computed as plain Python ("run")."""
+    import numpy as np
+
     from finaldrive.engine.api import Design, SimSettings
+    from finaldrive.engine.fast.minimal import N_STATE, kinetic_energy
+    from finaldrive.engine.model.jit import interpreted
     from finaldrive.engine.model.road import Road
-    from finaldrive.engine.simulation import simulate
+    from finaldrive.engine.setup import MINIMAL_COORDS
+    from finaldrive.engine.simulation import prepare, simulate, simulate_prepared
+    from finaldrive.engine.vehicle import default_vehicle
 
     settings = SimSettings(method="reference" if method == "reference" else "fast", duration=_SIMULATED_S,
                            series=True)
-    result = simulate(Design.from_deg(195.3, 0.037, 0.088), Road.parse("sine:0.04:3"), settings)
+    design, road, vehicle = Design.from_deg(195.3, 0.037, 0.088), Road.parse("sine:0.04:3"), default_vehicle()
+    if part == "setup":
+        prepare(design, road, settings, vehicle)
+        return
+    if part in ("rhs", "run"):
+        with interpreted():
+            setup = prepare(design, road, settings, vehicle)
+        if part == "rhs":
+            y = np.zeros(N_STATE)
+            y[:len(MINIMAL_COORDS)] = setup.q0[list(MINIMAL_COORDS)]
+            kinetic_energy(y, setup.p, *road.packed(), 0)
+            return
+        result = simulate_prepared(setup, road, settings)
+    else:
+        result = simulate(design, road, settings, vehicle)
     if not result.ok:
         raise RuntimeError(f"the {method} method failed while compiling: {result.reason}")
+
+
+def _compile(method: str) -> None:
+    """Compile the method (the fast one in stages with more than one CPU: the module's docstring),
+    then write its marker."""
+    if method == "fast" and len(os.sched_getaffinity(0)) > 1:
+        _compile_here(method, "rhs")
+        run = subprocess.Popen([sys.executable, "-m", "finaldrive.engine.precompile", "--part", "run", method],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        try:
+            _compile_here(method, "setup")
+        finally:
+            _, err = run.communicate()
+        if run.returncode != 0:
+            raise RuntimeError(f"compiling the {method} method's integration failed: "
+                               f"{err.decode(errors='replace')[-2000:]}")
+    _compile_here(method)
     cache_dir().mkdir(parents=True, exist_ok=True)
     (cache_dir() / f"compiled-{method}").touch()
 
@@ -127,12 +174,22 @@ def _lower_priority() -> None:
         _AUTOGROUP.write_text(str(_BACKGROUND_NICENESS))
 
 
-if __name__ == "__main__":
-    if "--nice" in sys.argv:
+def main(argv: list[str]) -> None:
+    """``[--nice] method...``: compile the methods (each unlocked when done); ``--part part method``:
+    one part of one method's compilation (for :func:`_compile`)."""
+    if "--nice" in argv:
         _lower_priority()
-    for name in sys.argv[1:]:
+    if "--part" in argv:
+        at = argv.index("--part")
+        _compile_here(argv[at + 2], argv[at + 1])
+        return
+    for name in argv:
         if name != "--nice":
             try:
-                _compile_here(name)
+                _compile(name)
             finally:
                 _lock(name).unlink(missing_ok=True)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -37,7 +37,7 @@ from finaldrive.engine.setup import MINIMAL_COORDS, Setup, pack_parameters, prep
 from finaldrive.engine.solver.equilibrium import ReferenceEquilibriumError
 from finaldrive.engine.vehicle import Vehicle, default_vehicle
 
-__all__ = ["MINIMAL_COORDS", "Setup", "evaluate", "pack_parameters", "prepare", "simulate"]
+__all__ = ["MINIMAL_COORDS", "Setup", "evaluate", "pack_parameters", "prepare", "simulate", "simulate_prepared"]
 
 #: Steps of a compiled loop between two looks at the wall clock and at should_stop: about
 #: 5-20 ms of work on one core (fast path ~2 us a step, reference ~60 us a step).
@@ -98,6 +98,14 @@ def simulate(design: Design, road: Road, settings: SimSettings = SimSettings(),
         return _failed(f"invalid design: {exc}", math.nan, math.nan, start)
     except (GeometryError, EquilibriumError, ReferenceEquilibriumError) as exc:
         return _failed(str(exc), math.nan, math.nan, start)
+    return simulate_prepared(setup, road, settings, should_stop, start)
+
+
+def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
+                      should_stop: Callable[[], bool] | None = None, start: float | None = None) -> SimResult:
+    """:func:`simulate` from its setup on (``prepare``'s, for the same road and settings); ``start``:
+    the perf_counter reading the run's wall time counts from (default: now)."""
+    start = time.perf_counter() if start is None else start
     p = setup.p
     chain = float(p[P.L_CHAIN])
     kind, rp = road.packed()

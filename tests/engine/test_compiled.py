@@ -3,6 +3,7 @@ compile_engine's coordination between processes."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -103,6 +104,7 @@ _PRINT_RESULT = "print([v.hex() for k, v in vars(r).items() if isinstance(v, flo
 
 def test_a_fast_result_loads_neither_scipy_linalg_nor_the_reference_solver() -> None:
     """Nor does it leave numba's registries to the garbage collector's walks (jit._configure freezes them)."""
+    precompile.compile_engine(later=())()   # a process with the cache filled (compiling makes objects after the freeze)
     code = _FAST_RESULT + ("heavy = {'scipy.linalg', 'finaldrive.engine.solver.reference'} & set(sys.modules); "
                            "assert not heavy, sorted(heavy); import gc; "
                            "assert gc.get_freeze_count() > 10 * len(gc.get_objects()), gc.get_freeze_count()")
@@ -187,3 +189,32 @@ def test_the_background_compilation_runs_at_the_lowest_priority_its_session_incl
     out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True,
                          start_new_session=True).stdout.split()
     assert out == ["19", "19"]
+
+
+#: A fresh process's runs with both steppers (a smooth road: ROS34PW2; a measured profile: ROS2) and
+#: series, printing the kernels numba compiled for them (none when the cache holds everything).
+_COMPILED_BY_A_RUN = """
+from numba.core import event
+compiled = []
+class Listener(event.Listener):
+    def on_start(self, ev): pass
+    def on_end(self, ev): compiled.append(ev.data["dispatcher"].py_func.__qualname__)
+event.register("numba:compile", Listener())
+from finaldrive.engine import Design, Road, SimSettings, simulate
+for road in (Road.parse("sine:0.04:3"), Road.from_points([-5.0, 0.0, 5.0, 50.0], [0.0, 0.01, 0.0, 0.0])):
+    r = simulate(Design.from_deg(250.0, 0.1, 0.1), road, SimSettings(duration=0.05, series=True))
+    assert r.ok, r.reason
+print(compiled)
+"""
+
+
+@pytest.mark.slow
+def test_a_method_compiled_in_stages_is_whole_in_the_cache(tmp_path: Path) -> None:
+    """The fast method compiled as compile_engine does (in stages, two processes at once, with more
+    than one CPU): a fresh process then compiles nothing."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    subprocess.run([sys.executable, "-m", "finaldrive.engine.precompile", "fast"], env=env, check=True)
+    assert (tmp_path / "compiled-fast").exists() and not (tmp_path / "compiling-fast").exists()
+    out = subprocess.run([sys.executable, "-c", _COMPILED_BY_A_RUN], env=env, check=True, capture_output=True,
+                         text=True).stdout
+    assert out.strip() == "[]"
