@@ -151,7 +151,7 @@ def _compile_here(method: str, part: str = "whole") -> None:
 def _compile(method: str) -> None:
     """Compile the method (the fast one in stages with more than one CPU: the module's docstring),
     then write its marker."""
-    if method == "fast" and len(os.sched_getaffinity(0)) > 1:
+    if method == "fast" and (os.cpu_count() or 1) > 1:
         _compile_here(method, "rhs")
         run = subprocess.Popen([sys.executable, "-m", "finaldrive.engine.precompile", "--part", "run", method],
                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
