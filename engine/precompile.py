@@ -8,14 +8,16 @@ only load the cache.
 
 With more than one CPU the fast method is compiled in stages, the second in two processes at once:
 first what a run's setup and its integration both call, the right-hand side (through the end
-state's kinetic energy, which calls it); then, from the cache, a run's setup (``prepare``: the
-pose, the static equilibrium) here and the integration in a child, whose own setup is computed as
-plain Python (``interpreted``); then one whole run here, which loads the child's kernels (and
-compiles anything missing) before the marker is written. Kernels the two halves would both
-compile (the right-hand side's) are in the cache before either starts, so no two processes write
-one kernel's cache index at once.
+state's kinetic energy, which calls it) and the pose (``assemble``); then, from the cache, a run's
+setup (``prepare``: the static equilibrium) here and the integration in a child, whose own setup
+is computed as plain Python (``interpreted``); then one whole run here, which loads the child's
+kernels (and compiles anything missing) before the marker is written. The kernels both halves
+call are in the cache before either starts, so the two do not write one kernel's cache index at
+once (the reference method's background compilation may, as before: numba writes each index and
+data file whole, by rename).
 
     python -m finaldrive.engine.precompile fast [reference] [--nice]    # what compile_engine runs
+    python -m finaldrive.engine.precompile --part rhs|setup|run fast    # one stage (for the above)
 """
 
 from __future__ import annotations
@@ -45,6 +47,12 @@ _BACKGROUND_NICENESS = 19
 #: first job's compilation (the fast method's 22 s of CPU in 34 s of wall time, against 22.6 s
 #: in the starting session). So the background compilation lowers its session's share as well.
 _AUTOGROUP = Path("/proc/self/autogroup")
+#: Linux takes one unprivileged autogroup change per 0.1 s, machine-wide (EAGAIN otherwise): tries, pause [s].
+_AUTOGROUP_TRIES = (5, 0.1)
+#: This module run as a program (its stages and methods are arguments).
+_PROGRAM = (sys.executable, "-m", "finaldrive.engine.precompile")
+#: The stages of the fast method's compilation (module docstring); "whole" compiles all at once.
+_PARTS = ("rhs", "setup", "run", "whole")
 
 
 def is_compiled(method: str) -> bool:
@@ -68,7 +76,7 @@ def _start(method: str, nice: bool = False) -> subprocess.Popen[bytes]:
     ``nice``: in the background, in a session of its own (it outlives its caller)."""
     cache_dir().mkdir(parents=True, exist_ok=True)
     _lock(method).touch()
-    command = [sys.executable, "-m", "finaldrive.engine.precompile", method, *(["--nice"] if nice else [])]
+    command = [*_PROGRAM, method, *(["--nice"] if nice else [])]
     return subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL if nice else subprocess.PIPE,
                             start_new_session=nice)
 
@@ -114,14 +122,18 @@ def compile_engine(now: tuple[str, ...] = ("fast",),
 
 
 def _compile_here(method: str, part: str = "whole") -> None:
-    """Simulate briefly, so that every kernel the method's runs call gets compiled and cached;
-    ``part``: only the fast method's right-hand side ("rhs"), a run's setup ("setup"), or the run
-    from a setup computed as plain Python ("run")."""
+    """Compile and cache every kernel the method's runs call, by a brief run; ``part``: only the
+    fast method's right-hand side and pose ("rhs", no run), a run's setup ("setup", no run), or the
+    run from a setup computed as plain Python ("run")."""
+    if part not in _PARTS:
+        raise ValueError(f"unknown part {part!r}: expected one of {', '.join(_PARTS)}")
     import numpy as np
 
     from finaldrive.engine.api import Design, SimSettings
-    from finaldrive.engine.fast.minimal import N_STATE, kinetic_energy
+    from finaldrive.engine.fast.bodies import N_DOF
+    from finaldrive.engine.fast.minimal import N_STATE, UPPER, kinetic_energy
     from finaldrive.engine.model.jit import interpreted
+    from finaldrive.engine.model.kinematics import assemble
     from finaldrive.engine.model.road import Road
     from finaldrive.engine.setup import MINIMAL_COORDS
     from finaldrive.engine.simulation import prepare, simulate, simulate_prepared
@@ -137,9 +149,12 @@ def _compile_here(method: str, part: str = "whole") -> None:
         with interpreted():
             setup = prepare(design, road, settings, vehicle)
         if part == "rhs":
+            z = setup.q0[list(MINIMAL_COORDS)]
             y = np.zeros(N_STATE)
-            y[:len(MINIMAL_COORDS)] = setup.q0[list(MINIMAL_COORDS)]
-            kinetic_energy(y, setup.p, *road.packed(), 0)
+            y[:N_DOF] = z
+            kinetic_energy(y, setup.p, *road.packed(), UPPER)
+            x1, y1, theta, phi, fs = (float(v) for v in z[:N_DOF - 1])
+            assemble(setup.p, road, x1, y1, theta, phi, fs, 0.0, 0.0)   # as simulate_prepared, for the end pose
             return
         result = simulate_prepared(setup, road, settings)
     else:
@@ -148,15 +163,23 @@ def _compile_here(method: str, part: str = "whole") -> None:
         raise RuntimeError(f"the {method} method failed while compiling: {result.reason}")
 
 
+def _cpus() -> int:
+    """CPUs this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
 def _compile(method: str) -> None:
     """Compile the method (the fast one in stages with more than one CPU: the module's docstring),
     then write its marker."""
-    if method == "fast" and (os.cpu_count() or 1) > 1:
+    if method == "fast" and _cpus() > 1:
         _compile_here(method, "rhs")
-        run = subprocess.Popen([sys.executable, "-m", "finaldrive.engine.precompile", "--part", "run", method],
-                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        run = subprocess.Popen([*_PROGRAM, "--part", "run", method], stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE)
         try:
             _compile_here(method, "setup")
+        except BaseException:
+            run.kill()
+            raise
         finally:
             _, err = run.communicate()
         if run.returncode != 0:
@@ -168,19 +191,31 @@ def _compile(method: str) -> None:
 
 
 def _lower_priority() -> None:
-    """Run at the lowest priority, this process and its session's autogroup (where there is one)."""
+    """Run at the lowest priority: this process, and its session's autogroup if it leads the session
+    (a background compilation does; a shell's session is left alone)."""
     os.nice(_BACKGROUND_NICENESS)
-    with contextlib.suppress(OSError):
-        _AUTOGROUP.write_text(str(_BACKGROUND_NICENESS))
+    if os.getsid(0) != os.getpid():
+        return
+    tries, pause = _AUTOGROUP_TRIES
+    for _ in range(tries):
+        try:
+            _AUTOGROUP.write_text(str(_BACKGROUND_NICENESS))
+            return
+        except BlockingIOError:   # another autogroup changed within the last 0.1 s
+            time.sleep(pause)
+        except OSError:           # no autogroups here
+            return
 
 
 def main(argv: list[str]) -> None:
     """``[--nice] method...``: compile the methods (each unlocked when done); ``--part part method``:
-    one part of one method's compilation (for :func:`_compile`)."""
+    one stage of one method's compilation (for :func:`_compile`)."""
     if "--nice" in argv:
         _lower_priority()
     if "--part" in argv:
         at = argv.index("--part")
+        if len(argv) < at + 3:
+            raise SystemExit("usage: --part rhs|setup|run METHOD")
         _compile_here(argv[at + 2], argv[at + 1])
         return
     for name in argv:

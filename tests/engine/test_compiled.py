@@ -213,6 +213,7 @@ def test_a_method_compiled_in_stages_is_whole_in_the_cache(tmp_path: Path) -> No
     """The fast method compiled as compile_engine does (in stages, two processes at once, with more
     than one CPU): a fresh process then compiles nothing."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    (tmp_path / "compiling-fast").touch()   # locked, as compile_engine does before starting it
     subprocess.run([sys.executable, "-m", "finaldrive.engine.precompile", "fast"], env=env, check=True)
     assert (tmp_path / "compiled-fast").exists() and not (tmp_path / "compiling-fast").exists()
     out = subprocess.run([sys.executable, "-c", _COMPILED_BY_A_RUN], env=env, check=True, capture_output=True,
