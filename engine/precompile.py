@@ -132,7 +132,7 @@ def _compile_here(method: str, part: str = "whole") -> None:
     from finaldrive.engine.api import Design, SimSettings
     from finaldrive.engine.fast.bodies import N_DOF
     from finaldrive.engine.fast.minimal import N_STATE, UPPER, kinetic_energy
-    from finaldrive.engine.model.jit import interpreted
+    from finaldrive.engine.model.jit import interpreted, load_registries
     from finaldrive.engine.model.kinematics import assemble
     from finaldrive.engine.model.road import Road
     from finaldrive.engine.setup import MINIMAL_COORDS
@@ -142,6 +142,7 @@ def _compile_here(method: str, part: str = "whole") -> None:
     settings = SimSettings(method="reference" if method == "reference" else "fast", duration=_SIMULATED_S,
                            series=True)
     design, road, vehicle = Design.from_deg(195.3, 0.037, 0.088), Road.parse("sine:0.04:3"), default_vehicle()
+    load_registries()
     if part == "setup":
         prepare(design, road, settings, vehicle)
         return

@@ -14,8 +14,20 @@ cache), at its first call, not when the engine is imported. Called from compiled
 compiled for the plain types of its arguments only: numba would otherwise compile one more
 specialisation for every constant argument (``gap(y, 1, ...)``, ``False``) and every omitted
 default, each optimising its callees again (fast_rhs was compiled five times). Inside
-:func:`interpreted`, kernels not compiled yet run as plain Python: the static geometry (one
-equilibrium, tens of milliseconds) needs neither numba nor its cache.
+:func:`interpreted`, kernels Python has not yet called compiled run as plain Python: the static
+geometry (one equilibrium, tens of milliseconds) needs neither numba nor its cache.
+
+A kernel has two compiled forms, each cached apart: the one Python calls, with numba's wrapper that
+unboxes Python's arguments, and the one compiled code calls, without it. numba would otherwise
+build, optimise and cache that wrapper (and a C-callable one, which nothing here uses) for every
+kernel, though most are only ever called from compiled code: a fifth of the fast method's
+compilation (docs/performance.md). A kernel called both ways is compiled once in each form (none
+of the fast method's is: its five kernels Python calls are called by no other).
+
+numba's cache also loads all of numba's typing and lowering registries before it loads anything
+(~0.4 s of a fresh process's first result), which compiled code loaded from the cache does not
+need: the kernels' cache skips that (_cache_class), and a process about to compile loads them
+first (load_registries).
 """
 
 from __future__ import annotations
@@ -41,6 +53,10 @@ _OPTIONS: dict[str, Any] = {"nogil": True, "error_model": "numpy"}
 #: fast path's loop 1.10-1.13x faster, results bit-identical). numba refuses to compile such a
 #: kernel if it makes an array after all; ``jit(allocates=True)`` marks those that do.
 _NO_RUNTIME: dict[str, Any] = {"_nrt": False}
+#: No C-callable wrapper (for ctypes and numba's cfunc, which the engine does not use) in either form;
+#: no Python wrapper in the form compiled code calls.
+_FOR_PYTHON: dict[str, Any] = {"no_cfunc_wrapper": True}
+_FOR_CALLERS: dict[str, Any] = {"no_cfunc_wrapper": True, "no_cpython_wrapper": True}
 
 
 def _source_fingerprint() -> str:
@@ -67,23 +83,33 @@ def cache_dir() -> Path:
 
 @functools.cache
 def _configure() -> None:
-    """Import numba, point its cache at cache_dir() and load its registries (once); SciPy's LAPACK
-    for it without scipy.linalg (engine.model.lapack).
+    """Import numba, point its cache at cache_dir() and start its runtime (once); SciPy's LAPACK for
+    it without scipy.linalg (engine.model.lapack); then ``gc.freeze()`` (see load_registries).
 
-    Then ``gc.freeze()``: numba's registries (loaded here rather than at the first compilation or
-    cache load, as numba would) are some 100k objects that live as long as the process, and every
-    full collection walks them again, the interpreter's at exit included (~0.5 s of a fresh
-    process's first result). Frozen, the collector skips them, and whatever else exists by then
-    (the process's imports, mostly): only a reference cycle among those objects that is dropped
-    later stays uncollected."""
+    numba's typing and lowering registries are left to the first compilation (numba's compiler
+    loads them itself): loading compiled code from the cache needs only the runtime."""
     from finaldrive.engine.model import lapack
 
     lapack.load()
     from numba import config
     from numba.core.registry import cpu_target
+    from numba.core.runtime.nrt import rtsys
 
     if not os.environ.get("NUMBA_CACHE_DIR"):
         config.CACHE_DIR = str(cache_dir())  # type: ignore[attr-defined]
+    rtsys.initialize(cpu_target.target_context)
+    gc.freeze()
+
+
+def load_registries() -> None:
+    """Load numba's typing and lowering registries now, then ``gc.freeze()``: for a process about to
+    compile. They are some 100k objects that live as long as the process, and every full
+    collection walks them again, the interpreter's at exit included (~0.5 s); frozen, the collector
+    skips them and whatever else exists by then (the process's imports, mostly): only a reference
+    cycle among those objects that is dropped later stays uncollected."""
+    _configure()
+    from numba.core.registry import cpu_target
+
     cpu_target.typing_context.refresh()
     cpu_target.target_context.refresh()
     gc.freeze()
@@ -107,20 +133,44 @@ def _dispatcher_class() -> Any:
     return PlainDispatcher
 
 
+@functools.cache
+def _cache_class(prefix: str) -> Any:
+    """numba's on-disk cache of compiled functions, its files named ``<prefix><module>.<function>-<line>...``
+    (the two forms of a kernel never share an index), loading without refreshing the registries."""
+    from numba.core.caching import CompileResultCacheImpl, FunctionCache
+
+    class Impl(CompileResultCacheImpl):
+        def get_filename_base(self, fullname: str, abiflags: str) -> str:
+            return prefix + super().get_filename_base(fullname, abiflags)
+
+    class _Cache(FunctionCache):
+        """numba's FunctionCache but for load_overload, which refreshes the target's registries
+        first (numba 0.60-0.68): rebuilding cached code needs none of them, only the runtime."""
+
+        _impl_class = Impl
+
+        def load_overload(self, sig: Any, target_context: Any) -> Any:
+            with self._guard_against_spurious_io_errors():
+                return self._load_overload(sig, target_context)
+
+    return _Cache
+
+
 def njit(**options: Any) -> Callable[[Callable[..., Any]], Any]:
     """numba's njit with the engine's cache directory (for functions built at run time)."""
     import numba
 
-    _configure()
+    load_registries()   # numba's own cache loads them anyway; frozen here
     return numba.njit(**options)
 
 
 class Kernel:
-    """A compiled model or solver function: numba's dispatcher, made at the first call.
+    """A compiled model or solver function: numba's dispatchers of its two forms, each made at its first use.
 
-    Kernels call each other in compiled code as dispatchers do (numba reads ``_numba_type_``).
-    ``prepare`` runs once before numba first compiles the function (to bind what it needs of
-    numba); ``python`` runs instead of ``fn`` inside :func:`interpreted` (default: ``fn``).
+    Kernels call each other in compiled code as dispatchers do (numba reads ``_numba_type_``), through
+    the form without Python's wrapper (``callee``); Python calls ``dispatcher``'s. ``prepare`` runs
+    before either form is made (to bind what it needs of numba; it may run twice); ``python`` runs
+    instead of ``fn`` inside :func:`interpreted` (default: ``fn``).
     """
 
     def __init__(self, fn: Callable[..., Any], prepare: Callable[[], None] | None = None,
@@ -131,25 +181,41 @@ class Kernel:
         self._prepare = prepare
         self._python = python or fn
         self._dispatcher: Any = None
+        self._callee: Any = None
 
     @property
     def dispatcher(self) -> Any:
-        """numba's dispatcher of the function (imports and configures numba the first time)."""
+        """numba's dispatcher of the form Python calls (imports and configures numba the first time)."""
         if self._dispatcher is None:
-            with _lock:
-                if self._dispatcher is None:
-                    if self._prepare is not None:
-                        self._prepare()
-                    _configure()
-                    self._dispatcher = _dispatcher_class()(py_func=self.py_func,
-                                                           targetoptions={"nopython": True, **_OPTIONS,
-                                                                          **({} if self._allocates else _NO_RUNTIME)})
-                    self._dispatcher.enable_caching()
+            self._dispatcher = self._make(callee=False)
         return self._dispatcher
 
     @property
+    def callee(self) -> Any:
+        """numba's dispatcher of the form compiled code calls: without a Python wrapper, it must not
+        be called from Python."""
+        if self._callee is None:
+            self._callee = self._make(callee=True)
+        return self._callee
+
+    def _make(self, callee: bool) -> Any:
+        """A dispatcher of one form, made once (another thread may have made it meanwhile)."""
+        with _lock:
+            made = self._callee if callee else self._dispatcher
+            if made is not None:
+                return made
+            if self._prepare is not None:
+                self._prepare()
+            _configure()
+            options = {"nopython": True, **_OPTIONS, **({} if self._allocates else _NO_RUNTIME),
+                       **(_FOR_CALLERS if callee else _FOR_PYTHON)}
+            made = _dispatcher_class()(py_func=self.py_func, targetoptions=options)
+            made._cache = _cache_class("callee-" if callee else "")(self.py_func)  # as enable_caching() would
+            return made
+
+    @property
     def _numba_type_(self) -> Any:
-        return self.dispatcher._numba_type_
+        return self.callee._numba_type_
 
     def __call__(self, *args: Any) -> Any:
         if self._dispatcher is None and getattr(_local, "interpreted", False):
