@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from datetime import datetime, timedelta
 
-from sqlalchemy import ColumnElement, and_, or_, select, text, update
+from sqlalchemy import ColumnElement, and_, func, or_, select, text, update
 from sqlalchemy.orm import Session
 
 from finaldrive.service.db.models import Job, JobState, Recording, Scheduler as SchedulerRow
@@ -93,6 +93,12 @@ def schedulers(session: Session) -> list[tuple[SchedulerRow, float]]:
 def _claimable(now: datetime) -> ColumnElement[bool]:
     return or_(Job.state.in_(_CLAIMABLE),
                and_(Job.state == JobState.running.value, or_(Job.lease_until.is_(None), Job.lease_until < now)))
+
+
+def newest_queued(session: Session) -> int:
+    """The newest queued job's id (0 if none): one indexed read, so that a scheduler with room claims
+    a new job before its next heartbeat."""
+    return session.scalar(select(func.max(Job.id)).where(Job.state == JobState.queued.value)) or 0
 
 
 def claim_jobs(session: Session, scheduler_id: str, *, lease_s: float, limit: int) -> list[int]:

@@ -48,7 +48,14 @@ from finaldrive.engine import (
 )
 from finaldrive.service.config import Settings
 from finaldrive.service.db.engine import Database, in_memory
-from finaldrive.service.db.leases import beat, claim_jobs, finish_job, register_scheduler, stop_scheduler
+from finaldrive.service.db.leases import (
+    beat,
+    claim_jobs,
+    finish_job,
+    newest_queued,
+    register_scheduler,
+    stop_scheduler,
+)
 from finaldrive.service.db.models import Job, JobState
 from finaldrive.service.db.repository import profile_roads
 from finaldrive.service.db.results import (
@@ -78,6 +85,9 @@ SCHEDULER_LOCK_TIMEOUT_S = 2.0
 _INTAKE_DESIGNS = 4096
 #: An idle loop waits this long per turn: with jobs (a result may be on its way to the store), without.
 _IDLE_WAIT_S, _IDLE_POLL_S = 0.02, 0.2
+#: Between heartbeats, a scheduler with room for a job looks this often for a newly queued one (a
+#: read) and claims it at once rather than at the next heartbeat [s].
+_LOOK_S = 0.2
 
 
 @dataclass(frozen=True)
@@ -143,6 +153,8 @@ class Scheduler:
         self.writer = _writer(db, self.id)
         self._registered = False
         self._next_beat = 0.0
+        self._next_look = 0.0
+        self._newest_seen = 0   # the newest queued job's id at the last look
         self._next_flush = 0.0
 
     # ------------------------------------------------------------------ the loop
@@ -165,6 +177,10 @@ class Scheduler:
     def turn(self, timeout: float) -> int:
         """One turn of the loop (tests drive it step by step); returns how many tasks finished."""
         now = time.monotonic()
+        if now < self._next_beat and now >= self._next_look and len(self.jobs) < self.config.max_jobs:
+            self._next_look = now + _LOOK_S
+            if self._new_job_queued():
+                self._next_beat = now
         # the heartbeat is a write transaction: taken while the writer is idle, it does not wait behind
         # the writer's (which held the loop ~50 ms a beat on SQLite), unless it is half a beat late
         if now >= self._next_beat and (not self.writer.busy() or now >= self._next_beat + self.config.heartbeat_s / 2):
@@ -209,6 +225,15 @@ class Scheduler:
         for job_id in sorted(owned.union(claimed or [])):  # owned but not open: a restart, or an open that failed
             if job_id not in self.jobs:
                 self._open(job_id)
+
+    def _new_job_queued(self) -> bool:
+        """Whether a job was queued since the last look: each new job brings the heartbeat (and its
+        claim) forward once, so a job another scheduler won or that stays queued costs no more writes."""
+        newest = self._db(newest_queued, "look for new jobs", write=False)
+        if newest is None or newest <= self._newest_seen:
+            return False
+        self._newest_seen = newest
+        return True
 
     # ------------------------------------------------------------------ jobs
     def _open(self, job_id: int) -> None:

@@ -228,6 +228,27 @@ def test_health_reports_each_scheduler_and_is_503_without_one(settings: Settings
         assert c.get("/v1/health").status_code == 503  # it stopped
 
 
+def test_a_new_job_is_claimed_before_the_next_heartbeat(settings: Settings) -> None:
+    """A scheduler with room looks for new jobs between heartbeats (a read) and claims one at once;
+    one without room does not look (nor beat) until a job of its own is done."""
+    slow_beat = SchedulerConfig(lease_s=120.0, heartbeat_s=60.0, flush_s=0.02, recordings=False)
+    with TestClient(create_app(settings)) as c, running_scheduler(settings, ToyTask(), config=slow_beat):
+        time.sleep(0.3)   # its first heartbeat is behind it; the next is a minute away
+        job_id = c.post("/v1/jobs", json=DE).json()["id"]
+        assert wait_done(c, job_id, timeout=10.0)["state"] == "succeeded"
+    full = Scheduler(open_database(settings), SerialExecutor(), config=SchedulerConfig(max_jobs=1, heartbeat_s=60.0,
+                     lease_s=120.0, flush_s=0.02, recordings=False), task=ToyTask(delay=0.02), warmup=None)
+    beats: list[float] = []
+    maintain = full._maintain
+    full._maintain = lambda: (beats.append(time.monotonic()), maintain())[1]   # type: ignore[method-assign]
+    first, second = _submit(settings, DE), _submit(settings, DE)
+    _drive(full, lambda: first in full.jobs)
+    _drive(full, lambda: second in full.jobs, timeout=20.0)   # once the first is done, well before a heartbeat
+    assert len(beats) == 2 and _job(settings, first)["state"] == "succeeded"   # no looks while it had no room
+    full.shutdown()
+    full.db.dispose()
+
+
 def test_a_job_that_cannot_be_planned_fails_with_a_clean_message(settings: Settings) -> None:
     job_id = _submit(settings, DE)
     db = open_database(settings)
