@@ -116,7 +116,7 @@ def _distance_sq_jac(q, r, ix, iy, jx, jy, J):
     J[r, jy] -= 2.0 * dy
 
 
-@jit(allocates=True)
+@jit(allocates=True, one_form=True)
 def jacobian(q: np.ndarray, p: np.ndarray, kind: int, rp: np.ndarray, J: np.ndarray) -> None:
     """Phi_q, the 33 x 39 Jacobian of eqs. (1)-(33). J is overwritten."""
     J[:, :] = 0.0

@@ -25,7 +25,7 @@ from finaldrive.engine.model.elements import (
 from finaldrive.engine.model.jit import jit
 
 
-@jit(allocates=True)
+@jit(allocates=True, one_form=True)
 def applied_forces(q: np.ndarray, qd: np.ndarray, u: float, sigma: float, p: np.ndarray,
                    qg: np.ndarray, longitudinal: bool, out: np.ndarray, aux: np.ndarray) -> None:
     """Q(q, q-dot, u) into out; the elements' outputs into aux (engine.model.elements)."""

@@ -21,8 +21,9 @@ A kernel has two compiled forms, each cached apart: the one Python calls, with n
 unboxes Python's arguments, and the one compiled code calls, without it. numba would otherwise
 build, optimise and cache that wrapper (and a C-callable one, which nothing here uses) for every
 kernel, though most are only ever called from compiled code: a fifth of the fast method's
-compilation (docs/performance.md). A kernel called both ways is compiled once in each form (none
-of the fast method's is: its five kernels Python calls are called by no other).
+compilation (docs/performance.md). A kernel that both call on a method's path is marked
+``one_form``: its form with Python's wrapper serves both (a test checks that no kernel of either
+method is compiled in both forms).
 
 numba's cache also loads all of numba's typing and lowering registries before it loads anything
 (~0.4 s of a fresh process's first result), which compiled code loaded from the cache does not
@@ -174,10 +175,11 @@ class Kernel:
     """
 
     def __init__(self, fn: Callable[..., Any], prepare: Callable[[], None] | None = None,
-                 python: Callable[..., Any] | None = None, *, allocates: bool = False) -> None:
+                 python: Callable[..., Any] | None = None, *, allocates: bool = False, one_form: bool = False) -> None:
         functools.update_wrapper(self, fn)
         self.py_func = fn
         self._allocates = allocates
+        self._one_form = one_form
         self._prepare = prepare
         self._python = python or fn
         self._dispatcher: Any = None
@@ -193,7 +195,9 @@ class Kernel:
     @property
     def callee(self) -> Any:
         """numba's dispatcher of the form compiled code calls: without a Python wrapper, it must not
-        be called from Python."""
+        be called from Python (``one_form``: the dispatcher Python calls)."""
+        if self._one_form:
+            return self.dispatcher
         if self._callee is None:
             self._callee = self._make(callee=True)
         return self._callee
@@ -224,16 +228,17 @@ class Kernel:
 
 
 @overload
-def jit(fn: Callable[..., Any], *, allocates: bool = False) -> Kernel: ...
+def jit(fn: Callable[..., Any], *, allocates: bool = False, one_form: bool = False) -> Kernel: ...
 @overload
-def jit(*, allocates: bool = False) -> Callable[[Callable[..., Any]], Kernel]: ...
-def jit(fn: Callable[..., Any] | None = None, *, allocates: bool = False) -> Any:
+def jit(*, allocates: bool = False, one_form: bool = False) -> Callable[[Callable[..., Any]], Kernel]: ...
+def jit(fn: Callable[..., Any] | None = None, *, allocates: bool = False, one_form: bool = False) -> Any:
     """Decorator for compiled model and solver functions (see the module's docstring):
-    ``@jit``, or ``@jit(allocates=True)`` for a function that makes arrays or slices (it needs
-    numba's runtime)."""
+    ``@jit``; ``allocates=True`` for a function that makes arrays or slices (it needs numba's
+    runtime); ``one_form=True`` for one that Python and compiled code both call on a method's
+    path (one form, with Python's wrapper, serves both)."""
     if fn is None:
-        return functools.partial(Kernel, allocates=allocates)
-    return Kernel(fn, allocates=allocates)
+        return functools.partial(Kernel, allocates=allocates, one_form=one_form)
+    return Kernel(fn, allocates=allocates, one_form=one_form)
 
 
 @contextlib.contextmanager
