@@ -45,6 +45,22 @@ def _calls_both_ways(x):
     return _both_ways(x) + 1.0
 
 
+@jit(one_form=True)
+def _one_form(x):
+    return x + 1.0
+
+
+@jit
+def _calls_one_form(x):
+    return _one_form(x) * 2.0
+
+
+def test_a_one_form_kernel_serves_python_and_compiled_callers_alike() -> None:
+    assert _calls_one_form(1.0) == 4.0 and _one_form(1.0) == 2.0
+    assert _one_form.callee is _one_form.dispatcher
+    assert not _one_form.dispatcher.targetoptions.get("no_cpython_wrapper")
+
+
 def test_compiled_code_calls_a_kernels_form_without_pythons_wrapper_cached_apart(tmp_path: Path) -> None:
     """Called from compiled code only, a kernel is compiled without numba's Python wrapper (nor the
     C-callable one: neither is ever used); called from Python too, it is compiled once more with the
