@@ -22,8 +22,8 @@ unboxes Python's arguments, and the one compiled code calls, without it. numba w
 build, optimise and cache that wrapper (and a C-callable one, which nothing here uses) for every
 kernel, though most are only ever called from compiled code: a fifth of the fast method's
 compilation (docs/performance.md). A kernel that both call on a method's path is marked
-``one_form``: its form with Python's wrapper serves both (a test checks that no kernel of either
-method is compiled in both forms).
+``one_form``: its form with Python's wrapper serves both (the staged compilation's test checks
+that none of the fast method's kernels is compiled in both forms).
 
 numba's cache also loads all of numba's typing and lowering registries before it loads anything
 (~0.4 s of a fresh process's first result), which compiled code loaded from the cache does not
@@ -102,6 +102,7 @@ def _configure() -> None:
     gc.freeze()
 
 
+@functools.cache
 def load_registries() -> None:
     """Load numba's typing and lowering registries now, then ``gc.freeze()``: for a process about to
     compile. They are some 100k objects that live as long as the process, and every full
@@ -109,17 +110,20 @@ def load_registries() -> None:
     skips them and whatever else exists by then (the process's imports, mostly): only a reference
     cycle among those objects that is dropped later stays uncollected."""
     _configure()
+    from numba.core.compiler_lock import global_compiler_lock
     from numba.core.registry import cpu_target
 
-    cpu_target.typing_context.refresh()
-    cpu_target.target_context.refresh()
+    with global_compiler_lock:   # as numba's compiler refreshes them: not beside another thread's compilation
+        cpu_target.typing_context.refresh()
+        cpu_target.target_context.refresh()
     gc.freeze()
 
 
 @functools.cache
-def _dispatcher_class() -> Any:
+def _dispatcher_class(callee: bool = False) -> Any:
     """numba's CPU dispatcher, typing calls from compiled code with the plain types of the arguments
-    (a literal as its type, an omitted default as its value's type)."""
+    (a literal as its type, an omitted default as its value's type); ``callee``: one that refuses
+    calls from Python (compiled without Python's wrapper, its entry point is null)."""
     from numba import typeof, types
     from numba.core.registry import CPUDispatcher
 
@@ -131,7 +135,15 @@ def _dispatcher_class() -> Any:
             _, folded = self._compiler.fold_argument_types(args, kws)  # type: ignore[attr-defined]
             return super().get_call_template([plain(t) for t in folded], {})
 
-    return PlainDispatcher
+    if not callee:
+        return PlainDispatcher
+
+    class CalleeDispatcher(PlainDispatcher):
+        def __call__(self, *args: Any, **kws: Any) -> Any:
+            raise TypeError(f"{self.py_func.__qualname__}: this form is for compiled callers; Python calls "
+                            "the kernel itself")
+
+    return CalleeDispatcher
 
 
 @functools.cache
@@ -151,8 +163,12 @@ def _cache_class(prefix: str) -> Any:
         _impl_class = Impl
 
         def load_overload(self, sig: Any, target_context: Any) -> Any:
-            with self._guard_against_spurious_io_errors():
-                return self._load_overload(sig, target_context)
+            try:
+                guard, load = self._guard_against_spurious_io_errors, self._load_overload
+            except AttributeError:   # another numba's internals: its own way, registries and all
+                return super().load_overload(sig, target_context)
+            with guard():
+                return load(sig, target_context)
 
     return _Cache
 
@@ -189,7 +205,7 @@ class Kernel:
     def dispatcher(self) -> Any:
         """numba's dispatcher of the form Python calls (imports and configures numba the first time)."""
         if self._dispatcher is None:
-            self._dispatcher = self._make(callee=False)
+            self._make(callee=False)
         return self._dispatcher
 
     @property
@@ -199,23 +215,25 @@ class Kernel:
         if self._one_form:
             return self.dispatcher
         if self._callee is None:
-            self._callee = self._make(callee=True)
+            self._make(callee=True)
         return self._callee
 
-    def _make(self, callee: bool) -> Any:
-        """A dispatcher of one form, made once (another thread may have made it meanwhile)."""
+    def _make(self, callee: bool) -> None:
+        """Make the dispatcher of one form, once (another thread may have made it meanwhile)."""
         with _lock:
-            made = self._callee if callee else self._dispatcher
-            if made is not None:
-                return made
+            if (self._callee if callee else self._dispatcher) is not None:
+                return
             if self._prepare is not None:
                 self._prepare()
             _configure()
             options = {"nopython": True, **_OPTIONS, **({} if self._allocates else _NO_RUNTIME),
                        **(_FOR_CALLERS if callee else _FOR_PYTHON)}
-            made = _dispatcher_class()(py_func=self.py_func, targetoptions=options)
+            made = _dispatcher_class(callee)(py_func=self.py_func, targetoptions=options)
             made._cache = _cache_class("callee-" if callee else "")(self.py_func)  # as enable_caching() would
-            return made
+            if callee:
+                self._callee = made
+            else:
+                self._dispatcher = made
 
     @property
     def _numba_type_(self) -> Any:
@@ -243,7 +261,7 @@ def jit(fn: Callable[..., Any] | None = None, *, allocates: bool = False, one_fo
 
 @contextlib.contextmanager
 def interpreted() -> Iterator[None]:
-    """In this thread, run kernels that are not compiled yet as plain Python (no numba)."""
+    """In this thread, run as plain Python (no numba) the kernels whose form Python calls is not made yet."""
     before = getattr(_local, "interpreted", False)
     _local.interpreted = True
     try:

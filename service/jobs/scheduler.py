@@ -206,6 +206,9 @@ class Scheduler:
         log.info("scheduler %s stopped", self.id)
 
     def _maintain(self) -> None:
+        # the jobs seen by the last look count as seen only if this beat claims all it may (below):
+        # else (the store failed, or room ran out) a later look tries them again
+        seen, self._newest_seen = self._newest_seen, 0
         if not self._registered:
             done = self._db(partial(register_scheduler, scheduler_id=self.id, host=socket.gethostname(),
                                     pid=os.getpid(), executor=self.executor_kind, capacity=self.executor.capacity),
@@ -222,13 +225,16 @@ class Scheduler:
             self._drop(job_id)
         room = self.config.max_jobs - len(owned)
         claimed = self._db(lambda s: claim_jobs(s, self.id, lease_s=self.config.lease_s, limit=room), "claim jobs")
+        if claimed is not None and len(claimed) < room:
+            self._newest_seen = seen   # every claimable job was taken, by us or by others
         for job_id in sorted(owned.union(claimed or [])):  # owned but not open: a restart, or an open that failed
             if job_id not in self.jobs:
                 self._open(job_id)
 
     def _new_job_queued(self) -> bool:
         """Whether a job was queued since the last look: each new job brings the heartbeat (and its
-        claim) forward once, so a job another scheduler won or that stays queued costs no more writes."""
+        claim) forward once, so a job another scheduler won costs no more writes; one left queued for
+        want of room is looked at again once the scheduler has room (_maintain)."""
         newest = self._db(newest_queued, "look for new jobs", write=False)
         if newest is None or newest <= self._newest_seen:
             return False

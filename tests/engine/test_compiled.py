@@ -71,6 +71,12 @@ from test_compiled import _both_ways, _calls_both_ways
 assert _calls_both_ways(1.5) == 4.0
 assert _both_ways._dispatcher is None                        # not made: nothing called it from Python
 callee = _both_ways.callee
+try:
+    callee(1.5)                                              # its entry point is null: refused, not a crash
+except TypeError:
+    pass
+else:
+    raise AssertionError("the form for compiled callers ran from Python")
 assert callee.targetoptions["no_cpython_wrapper"] and callee.targetoptions["no_cfunc_wrapper"]
 assert _both_ways(1.5) == 3.0                                # now the form Python calls
 assert not _both_ways.dispatcher.targetoptions.get("no_cpython_wrapper")
@@ -110,7 +116,7 @@ def test_kernels_run_without_numbas_runtime_unless_they_make_arrays() -> None:
     from numba.core.errors import NumbaError
 
     assert _marked_as_making_one(3).tolist() == [0.0, 1.0, 2.0]   # a runtime-less kernel called from one with it
-    assert _fill.dispatcher.targetoptions["_nrt"] is False
+    assert _fill.callee.targetoptions["_nrt"] is False   # the form that ran, called from compiled code
     assert "_nrt" not in _marked_as_making_one.dispatcher.targetoptions
     with pytest.raises(NumbaError):   # refused, loudly, rather than leaking or crashing
         _makes_an_array(3)

@@ -230,10 +230,13 @@ def test_health_reports_each_scheduler_and_is_503_without_one(settings: Settings
 
 def test_a_new_job_is_claimed_before_the_next_heartbeat(settings: Settings) -> None:
     """A scheduler with room looks for new jobs between heartbeats (a read) and claims one at once;
-    one without room does not look (nor beat) until a job of its own is done."""
+    one without room does not look (nor beat), and claims a job left queued as soon as it has room."""
     slow_beat = SchedulerConfig(lease_s=120.0, heartbeat_s=60.0, flush_s=0.02, recordings=False)
-    with TestClient(create_app(settings)) as c, running_scheduler(settings, ToyTask(), config=slow_beat):
-        time.sleep(0.3)   # its first heartbeat is behind it; the next is a minute away
+    with TestClient(create_app(settings)) as c, running_scheduler(settings, ToyTask(), config=slow_beat) as running:
+        deadline = time.monotonic() + 10.0
+        while not running._registered:   # its first heartbeat is behind it; the next is a minute away
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
         job_id = c.post("/v1/jobs", json=DE).json()["id"]
         assert wait_done(c, job_id, timeout=10.0)["state"] == "succeeded"
     full = Scheduler(open_database(settings), SerialExecutor(), config=SchedulerConfig(max_jobs=1, heartbeat_s=60.0,
@@ -241,12 +244,16 @@ def test_a_new_job_is_claimed_before_the_next_heartbeat(settings: Settings) -> N
     beats: list[float] = []
     maintain = full._maintain
     full._maintain = lambda: (beats.append(time.monotonic()), maintain())[1]   # type: ignore[method-assign]
-    first, second = _submit(settings, DE), _submit(settings, DE)
-    _drive(full, lambda: first in full.jobs)
-    _drive(full, lambda: second in full.jobs, timeout=20.0)   # once the first is done, well before a heartbeat
-    assert len(beats) == 2 and _job(settings, first)["state"] == "succeeded"   # no looks while it had no room
-    full.shutdown()
-    full.db.dispose()
+    try:
+        full.turn(0.01)   # the first heartbeat: nothing queued
+        first, second = _submit(settings, DE), _submit(settings, DE)
+        _drive(full, lambda: first in full.jobs, timeout=5.0)
+        _drive(full, lambda: second in full.jobs, timeout=20.0)   # once the first is done, well before a heartbeat
+        # one beat each: the first, the look that found both jobs (room for one), the look once the first was done
+        assert len(beats) == 3 and _job(settings, first)["state"] == "succeeded"
+    finally:
+        full.shutdown()
+        full.db.dispose()
 
 
 def test_a_job_that_cannot_be_planned_fails_with_a_clean_message(settings: Settings) -> None:
