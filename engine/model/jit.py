@@ -120,7 +120,7 @@ def load_registries() -> None:
 
 
 @functools.cache
-def _dispatcher_class(callee: bool = False) -> Any:
+def _dispatcher_class(callee: bool) -> Any:
     """numba's CPU dispatcher, typing calls from compiled code with the plain types of the arguments
     (a literal as its type, an omitted default as its value's type); ``callee``: one that refuses
     calls from Python (compiled without Python's wrapper, its entry point is null)."""
