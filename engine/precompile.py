@@ -6,18 +6,17 @@ method. :func:`compile_engine` instead compiles each method once, in child proce
 never imports numba), and leaves a marker per method in the cache directory; later processes
 only load the cache.
 
-With more than one CPU the fast method is compiled in stages, the second in two processes at once:
-first what a run's setup and its integration both call, the right-hand side (through the end
-state's kinetic energy, which calls it) and the pose (``assemble``); then, from the cache, a run's
-setup (``prepare``: the static equilibrium) here and the integration in a child, whose own setup
-is computed as plain Python (``interpreted``); then one whole run here, which loads the child's
-kernels (and compiles anything missing) before the marker is written. The kernels both halves
-call are in the cache before either starts, so the two do not write one kernel's cache index at
-once (the reference method's background compilation may, as before: numba writes each index and
+With more than one CPU the fast method is built by several processes at once (up to
+``_MAX_BUILDERS``): each runs the method briefly as plain Python, recording which kernel calls
+which with what types (engine.model.jit.traced), then all compile those kernels between them, each
+kernel once, callees first (engine.model.kernel_build). A last brief compiled run, here, loads
+them all (and compiles what no trace saw) before the marker is written. The reference method,
+whose plain-Python run takes half a minute, is compiled by one run in one process (the kernels it
+shares with the fast method's build may be written by both at once: numba writes each index and
 data file whole, by rename).
 
     python -m finaldrive.engine.precompile fast [reference] [--nice]    # what compile_engine runs
-    python -m finaldrive.engine.precompile --part rhs|setup|run fast    # one stage (for the above)
+    python -m finaldrive.engine.precompile --builder DIR fast           # one more builder (for the above)
 """
 
 from __future__ import annotations
@@ -26,18 +25,30 @@ import contextlib
 import os
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from finaldrive.engine.model.jit import cache_dir
 
+if TYPE_CHECKING:
+    from finaldrive.engine.api import Design, SimSettings
+    from finaldrive.engine.model.road import Road
+    from finaldrive.engine.vehicle import Vehicle
+
 #: Simulated time of the runs that compile a method's kernels (with series) [s].
 _SIMULATED_S = 0.02
+#: Simulated time of the fast method's plain-Python run with the two-run chain (the build's trace;
+#: the paper's single run is traced for _SIMULATED_S) [s].
+_TWO_RUN_TRACE_S = 0.005
 #: A compilation whose lock is older than this [s] is taken as dead.
 _LOCK_S = 600.0
 #: How often a process waiting for another's compilation looks at the cache [s].
 _POLL_S = 0.1
+#: Most processes building the fast method at once (the kernels' call graph is not much wider).
+_MAX_BUILDERS = 4
 #: The niceness of a method compiled in the background: the lowest priority, below Ray's workers
 #: (15), so it takes only idle time.
 _BACKGROUND_NICENESS = 19
@@ -49,10 +60,8 @@ _BACKGROUND_NICENESS = 19
 _AUTOGROUP = Path("/proc/self/autogroup")
 #: Linux takes one unprivileged autogroup change per 0.1 s, machine-wide (EAGAIN otherwise): tries, pause [s].
 _AUTOGROUP_TRIES = (5, 0.1)
-#: This module run as a program (its stages and methods are arguments).
+#: This module run as a program (its builders and methods are arguments).
 _PROGRAM = (sys.executable, "-m", "finaldrive.engine.precompile")
-#: The stages of the fast method's compilation (module docstring); "whole" compiles all at once.
-_PARTS = ("rhs", "setup", "run", "whole")
 
 
 def is_compiled(method: str) -> bool:
@@ -121,47 +130,44 @@ def compile_engine(now: tuple[str, ...] = ("fast",),
     return wait
 
 
-def _compile_here(method: str, part: str = "whole") -> None:
-    """Compile and cache every kernel the method's runs call, by a brief run; ``part``: only the
-    fast method's right-hand side and pose ("rhs", no run), a run's setup ("setup", no run), or the
-    run from a setup computed as plain Python ("run")."""
-    if part not in _PARTS:
-        raise ValueError(f"unknown part {part!r}: expected one of {', '.join(_PARTS)}")
-    import numpy as np
-
+def _brief_run(method: str) -> tuple[Design, Road, SimSettings, Vehicle]:
+    """The brief run (design, road, settings, vehicle) that calls every kernel of the method."""
     from finaldrive.engine.api import Design, SimSettings
-    from finaldrive.engine.fast.bodies import N_DOF
-    from finaldrive.engine.fast.minimal import N_STATE, UPPER, kinetic_energy
-    from finaldrive.engine.model.jit import interpreted, load_registries
-    from finaldrive.engine.model.kinematics import assemble
     from finaldrive.engine.model.road import Road
-    from finaldrive.engine.setup import MINIMAL_COORDS
-    from finaldrive.engine.simulation import prepare, simulate, simulate_prepared
     from finaldrive.engine.vehicle import default_vehicle
 
     settings = SimSettings(method="reference" if method == "reference" else "fast", duration=_SIMULATED_S,
                            series=True)
-    design, road, vehicle = Design.from_deg(195.3, 0.037, 0.088), Road.parse("sine:0.04:3"), default_vehicle()
+    return Design.from_deg(195.3, 0.037, 0.088), Road.parse("sine:0.04:3"), settings, default_vehicle()
+
+
+def _compile_here(method: str) -> None:
+    """Compile and cache (or load) every kernel of the method, by a brief run."""
+    from finaldrive.engine.model.jit import load_registries
+    from finaldrive.engine.simulation import simulate
+
     load_registries()
-    if part == "setup":
-        prepare(design, road, settings, vehicle)
-        return
-    if part in ("rhs", "run"):
-        with interpreted():
-            setup = prepare(design, road, settings, vehicle)
-        if part == "rhs":
-            z = setup.q0[list(MINIMAL_COORDS)]
-            y = np.zeros(N_STATE)
-            y[:N_DOF] = z
-            kinetic_energy(y, setup.p, *road.packed(), UPPER)
-            x1, y1, theta, phi, fs = (float(v) for v in z[:N_DOF - 1])
-            assemble(setup.p, road, x1, y1, theta, phi, fs, 0.0, 0.0)   # as simulate_prepared, for the end pose
-            return
-        result = simulate_prepared(setup, road, settings)
-    else:
-        result = simulate(design, road, settings, vehicle)
+    result = simulate(*_brief_run(method))
     if not result.ok:
         raise RuntimeError(f"the {method} method failed while compiling: {result.reason}")
+
+
+def _build_here(method: str, directory: Path) -> None:
+    """Trace the method's brief run as plain Python (and, briefer, with the two-run chain), then
+    compile the kernels they called with the other builders sharing ``directory``
+    (engine.model.kernel_build)."""
+    from dataclasses import replace
+
+    from finaldrive.engine.model.jit import load_registries, traced
+    from finaldrive.engine.model.kernel_build import build, plan
+    from finaldrive.engine.simulation import simulate
+
+    load_registries()
+    design, road, settings, vehicle = _brief_run(method)
+    with traced() as trace:
+        simulate(design, road, settings, vehicle)
+        simulate(design, road, replace(settings, duration=_TWO_RUN_TRACE_S), vehicle.replace(chain_runs=2.0))
+    build(plan(trace), directory)
 
 
 def _cpus() -> int:
@@ -170,22 +176,25 @@ def _cpus() -> int:
 
 
 def _compile(method: str) -> None:
-    """Compile the method (the fast one in stages with more than one CPU: the module's docstring),
-    then write its marker."""
-    if method == "fast" and _cpus() > 1:
-        _compile_here(method, "rhs")
-        run = subprocess.Popen([*_PROGRAM, "--part", "run", method], stdout=subprocess.DEVNULL,
-                               stderr=subprocess.PIPE)
-        try:
-            _compile_here(method, "setup")
-        except BaseException:
-            run.kill()
-            raise
-        finally:
-            _, err = run.communicate()
-        if run.returncode != 0:
-            raise RuntimeError(f"compiling the {method} method's integration failed: "
-                               f"{err.decode(errors='replace')[-2000:]}")
+    """Compile the method (the fast one by several builders with more than one CPU: the module's
+    docstring), then write its marker."""
+    builders = min(_cpus(), _MAX_BUILDERS) if method == "fast" else 1
+    if builders > 1:
+        with tempfile.TemporaryDirectory(prefix="finaldrive-build-") as directory:
+            helpers = [subprocess.Popen([*_PROGRAM, "--builder", directory, method], stdout=subprocess.DEVNULL,
+                                        stderr=subprocess.PIPE) for _ in range(builders - 1)]
+            try:
+                _build_here(method, Path(directory))
+            except BaseException:
+                for helper in helpers:
+                    helper.kill()
+                raise
+            finally:
+                errors = [helper.communicate()[1] for helper in helpers]
+            for helper, err in zip(helpers, errors, strict=True):
+                if helper.returncode != 0:
+                    raise RuntimeError(f"a builder of the {method} method failed: "
+                                       f"{err.decode(errors='replace')[-2000:]}")
     _compile_here(method)
     cache_dir().mkdir(parents=True, exist_ok=True)
     (cache_dir() / f"compiled-{method}").touch()
@@ -209,15 +218,15 @@ def _lower_priority() -> None:
 
 
 def main(argv: list[str]) -> None:
-    """``[--nice] method...``: compile the methods (each unlocked when done); ``--part part method``:
-    one stage of one method's compilation (for :func:`_compile`)."""
+    """``[--nice] method...``: compile the methods (each unlocked when done); ``--builder DIR method``:
+    one more builder of the method (for :func:`_compile`)."""
     if "--nice" in argv:
         _lower_priority()
-    if "--part" in argv:
-        at = argv.index("--part")
+    if "--builder" in argv:
+        at = argv.index("--builder")
         if len(argv) < at + 3:
-            raise SystemExit("usage: --part rhs|setup|run METHOD")
-        _compile_here(argv[at + 2], argv[at + 1])
+            raise SystemExit("usage: --builder DIR METHOD")
+        _build_here(argv[at + 2], Path(argv[at + 1]))
         return
     for name in argv:
         if name != "--nice":

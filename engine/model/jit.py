@@ -25,6 +25,11 @@ compilation (docs/performance.md). A kernel that both call on a method's path is
 ``one_form``: its form with Python's wrapper serves both (the staged compilation's test checks
 that none of the fast method's kernels is compiled in both forms).
 
+Inside :func:`traced`, the kernels run as plain Python as inside :func:`interpreted`, and each call is
+recorded with the argument types numba would compile it for, in the form it would compile (a
+:class:`Trace`): what engine.model.kernel_build needs to compile those kernels in several processes
+at once.
+
 numba's cache also loads all of numba's typing and lowering registries before it loads anything
 (~0.4 s of a fresh process's first result), which compiled code loaded from the cache does not
 need: the kernels' cache skips that (_cache_class), and a process about to compile loads them
@@ -239,9 +244,14 @@ class Kernel:
     def _numba_type_(self) -> Any:
         return self.callee._numba_type_
 
+    def compile(self, form: str, signature: tuple[Any, ...]) -> None:
+        """Compile (or load from the cache) the form (PYTHON, CALLEE) for the argument types."""
+        (self.dispatcher if form == PYTHON else self.callee).compile(signature)
+
     def __call__(self, *args: Any) -> Any:
         if self._dispatcher is None and getattr(_local, "interpreted", False):
-            return self._python(*args)
+            trace = getattr(_local, "trace", None)
+            return self._python(*args) if trace is None else trace.call(self, args)
         return self.dispatcher(*args)
 
 
@@ -268,3 +278,68 @@ def interpreted() -> Iterator[None]:
         yield
     finally:
         _local.interpreted = before
+
+
+#: The two forms of a kernel (Kernel.dispatcher, Kernel.callee), as a Trace names them.
+PYTHON, CALLEE = "python", "callee"
+#: A traced call: the kernel, its form, the argument types of that form's compiled specialisation.
+Call = tuple[Kernel, str, tuple[Any, ...]]
+
+
+class Trace:
+    """The kernels called inside :func:`traced`: ``calls``, each (kernel, form, argument types) once in
+    the order first made, and ``callees``, the calls each made (from its plain-Python run).
+
+    The argument types are those numba compiles the form for: for a call from Python, numba's types of
+    the values given (numba folds in the omitted defaults itself); for a call from a kernel, their
+    plain types with the defaults filled in (_dispatcher_class). Those of a call from compiled code
+    are the types its caller's compilation infers, which the values' types matched for every kernel
+    of the fast method (tests/engine/test_compiled.py); a branch the traced run does not take is not
+    traced."""
+
+    def __init__(self) -> None:
+        from numba import typeof, types
+        from numba.core.typing.typeof import Purpose
+
+        self._typeof, self._unliteral, self._argument = typeof, types.unliteral, Purpose.argument
+        self.callees: dict[Call, list[Call]] = {}
+        self._stack: list[Call] = []
+
+    @property
+    def calls(self) -> list[Call]:
+        return list(self.callees)
+
+    def _types(self, kernel: Kernel, args: tuple[Any, ...]) -> tuple[Any, ...]:
+        if not self._stack:   # from Python: as numba's dispatcher types a call's values
+            return tuple(self._typeof(a, self._argument) for a in args)
+        import inspect
+
+        bound = inspect.signature(kernel.py_func).bind(*args)
+        bound.apply_defaults()
+        return tuple(self._unliteral(self._typeof(a, self._argument)) for a in bound.args)
+
+    def call(self, kernel: Kernel, args: tuple[Any, ...]) -> Any:
+        """Record the call, then run the kernel as plain Python (its own calls recorded inside)."""
+        form = PYTHON if not self._stack or kernel._one_form else CALLEE
+        call = (kernel, form, self._types(kernel, args))
+        self.callees.setdefault(call, [])
+        if self._stack and call not in self.callees[self._stack[-1]]:
+            self.callees[self._stack[-1]].append(call)
+        self._stack.append(call)
+        try:
+            return kernel._python(*args)
+        finally:
+            self._stack.pop()
+
+
+@contextlib.contextmanager
+def traced() -> Iterator[Trace]:
+    """In this thread, run the kernels as :func:`interpreted` does, recording their calls (imports numba)."""
+    trace = Trace()
+    before = getattr(_local, "trace", None)
+    _local.trace = trace
+    try:
+        with interpreted():
+            yield trace
+    finally:
+        _local.trace = before

@@ -271,15 +271,19 @@ print(compiled)
 
 
 @pytest.mark.slow
-def test_a_method_compiled_in_stages_is_whole_in_the_cache(tmp_path: Path) -> None:
-    """The fast method compiled as compile_engine does (in stages, two processes at once, with more
-    than one CPU): a fresh process then compiles nothing; and no kernel was compiled in both forms
-    (one Python calls, one compiled code calls: engine.model.jit), which would compile it twice."""
+def test_a_method_built_by_several_processes_is_whole_in_the_cache(tmp_path: Path) -> None:
+    """The fast method compiled as compile_engine does (by two builders at once, from a trace of its
+    plain-Python runs: engine.model.kernel_build): a fresh process then compiles nothing; every kernel
+    was compiled for one signature only (a traced type unlike the one numba infers would add a
+    second); and none in both forms (one Python calls, one compiled code calls: engine.model.jit),
+    which would compile it twice."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
     (tmp_path / "compiling-fast").touch()   # locked, as compile_engine does before starting it
     subprocess.run([sys.executable, "-m", "finaldrive.engine.precompile", "fast"], env=env, check=True)
     assert (tmp_path / "compiled-fast").exists() and not (tmp_path / "compiling-fast").exists()
     indexes = {path.name.rsplit("-", 1)[0] for path in tmp_path.rglob("*.nbi")}
+    data = {path.name for path in tmp_path.rglob("*.nbc")}
+    assert len(data) == len(indexes) and all(name.endswith(".1.nbc") for name in data)
     for_python = {name for name in indexes if not name.startswith("callee-")}
     assert len(for_python) >= 3 and len(indexes) > 3 * len(for_python)
     assert not {name for name in for_python if "callee-" + name in indexes}
