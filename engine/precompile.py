@@ -9,8 +9,8 @@ only load the cache.
 With more than one CPU the fast method is built by several processes at once (up to
 ``_MAX_BUILDERS``): each runs the method briefly as plain Python, recording which kernel calls
 which with what types (engine.model.jit.traced), then all compile those kernels between them, each
-kernel once, callees first (engine.model.kernel_build). A last brief compiled run, here, loads
-them all (and compiles what no trace saw) before the marker is written. The reference method,
+traced kernel once, callees first (engine.model.kernel_build). A last brief compiled run, here,
+loads them all (and compiles what no trace saw) before the marker is written. The reference method,
 whose plain-Python run takes half a minute, is compiled by one run in one process (the kernels it
 shares with the fast method's build may be written by both at once: numba writes each index and
 data file whole, by rename).
@@ -47,8 +47,12 @@ _TWO_RUN_TRACE_S = 0.005
 _LOCK_S = 600.0
 #: How often a process waiting for another's compilation looks at the cache [s].
 _POLL_S = 0.1
-#: Most processes building the fast method at once (the kernels' call graph is not much wider).
+#: Most processes building the fast method at once: each pays its own start (~1.3 s: imports,
+#: numba's registries, the trace), and the kernels' call graph narrows to one chain (the right-hand
+#: side, a step, the integration: ~6 s here) at its end. A choice, measured with two only.
 _MAX_BUILDERS = 4
+#: How long a helper builder may take to exit once every kernel is built [s].
+_HELPER_EXIT_S = 30.0
 #: The niceness of a method compiled in the background: the lowest priority, below Ray's workers
 #: (15), so it takes only idle time.
 _BACKGROUND_NICENESS = 19
@@ -152,12 +156,10 @@ def _compile_here(method: str) -> None:
         raise RuntimeError(f"the {method} method failed while compiling: {result.reason}")
 
 
-def _build_here(method: str, directory: Path) -> None:
+def _build_here(method: str, directory: Path, waiting: Callable[[], None]) -> None:
     """Trace the method's brief run as plain Python (and, briefer, with the two-run chain), then
     compile the kernels they called with the other builders sharing ``directory``
-    (engine.model.kernel_build)."""
-    from dataclasses import replace
-
+    (engine.model.kernel_build; ``waiting`` as there)."""
     from finaldrive.engine.model.jit import load_registries, traced
     from finaldrive.engine.model.kernel_build import build, plan
     from finaldrive.engine.simulation import simulate
@@ -165,9 +167,13 @@ def _build_here(method: str, directory: Path) -> None:
     load_registries()
     design, road, settings, vehicle = _brief_run(method)
     with traced() as trace:
-        simulate(design, road, settings, vehicle)
-        simulate(design, road, replace(settings, duration=_TWO_RUN_TRACE_S), vehicle.replace(chain_runs=2.0))
-    build(plan(trace), directory)
+        for run_settings, run_vehicle in ((settings, vehicle), (settings.with_(duration=_TWO_RUN_TRACE_S),
+                                                               vehicle.replace(chain_runs=2.0))):
+            # the trace only speeds the build up: plain Python raises where compiled code would go on
+            # with an inf or a nan, and what the trace then misses is compiled by the run after the build
+            with contextlib.suppress(ArithmeticError, ValueError):
+                simulate(design, road, run_settings, run_vehicle)
+    build(plan(trace), directory, waiting)
 
 
 def _cpus() -> int:
@@ -175,26 +181,47 @@ def _cpus() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
+def _give_up_after(seconds: float) -> Callable[[], None]:
+    """A builder's ``waiting``: raise TimeoutError once ``seconds`` have passed."""
+    deadline = time.monotonic() + seconds
+
+    def waiting() -> None:
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"the engine's build waited more than {seconds:g} s for another builder")
+    return waiting
+
+
+def _build(method: str, builders: int) -> None:
+    """Build the method's kernels here and in ``builders - 1`` helper processes (the module's docstring).
+    A helper that fails leaves its kernels to the others (the failure written to stderr)."""
+    with tempfile.TemporaryDirectory(prefix="finaldrive-build-") as name:
+        directory = Path(name)
+        logs = [directory / f"builder-{i}.log" for i in range(1, builders)]
+        helpers = []
+        for log in logs:
+            with log.open("wb") as err:
+                helpers.append(subprocess.Popen([*_PROGRAM, "--builder", name, method], stdout=subprocess.DEVNULL,
+                                                stderr=err))
+        try:
+            _build_here(method, directory, _give_up_after(_LOCK_S))
+        finally:
+            for helper in helpers:   # each is done once every kernel is: it exits within a poll
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    helper.wait(_HELPER_EXIT_S)
+                helper.kill()
+                helper.wait()
+        for helper, log in zip(helpers, logs, strict=True):
+            if helper.returncode != 0:
+                print(f"a builder of the {method} method ended with code {helper.returncode} (the others built "
+                      f"its kernels): {log.read_text(errors='replace')[-2000:]}", file=sys.stderr)
+
+
 def _compile(method: str) -> None:
     """Compile the method (the fast one by several builders with more than one CPU: the module's
     docstring), then write its marker."""
-    builders = min(_cpus(), _MAX_BUILDERS) if method == "fast" else 1
+    builders = min(_cpus(), _MAX_BUILDERS) if method == "fast" and sys.platform != "win32" else 1  # fcntl locks
     if builders > 1:
-        with tempfile.TemporaryDirectory(prefix="finaldrive-build-") as directory:
-            helpers = [subprocess.Popen([*_PROGRAM, "--builder", directory, method], stdout=subprocess.DEVNULL,
-                                        stderr=subprocess.PIPE) for _ in range(builders - 1)]
-            try:
-                _build_here(method, Path(directory))
-            except BaseException:
-                for helper in helpers:
-                    helper.kill()
-                raise
-            finally:
-                errors = [helper.communicate()[1] for helper in helpers]
-            for helper, err in zip(helpers, errors, strict=True):
-                if helper.returncode != 0:
-                    raise RuntimeError(f"a builder of the {method} method failed: "
-                                       f"{err.decode(errors='replace')[-2000:]}")
+        _build(method, builders)
     _compile_here(method)
     cache_dir().mkdir(parents=True, exist_ok=True)
     (cache_dir() / f"compiled-{method}").touch()
@@ -226,7 +253,12 @@ def main(argv: list[str]) -> None:
         at = argv.index("--builder")
         if len(argv) < at + 3:
             raise SystemExit("usage: --builder DIR METHOD")
-        _build_here(argv[at + 2], Path(argv[at + 1]))
+        parent = os.getppid()
+
+        def waiting() -> None:   # a builder outlives no parent
+            if os.getppid() != parent:
+                raise SystemExit("the build's first process has ended")
+        _build_here(argv[at + 2], Path(argv[at + 1]), waiting)
         return
     for name in argv:
         if name != "--nice":

@@ -23,7 +23,7 @@ build, optimise and cache that wrapper (and a C-callable one, which nothing here
 kernel, though most are only ever called from compiled code: a fifth of the fast method's
 compilation (docs/performance.md). A kernel that both call on a method's path is marked
 ``one_form``: its form with Python's wrapper serves both (the staged compilation's test checks
-that none of the fast method's kernels is compiled in both forms).
+that none of the fast method's kernels is compiled in both forms, tests/engine/test_compiled.py).
 
 Inside :func:`traced`, the kernels run as plain Python as inside :func:`interpreted`, and each call is
 recorded with the argument types numba would compile it for, in the form it would compile (a
@@ -246,12 +246,17 @@ class Kernel:
 
     def compile(self, form: str, signature: tuple[Any, ...]) -> None:
         """Compile (or load from the cache) the form (PYTHON, CALLEE) for the argument types."""
+        if form not in (PYTHON, CALLEE):
+            raise ValueError(f"unknown form {form!r}: expected {PYTHON!r} or {CALLEE!r}")
         (self.dispatcher if form == PYTHON else self.callee).compile(signature)
 
     def __call__(self, *args: Any) -> Any:
-        if self._dispatcher is None and getattr(_local, "interpreted", False):
+        if getattr(_local, "interpreted", False):
             trace = getattr(_local, "trace", None)
-            return self._python(*args) if trace is None else trace.call(self, args)
+            if trace is not None:
+                return trace.call(self, args)
+            if self._dispatcher is None:
+                return self._python(*args)
         return self.dispatcher(*args)
 
 
@@ -291,17 +296,18 @@ class Trace:
     the order first made, and ``callees``, the calls each made (from its plain-Python run).
 
     The argument types are those numba compiles the form for: for a call from Python, numba's types of
-    the values given (numba folds in the omitted defaults itself); for a call from a kernel, their
-    plain types with the defaults filled in (_dispatcher_class). Those of a call from compiled code
-    are the types its caller's compilation infers, which the values' types matched for every kernel
-    of the fast method (tests/engine/test_compiled.py); a branch the traced run does not take is not
-    traced."""
+    the values given and ``omitted`` for each default left out (as numba's dispatcher types a call);
+    for a call from a kernel, their types with the defaults filled in (_dispatcher_class). Those of a
+    call from compiled code are the types its caller's compilation infers, which the values' types
+    matched for every kernel of the fast method (tests/engine/test_compiled.py); a branch the traced
+    run does not take is not traced."""
 
     def __init__(self) -> None:
         from numba import typeof, types
         from numba.core.typing.typeof import Purpose
 
-        self._typeof, self._unliteral, self._argument = typeof, types.unliteral, Purpose.argument
+        self._typeof = functools.partial(typeof, purpose=Purpose.argument)
+        self._omitted = types.Omitted
         self.callees: dict[Call, list[Call]] = {}
         self._stack: list[Call] = []
 
@@ -310,13 +316,14 @@ class Trace:
         return list(self.callees)
 
     def _types(self, kernel: Kernel, args: tuple[Any, ...]) -> tuple[Any, ...]:
-        if not self._stack:   # from Python: as numba's dispatcher types a call's values
-            return tuple(self._typeof(a, self._argument) for a in args)
         import inspect
 
-        bound = inspect.signature(kernel.py_func).bind(*args)
-        bound.apply_defaults()
-        return tuple(self._unliteral(self._typeof(a, self._argument)) for a in bound.args)
+        defaults = _defaults(kernel.py_func)[len(args):]
+        if any(d is inspect.Parameter.empty for d in defaults):
+            raise TypeError(f"{kernel.py_func.__qualname__}() called with {len(args)} arguments: too few")
+        if not self._stack:   # from Python
+            return tuple(map(self._typeof, args)) + tuple(self._omitted(d) for d in defaults)
+        return tuple(map(self._typeof, args + defaults))
 
     def call(self, kernel: Kernel, args: tuple[Any, ...]) -> Any:
         """Record the call, then run the kernel as plain Python (its own calls recorded inside)."""
@@ -330,6 +337,15 @@ class Trace:
             return kernel._python(*args)
         finally:
             self._stack.pop()
+
+
+@functools.cache
+def _defaults(fn: Callable[..., Any]) -> tuple[Any, ...]:
+    """The default of every positional parameter (``inspect.Parameter.empty`` for none)."""
+    import inspect
+
+    return tuple(p.default for p in inspect.signature(fn).parameters.values()
+                 if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD))
 
 
 @contextlib.contextmanager

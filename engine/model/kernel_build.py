@@ -1,19 +1,20 @@
-"""Compiling traced kernels in several processes at once, each kernel once.
+"""Compiling traced kernels in several processes at once, each traced kernel once.
 
 numba compiles the kernels a kernel calls inside its own compilation, one after another: the fast
 method's ~60 compilations ran on one core (docs/performance.md). Given the calls a plain-Python run
 made (engine.model.jit.Trace), every process of a build runs :func:`build` on the same plan with
-the same directory: each in turn claims a kernel whose traced callees are all compiled (by
-creating a file exclusively, its pid inside), compiles it, numba loading those callees from its
-on-disk cache whichever process compiled them, and marks it done; the kernels on the longest
-chain of callers first. A kernel the trace did not see (a branch its run did not take) is compiled
-inside its caller's compilation, as numba does. A kernel claimed by a process that has died is
-taken over; a process left alone compiles whatever is left.
+the same directory: each in turn claims a kernel whose traced callees are all compiled (an
+exclusive lock on ``<task>.claimed``, held while it compiles: the system releases it if the
+process dies, and another takes the task over), compiles it, numba loading those callees from its
+on-disk cache whichever process compiled them, and marks it done (``<task>.done``, written before
+the lock is released); the kernels on the longest chain of callers first. A kernel the trace did
+not see (a branch its run did not take) is compiled inside its caller's compilation, as numba
+does, and so perhaps inside two callers' at once. Locks are POSIX (``fcntl.flock``).
 """
 
 from __future__ import annotations
 
-import contextlib
+import fcntl
 import functools
 import hashlib
 import os
@@ -25,21 +26,23 @@ from pathlib import Path
 from finaldrive.engine.model.jit import Call, Trace
 
 #: How often a process with nothing to compile looks at the others' progress [s].
-_POLL_S = 0.01
+_POLL_S = 0.02
 
 
 @dataclass(frozen=True)
 class Task:
-    """One compilation: ``name`` (a file name, the same in every process), its traced callees' names."""
+    """One compilation: ``name`` (a file name, the same in every process), the names of the tasks
+    it waits for (its traced callees; and an earlier signature of the same kernel's form, which
+    numba caches in the same index)."""
 
     name: str
     compile: Callable[[], None]
-    callees: tuple[str, ...]
+    after: tuple[str, ...]
 
 
 def _name(call: Call) -> str:
     kernel, form, types = call
-    digest = hashlib.sha256(repr(types).encode()).hexdigest()[:12]
+    digest = hashlib.sha256(str(types).encode()).hexdigest()[:12]
     return f"{kernel.py_func.__module__}.{kernel.py_func.__qualname__}.{form}.{digest}"
 
 
@@ -48,95 +51,104 @@ def _weight(call: Call) -> int:
     return len(call[0].py_func.__code__.co_code)
 
 
+def _acyclic_callees(trace: Trace) -> dict[Call, list[Call]]:
+    """The traced callees without the calls that close a cycle (recursion), found depth first."""
+    kept: dict[Call, list[Call]] = {}
+    open_: set[Call] = set()
+
+    def visit(call: Call) -> None:
+        open_.add(call)
+        kept[call] = []
+        for callee in trace.callees[call]:
+            if callee in open_:
+                continue
+            if callee not in kept:
+                visit(callee)
+            kept[call].append(callee)
+        open_.discard(call)
+
+    for call in trace.calls:
+        if call not in kept:
+            visit(call)
+    return kept
+
+
 def plan(trace: Trace) -> list[Task]:
     """The traced calls as tasks, the most urgent first: the largest weight of the kernel and its
     callers up its longest chain (what is left to compile after it, at the least)."""
-    callers: dict[Call, list[Call]] = {call: [] for call in trace.calls}
-    for caller, callees in trace.callees.items():
-        for callee in callees:
-            if callee != caller:
-                callers[callee].append(caller)
-    rank: dict[Call, int] = {}
+    callees = _acyclic_callees(trace)
+    callers: dict[Call, list[Call]] = {call: [] for call in callees}
+    for caller, called in callees.items():
+        for callee in called:
+            callers[callee].append(caller)
 
-    def rank_of(call: Call, chain: frozenset[Call]) -> int:
-        if call not in rank:
-            above = [rank_of(c, chain | {call}) for c in callers[call] if c not in chain]   # recursion: cut
-            rank[call] = _weight(call) + max(above, default=0)
-        return rank[call]
+    @functools.cache
+    def rank(call: Call) -> int:
+        return _weight(call) + max((rank(caller) for caller in callers[call]), default=0)
 
-    order = sorted(trace.calls, key=lambda call: -rank_of(call, frozenset()))
-    return [Task(_name(call), functools.partial(call[0].compile, call[1], call[2]),
-                 tuple(_name(c) for c in trace.callees[call] if c != call)) for call in order]
-
-
-def _alive(pid: int) -> bool:
-    """Whether the process runs (a zombie, dead but not yet waited for, does not)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    with contextlib.suppress(OSError):
-        stat = Path(f"/proc/{pid}/stat").read_text()
-        return stat[stat.rfind(")") + 2] != "Z"
-    return True
+    earlier: dict[tuple[object, str], str] = {}   # the previous signature's task of a kernel's form
+    tasks = []
+    for call in sorted(callees, key=lambda call: -rank(call)):
+        name, form = _name(call), (call[0], call[1])
+        after = tuple(_name(callee) for callee in callees[call]) + ((earlier[form],) if form in earlier else ())
+        earlier[form] = name
+        tasks.append(Task(name, functools.partial(call[0].compile, call[1], call[2]), after))
+    return tasks
 
 
 class _Board:
-    """The build's directory: ``<task>.claimed`` (the claimant's pid) and ``<task>.done`` files."""
+    """The build's directory: ``<task>.claimed`` (locked by the process compiling it) and ``<task>.done``."""
 
     def __init__(self, directory: Path) -> None:
         self.directory = directory
-        self._done: set[str] = set()
+        self.done: set[str] = set()
 
-    def done(self, name: str) -> bool:
-        if name not in self._done and (self.directory / f"{name}.done").exists():
-            self._done.add(name)
-        return name in self._done
+    def look(self) -> None:
+        """Read which tasks are done (one listing of the directory)."""
+        self.done.update(name[:-5] for name in os.listdir(self.directory) if name.endswith(".done"))
 
-    def mark_done(self, name: str) -> None:
+    def claim(self, name: str) -> int | None:
+        """Lock the task's claim and return its descriptor, unless another process holds it or the
+        task is done meanwhile."""
+        fd = os.open(self.directory / f"{name}.claimed", os.O_CREAT | os.O_RDWR)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            return None
+        if (self.directory / f"{name}.done").exists():   # finished between the listing and the lock
+            self.done.add(name)
+            os.close(fd)
+            return None
+        return fd
+
+    def finish(self, name: str, fd: int) -> None:
+        """Mark the task done, then release its claim."""
         (self.directory / f"{name}.done").touch()
-        self._done.add(name)
-
-    def claim(self, name: str) -> bool:
-        """Claim the task (True), unless it is done or a live process has claimed it."""
-        path = self.directory / f"{name}.claimed"
-        try:
-            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
-        except FileExistsError:
-            if self.done(name) or self._claimant_alive(name):
-                return False
-            path.write_text(str(os.getpid()))   # its claimant died: taken over
-            return True
-        with os.fdopen(fd, "w") as f:
-            f.write(str(os.getpid()))
-        return True
-
-    def in_progress(self, name: str) -> bool:
-        """Whether a live process has claimed the task and not finished it."""
-        return not self.done(name) and self._claimant_alive(name)
-
-    def _claimant_alive(self, name: str) -> bool:
-        try:
-            text = (self.directory / f"{name}.claimed").read_text()
-        except FileNotFoundError:
-            return False
-        return not text or _alive(int(text))   # empty: being written
+        self.done.add(name)
+        os.close(fd)
 
 
-def build(tasks: list[Task], directory: Path) -> list[str]:
+def build(tasks: list[Task], directory: Path, waiting: Callable[[], None] = lambda: None) -> list[str]:
     """Compile the tasks with whichever processes build the same plan in ``directory``, until every
-    task is done; return the names of those compiled here."""
-    board, left, here = _Board(directory), list(tasks), []
-    while left := [task for task in left if not board.done(task.name)]:
-        task = next((t for t in left if all(board.done(c) for c in t.callees) and board.claim(t.name)), None)
-        if task is None and not any(board.in_progress(t.name) for t in left):
-            task = left[0]   # a cycle of calls: numba compiles the rest of it inside
-        if task is None:
+    task is done; return the names of those compiled here. ``waiting`` is called whenever this
+    process has nothing to compile for a while (it may raise, to give up)."""
+    board, here = _Board(directory), list[str]()
+    while True:
+        board.look()
+        left = [task for task in tasks if task.name not in board.done]
+        if not left:
+            return here
+        for task in left:
+            if all(name in board.done for name in task.after) and (fd := board.claim(task.name)) is not None:
+                try:
+                    task.compile()
+                except BaseException:
+                    os.close(fd)
+                    raise
+                board.finish(task.name, fd)
+                here.append(task.name)
+                break
+        else:
+            waiting()
             time.sleep(_POLL_S)
-            continue
-        task.compile()
-        board.mark_done(task.name)
-        here.append(task.name)
-    return here

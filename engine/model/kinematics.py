@@ -87,7 +87,7 @@ def tangent_angle(x2: float, y2: float, x6: float, y6: float, res: float, rws: f
     return math.atan2(math.sin(gamma), math.cos(gamma))
 
 
-@jit(one_form=True)   # the two-run chain's setup (chain_length) and its compiled runs (chain_runs.slack) call it
+@jit(one_form=True)   # the two-run chain's setup (whole_chain_length) and its runs (chain_runs.slack) call it
 def loop_length(dist: float, res: float, rws: float) -> float:
     """Length of the chain's closed loop with both runs taut, sprocket centres dist apart: both
     straight runs (eqs. 24-29 and their mirror, sqrt(dist^2 - k^2) each) and both wraps,

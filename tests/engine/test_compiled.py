@@ -253,8 +253,8 @@ def test_the_background_compilation_runs_at_the_lowest_priority_its_session_incl
     assert out == ["19", "19"]
 
 
-#: A fresh process's runs with both steppers (a smooth road: ROS34PW2; a measured profile: ROS2) and
-#: series, printing the kernels numba compiled for them (none when the cache holds everything).
+#: A fresh process's runs with both steppers (a smooth road: ROS34PW2; a measured profile: ROS2), series
+#: and both chains, printing the kernels numba compiled for them (none when the cache holds everything).
 _COMPILED_BY_A_RUN = """
 from numba.core import event
 compiled = []
@@ -262,18 +262,21 @@ class Listener(event.Listener):
     def on_start(self, ev): pass
     def on_end(self, ev): compiled.append(ev.data["dispatcher"].py_func.__qualname__)
 event.register("numba:compile", Listener())
-from finaldrive.engine import Design, Road, SimSettings, simulate
+from finaldrive.engine import Design, Road, SimSettings, default_vehicle, simulate
 for road in (Road.parse("sine:0.04:3"), Road.from_points([-5.0, 0.0, 5.0, 50.0], [0.0, 0.01, 0.0, 0.0])):
-    r = simulate(Design.from_deg(250.0, 0.1, 0.1), road, SimSettings(duration=0.05, series=True))
-    assert r.ok, r.reason
+    for vehicle in (default_vehicle(), default_vehicle().replace(chain_runs=2.0)):
+        r = simulate(Design.from_deg(250.0, 0.1, 0.1), road, SimSettings(duration=0.05, series=True), vehicle)
+        assert r.ok, r.reason
 print(compiled)
 """
 
 
 @pytest.mark.slow
+@pytest.mark.skipif(precompile._cpus() < 2, reason="one CPU: the fast method is built by one process")
 def test_a_method_built_by_several_processes_is_whole_in_the_cache(tmp_path: Path) -> None:
-    """The fast method compiled as compile_engine does (by two builders at once, from a trace of its
-    plain-Python runs: engine.model.kernel_build): a fresh process then compiles nothing; every kernel
+    """The fast method compiled as compile_engine does (by several builders at once, two on a machine of
+    two CPUs, from a trace of its plain-Python runs: engine.model.kernel_build): a fresh process's
+    runs, with either chain, then compile nothing; every kernel
     was compiled for one signature only (a traced type unlike the one numba infers would add a
     second); and none in both forms (one Python calls, one compiled code calls: engine.model.jit),
     which would compile it twice."""
