@@ -27,6 +27,7 @@ _EXPORTS: dict[str, str] = {
                      "load_vehicle_dict"), "finaldrive.engine.vehicle"),
     "static_geometry": "finaldrive.engine.geometry",
     "compile_engine": "finaldrive.engine.precompile",
+    "start_runtime": "finaldrive.engine.model.jit",
     **dict.fromkeys(("FIELDS", "Field", "base_of", "design_label", "history_record", "human", "unit_of"),
                     "finaldrive.engine.fields"),
     **dict.fromkeys(("MAX_TRAVEL_POINTS", "TRAVEL_POINTS", "TravelError", "drive_squat", "travel_kinematics"),
@@ -101,6 +102,7 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         coordinate_index as coordinate_index,
         point_positions as point_positions,
     )
+    from finaldrive.engine.model.jit import start_runtime as start_runtime
     from finaldrive.engine.model.road import (
         PROFILE_MAX_POINTS as PROFILE_MAX_POINTS,
         Road as Road,

@@ -204,6 +204,10 @@ def _build(method: str, builders: int) -> None:
                                                 stderr=err))
         try:
             _build_here(method, directory, _give_up_after(_LOCK_S))
+        except BaseException:
+            for helper in helpers:
+                helper.kill()
+            raise
         finally:
             for helper in helpers:   # each is done once every kernel is: it exits within a poll
                 with contextlib.suppress(subprocess.TimeoutExpired):

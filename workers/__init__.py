@@ -12,9 +12,19 @@ if __name__ != "finaldrive.workers":  # never importable as a top-level `workers
     raise ImportError(f"this is finaldrive.workers; import it by that name, not as {__name__!r}")
 
 import importlib
+import os
+import time
 from typing import TYPE_CHECKING, Any, Literal
 
-from finaldrive.workers.base import Done, Executor, Shared, WorkerLostError, map_batches
+from finaldrive.workers.base import (
+    IN_FLIGHT_PER_WORKER,
+    MAP_DRAIN_S,
+    Done,
+    Executor,
+    Shared,
+    WorkerLostError,
+    map_batches,
+)
 from finaldrive.workers.process import ProcessExecutor
 from finaldrive.workers.serial import SerialExecutor
 
@@ -29,6 +39,10 @@ __all__ = [
 ]
 
 _LAZY = {"evaluate_all", "evaluate_roads_stream", "evaluate_stream"}   # from finaldrive.workers.evaluate
+
+#: How long ``make_executor`` waits, once the engine is compiled, for the workers' first task
+#: (numba's import and runtime, ~0.4 s a worker) [s]; what is left then is cancelled.
+WARM_UP_WAIT_S = 5.0
 
 
 def __getattr__(name: str) -> Any:
@@ -55,7 +69,9 @@ def make_executor(
     (``os.nice``, once per process), so the calling process keeps its core; ignored by serial.
 
     For a process or Ray pool, the engine's compiled code is built once on this machine if it is
-    not yet (``engine.compile_engine``, while the pool starts), so the workers only load it.
+    not yet (``engine.compile_engine``, while the pool starts), so the workers only load it; each
+    worker of a local pool meanwhile imports numba and starts its runtime (a first task, waited for
+    up to ``WARM_UP_WAIT_S`` once the code is built, then cancelled; a cluster's workers are left alone).
     """
     if kind == "serial":
         return SerialExecutor()
@@ -77,8 +93,34 @@ def make_executor(
             ) from error
         executor = RayExecutor(num_workers=num_workers, max_retries=max_retries, address=address, niceness=niceness)
     try:
+        local = kind == "process" or not (address or os.environ.get("RAY_ADDRESS"))   # not a cluster's workers
+        one_each = executor.capacity // IN_FLIGHT_PER_WORKER if local else 0
+        warming = {executor.submit(_start_runtime, None) for _ in range(one_each)}
         compiled()
+        _drain(executor, warming, WARM_UP_WAIT_S)
     except BaseException:
         executor.close()
         raise
     return executor
+
+
+def _start_runtime(batch: None) -> None:
+    """A worker's first task, while the engine compiles: import numba and start its runtime
+    (``engine.start_runtime``), so that its first simulation only loads the compiled code."""
+    from finaldrive.engine import start_runtime
+
+    start_runtime()
+
+
+def _drain(executor: Executor, tasks: set[int], timeout: float) -> None:
+    """Wait up to ``timeout`` s for the tasks (their results and errors dropped: a worker whose start
+    fails fails its first batch alike), cancel those left, and take every report of them off the
+    executor, so that its user sees none."""
+    deadline = time.monotonic() + timeout
+    while tasks and (left := deadline - time.monotonic()) > 0:
+        tasks -= {done.task for done in executor.poll(left)}
+    if tasks:
+        executor.cancel(tasks)
+        deadline = time.monotonic() + MAP_DRAIN_S
+        while tasks and (left := deadline - time.monotonic()) > 0:
+            tasks -= {done.task for done in executor.poll(left)}

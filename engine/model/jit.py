@@ -25,8 +25,8 @@ compilation (docs/performance.md). A kernel that both call on a method's path is
 ``one_form``: its form with Python's wrapper serves both (the staged compilation's test checks
 that none of the fast method's kernels is compiled in both forms, tests/engine/test_compiled.py).
 
-Inside :func:`traced`, the kernels run as plain Python as inside :func:`interpreted`, and each call is
-recorded with the argument types numba would compile it for, in the form it would compile (a
+Inside :func:`traced`, every kernel runs as plain Python, and each call is recorded with the
+argument types numba would compile it for, in the form it would compile (a
 :class:`Trace`): what engine.model.kernel_build needs to compile those kernels in several processes
 at once.
 
@@ -88,9 +88,11 @@ def cache_dir() -> Path:
 
 
 @functools.cache
-def _configure() -> None:
+def start_runtime() -> None:
     """Import numba, point its cache at cache_dir() and start its runtime (once); SciPy's LAPACK for
-    it without scipy.linalg (engine.model.lapack); then ``gc.freeze()`` (see load_registries).
+    it without scipy.linalg (engine.model.lapack); then ``gc.freeze()`` (see load_registries). What
+    loading compiled code needs, and a kernel's first use does: a worker may do it beforehand, while
+    the engine compiles (workers.make_executor).
 
     numba's typing and lowering registries are left to the first compilation (numba's compiler
     loads them itself): loading compiled code from the cache needs only the runtime."""
@@ -114,7 +116,7 @@ def load_registries() -> None:
     collection walks them again, the interpreter's at exit included (~0.5 s); frozen, the collector
     skips them and whatever else exists by then (the process's imports, mostly): only a reference
     cycle among those objects that is dropped later stays uncollected."""
-    _configure()
+    start_runtime()
     from numba.core.compiler_lock import global_compiler_lock
     from numba.core.registry import cpu_target
 
@@ -230,7 +232,7 @@ class Kernel:
                 return
             if self._prepare is not None:
                 self._prepare()
-            _configure()
+            start_runtime()
             options = {"nopython": True, **_OPTIONS, **({} if self._allocates else _NO_RUNTIME),
                        **(_FOR_CALLERS if callee else _FOR_PYTHON)}
             made = _dispatcher_class(callee)(py_func=self.py_func, targetoptions=options)
@@ -350,7 +352,8 @@ def _defaults(fn: Callable[..., Any]) -> tuple[Any, ...]:
 
 @contextlib.contextmanager
 def traced() -> Iterator[Trace]:
-    """In this thread, run the kernels as :func:`interpreted` does, recording their calls (imports numba)."""
+    """In this thread, run every kernel as plain Python (compiled or not), recording the calls in the
+    Trace yielded (imports numba, for its types)."""
     trace = Trace()
     before = getattr(_local, "trace", None)
     _local.trace = trace

@@ -163,7 +163,7 @@ _PRINT_RESULT = "print([v.hex() for k, v in vars(r).items() if isinstance(v, flo
 
 def test_a_fast_result_loads_neither_scipy_linalg_nor_the_reference_solver() -> None:
     """Nor numba's typing and lowering registries (some 100k objects, ~0.4 s), which loading compiled
-    code from the cache does not need; what it imports before is frozen (jit._configure)."""
+    code from the cache does not need; what it imports before is frozen (jit.start_runtime)."""
     precompile.compile_engine(later=())()   # a process with the cache filled: it loads, compiles nothing
     registries_only = "numba.np.polynomial.polynomial_core"   # imported by the target's registries alone
     code = _FAST_RESULT + ("heavy = {'scipy.linalg', 'finaldrive.engine.solver.reference', "

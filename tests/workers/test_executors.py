@@ -40,6 +40,16 @@ def test_make_executor_kinds() -> None:
         make_executor("threads")  # type: ignore[arg-type]
 
 
+def test_make_executor_starts_numba_in_every_worker_and_hides_those_tasks() -> None:
+    """While the engine compiles, each worker's first task imports numba and starts its runtime: the
+    first batches find it started; none of those tasks is reported to the executor's user."""
+    with make_executor("process", num_workers=2) as executor:
+        assert executor.poll(0.2) == []
+        assert executor.in_flight() == 0
+        seen = dict(result for _, result in executor.map_batches(toyfns.runtime_started, [None] * 4))
+    assert len(seen) == 2 and all(seen.values())
+
+
 @pytest.mark.parametrize("kind", ["serial", "process"])
 def test_map_batches_yields_every_batch_once(kind: str, pool: workers.Executor) -> None:
     executor = SerialExecutor() if kind == "serial" else pool

@@ -187,3 +187,11 @@ def held_keys(batch: object) -> tuple[int, list[int]]:
 def held_keys_after(batch: object, seconds: float) -> tuple[int, list[int]]:
     time.sleep(seconds)
     return held_keys(batch)
+
+
+def runtime_started(batch: object) -> tuple[int, bool]:
+    """(this worker's pid, whether numba's runtime was started in it before this task)."""
+    import sys
+
+    jit = sys.modules.get("finaldrive.engine.model.jit")
+    return os.getpid(), jit is not None and jit.start_runtime.cache_info().currsize == 1
