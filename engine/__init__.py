@@ -26,7 +26,7 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("VEHICLE_VALUE_LIMIT", "Vehicle", "VehicleError", "default_vehicle", "load_vehicle",
                      "load_vehicle_dict"), "finaldrive.engine.vehicle"),
     "static_geometry": "finaldrive.engine.geometry",
-    "compile_engine": "finaldrive.engine.precompile",
+    **dict.fromkeys(("compile_engine", "is_compiled"), "finaldrive.engine.precompile"),
     "start_runtime": "finaldrive.engine.model.jit",
     **dict.fromkeys(("FIELDS", "Field", "base_of", "design_label", "history_record", "human", "unit_of"),
                     "finaldrive.engine.fields"),
@@ -109,7 +109,7 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         RoadError as RoadError,
     )
     from finaldrive.engine.optimize import DifferentialEvolution as DifferentialEvolution
-    from finaldrive.engine.precompile import compile_engine as compile_engine
+    from finaldrive.engine.precompile import compile_engine as compile_engine, is_compiled as is_compiled
     from finaldrive.engine.simulation import evaluate as evaluate, simulate as simulate
     from finaldrive.engine.study.plan import (
         PAPER_SWEEP_STEP as PAPER_SWEEP_STEP,

@@ -193,16 +193,17 @@ def _give_up_after(seconds: float) -> Callable[[], None]:
 
 def _build(method: str, builders: int) -> None:
     """Build the method's kernels here and in ``builders - 1`` helper processes (the module's docstring).
-    A helper that fails leaves its kernels to the others (the failure written to stderr)."""
+    A helper that fails leaves its kernels to the others (the failure written to stderr); if this
+    builder fails, the helpers are killed at once."""
     with tempfile.TemporaryDirectory(prefix="finaldrive-build-") as name:
         directory = Path(name)
         logs = [directory / f"builder-{i}.log" for i in range(1, builders)]
-        helpers = []
-        for log in logs:
-            with log.open("wb") as err:
-                helpers.append(subprocess.Popen([*_PROGRAM, "--builder", name, method], stdout=subprocess.DEVNULL,
-                                                stderr=err))
+        helpers: list[subprocess.Popen[bytes]] = []
         try:
+            for log in logs:
+                with log.open("wb") as err:
+                    helpers.append(subprocess.Popen([*_PROGRAM, "--builder", name, method],
+                                                    stdout=subprocess.DEVNULL, stderr=err))
             _build_here(method, directory, _give_up_after(_LOCK_S))
         except BaseException:
             for helper in helpers:

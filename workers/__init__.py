@@ -12,7 +12,6 @@ if __name__ != "finaldrive.workers":  # never importable as a top-level `workers
     raise ImportError(f"this is finaldrive.workers; import it by that name, not as {__name__!r}")
 
 import importlib
-import os
 import time
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -40,8 +39,8 @@ __all__ = [
 
 _LAZY = {"evaluate_all", "evaluate_roads_stream", "evaluate_stream"}   # from finaldrive.workers.evaluate
 
-#: How long ``make_executor`` waits, once the engine is compiled, for the workers' first task
-#: (numba's import and runtime, ~0.4 s a worker) [s]; what is left then is cancelled.
+#: How long ``make_executor`` waits for the workers' first task (numba's import and runtime, ~0.4 s a
+#: worker), from its start [s]; what is left then is cancelled.
 WARM_UP_WAIT_S = 5.0
 
 
@@ -69,17 +68,19 @@ def make_executor(
     (``os.nice``, once per process), so the calling process keeps its core; ignored by serial.
 
     For a process or Ray pool, the engine's compiled code is built once on this machine if it is
-    not yet (``engine.compile_engine``, while the pool starts), so the workers only load it; each
-    worker of a local pool meanwhile imports numba and starts its runtime (a first task, waited for
-    up to ``WARM_UP_WAIT_S`` once the code is built, then cancelled; a cluster's workers are left alone).
+    not yet (``engine.compile_engine``, while the pool starts), so the workers only load it. While
+    it compiles, the workers of a pool started here (not a cluster's, nor a Ray the caller started)
+    import numba and start its runtime: one first task per worker (Ray may give one worker two),
+    waited for up to ``WARM_UP_WAIT_S`` from their start, those not done by then cancelled.
     """
     if kind == "serial":
         return SerialExecutor()
     if kind not in ("process", "ray"):
         raise ValueError(f"unknown executor kind {kind!r}: expected 'serial', 'process' or 'ray'")
-    from finaldrive.engine import compile_engine
+    from finaldrive.engine import compile_engine, is_compiled
 
     compiled = compile_engine()   # while the pool starts
+    warm_up = not is_compiled("fast")   # the workers have time for it
     executor: Executor
     if kind == "process":
         executor = ProcessExecutor(num_workers=num_workers, max_retries=max_retries, niceness=niceness)
@@ -91,13 +92,16 @@ def make_executor(
                 "make_executor('ray') needs Ray: pip install ray "
                 f"(import failed: {error})"
             ) from error
-        executor = RayExecutor(num_workers=num_workers, max_retries=max_retries, address=address, niceness=niceness)
+        ray_executor = RayExecutor(num_workers=num_workers, max_retries=max_retries, address=address,
+                                   niceness=niceness)
+        executor, warm_up = ray_executor, warm_up and ray_executor.local
     try:
-        local = kind == "process" or not (address or os.environ.get("RAY_ADDRESS"))   # not a cluster's workers
-        one_each = executor.capacity // IN_FLIGHT_PER_WORKER if local else 0
-        warming = {executor.submit(_start_runtime, None) for _ in range(one_each)}
+        deadline = time.monotonic() + WARM_UP_WAIT_S
+        warming = {executor.submit(_start_runtime, None)
+                   for _ in range(executor.capacity // IN_FLIGHT_PER_WORKER if warm_up else 0)}
         compiled()
-        _drain(executor, warming, WARM_UP_WAIT_S)
+        if warming:
+            _drain(executor, warming, deadline)
     except BaseException:
         executor.close()
         raise
@@ -112,15 +116,19 @@ def _start_runtime(batch: None) -> None:
     start_runtime()
 
 
-def _drain(executor: Executor, tasks: set[int], timeout: float) -> None:
-    """Wait up to ``timeout`` s for the tasks (their results and errors dropped: a worker whose start
-    fails fails its first batch alike), cancel those left, and take every report of them off the
-    executor, so that its user sees none."""
-    deadline = time.monotonic() + timeout
-    while tasks and (left := deadline - time.monotonic()) > 0:
-        tasks -= {done.task for done in executor.poll(left)}
-    if tasks:
-        executor.cancel(tasks)
-        deadline = time.monotonic() + MAP_DRAIN_S
-        while tasks and (left := deadline - time.monotonic()) > 0:
-            tasks -= {done.task for done in executor.poll(left)}
+def _drain(executor: Executor, tasks: set[int], deadline: float) -> None:
+    """Wait until ``deadline`` (monotonic) for the tasks (their results and errors dropped: a worker
+    whose start fails fails its first batch alike), cancel those left, and take every report of them
+    off the executor, so that its user sees none."""
+    left = _wait_for(executor, tasks, deadline)
+    if left:
+        executor.cancel(left)
+        _wait_for(executor, left, time.monotonic() + MAP_DRAIN_S)
+
+
+def _wait_for(executor: Executor, tasks: set[int], deadline: float) -> set[int]:
+    """Poll until every task is reported or ``deadline`` passes; the tasks not reported."""
+    left = set(tasks)
+    while left and (seconds := deadline - time.monotonic()) > 0:
+        left -= {done.task for done in executor.poll(seconds)}
+    return left

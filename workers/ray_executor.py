@@ -212,6 +212,8 @@ class RayExecutor(ExecutorMixin):
         self.max_retries = max_retries
         self.niceness = niceness
         self._started = not ray.is_initialized()
+        #: Whether this executor started a Ray of its own on this machine (not a cluster's, nor the caller's).
+        self.local = False
         self._env_before = {name: os.environ.get(name) for name in _AUTH_ENV}
         self._signals: _Signals | None = None
         if self._started:
@@ -226,6 +228,7 @@ class RayExecutor(ExecutorMixin):
                 else:
                     self._use_own_token()
                     ray.init(address="local", num_cpus=num_workers or os.cpu_count() or 1, **options)
+                    self.local = True
             except BaseException:
                 self._undo_init()
                 self._started = False

@@ -22,8 +22,8 @@ unboxes Python's arguments, and the one compiled code calls, without it. numba w
 build, optimise and cache that wrapper (and a C-callable one, which nothing here uses) for every
 kernel, though most are only ever called from compiled code: a fifth of the fast method's
 compilation (docs/performance.md). A kernel that both call on a method's path is marked
-``one_form``: its form with Python's wrapper serves both (the staged compilation's test checks
-that none of the fast method's kernels is compiled in both forms, tests/engine/test_compiled.py).
+``one_form``: its form with Python's wrapper serves both (a test of the fast method's build checks
+that none of its kernels is compiled in both forms, tests/engine/test_compiled.py).
 
 Inside :func:`traced`, every kernel runs as plain Python, and each call is recorded with the
 argument types numba would compile it for, in the form it would compile (a
@@ -90,9 +90,9 @@ def cache_dir() -> Path:
 @functools.cache
 def start_runtime() -> None:
     """Import numba, point its cache at cache_dir() and start its runtime (once); SciPy's LAPACK for
-    it without scipy.linalg (engine.model.lapack); then ``gc.freeze()`` (see load_registries). What
-    loading compiled code needs, and a kernel's first use does: a worker may do it beforehand, while
-    the engine compiles (workers.make_executor).
+    it without scipy.linalg (engine.model.lapack); then ``gc.freeze()`` (see load_registries): what
+    loading compiled code needs, and what a kernel's first use does (a worker may do it beforehand,
+    while the engine compiles: workers.make_executor).
 
     numba's typing and lowering registries are left to the first compilation (numba's compiler
     loads them itself): loading compiled code from the cache needs only the runtime."""

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from functools import partial
 from pathlib import Path
 
@@ -40,14 +40,44 @@ def test_make_executor_kinds() -> None:
         make_executor("threads")  # type: ignore[arg-type]
 
 
-def test_make_executor_starts_numba_in_every_worker_and_hides_those_tasks() -> None:
-    """While the engine compiles, each worker's first task imports numba and starts its runtime: the
-    first batches find it started; none of those tasks is reported to the executor's user."""
+@pytest.fixture
+def engine_compiling(monkeypatch: pytest.MonkeyPatch) -> Callable[[bool], None]:
+    """Make make_executor see the engine compiled (True) or compiling for 0.5 s (False)."""
+    import finaldrive.engine
+
+    def set_compiled(compiled: bool) -> None:
+        monkeypatch.setattr(finaldrive.engine, "is_compiled", lambda method: compiled)
+        monkeypatch.setattr(finaldrive.engine, "compile_engine", lambda: lambda: 0.0 if compiled else time.sleep(0.5))
+    return set_compiled
+
+
+def test_while_the_engine_compiles_the_workers_start_numba_and_hide_those_tasks(
+        engine_compiling: Callable[[bool], None], monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each worker's first task imports numba and starts its runtime: the first batches find it
+    started; none of those tasks is reported to the executor's user."""
+    engine_compiling(False)
+    monkeypatch.setattr(workers, "WARM_UP_WAIT_S", 60.0)   # however slow the machine
     with make_executor("process", num_workers=2) as executor:
-        assert executor.poll(0.2) == []
-        assert executor.in_flight() == 0
+        assert executor.poll(0.2) == [] and executor.in_flight() == 0
         seen = dict(result for _, result in executor.map_batches(toyfns.runtime_started, [None] * 4))
     assert len(seen) == 2 and all(seen.values())
+
+
+def test_warm_up_tasks_not_done_in_time_are_cancelled_unseen(engine_compiling: Callable[[bool], None],
+                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    engine_compiling(False)
+    monkeypatch.setattr(workers, "WARM_UP_WAIT_S", 0.0)
+    with make_executor("process", num_workers=2) as executor:
+        assert executor.poll(0.2) == [] and executor.in_flight() == 0
+        assert dict(executor.map_batches(toyfns.add, [[1], [2]], shared=(10,))) == {0: [11], 1: [12]}
+
+
+def test_with_the_engine_compiled_the_workers_start_nothing_beforehand(
+        engine_compiling: Callable[[bool], None]) -> None:
+    engine_compiling(True)
+    with make_executor("process", num_workers=2) as executor:
+        seen = dict(result for _, result in executor.map_batches(toyfns.runtime_started, [None] * 2))
+    assert not any(seen.values())
 
 
 @pytest.mark.parametrize("kind", ["serial", "process"])

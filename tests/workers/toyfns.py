@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -191,7 +192,5 @@ def held_keys_after(batch: object, seconds: float) -> tuple[int, list[int]]:
 
 def runtime_started(batch: object) -> tuple[int, bool]:
     """(this worker's pid, whether numba's runtime was started in it before this task)."""
-    import sys
-
     jit = sys.modules.get("finaldrive.engine.model.jit")
     return os.getpid(), jit is not None and jit.start_runtime.cache_info().currsize == 1
