@@ -17,11 +17,11 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from finaldrive.workers.base import (
     IN_FLIGHT_PER_WORKER,
-    MAP_DRAIN_S,
     Done,
     Executor,
     Shared,
     WorkerLostError,
+    cancel_unseen,
     map_batches,
 )
 from finaldrive.workers.process import ProcessExecutor
@@ -118,17 +118,9 @@ def _start_runtime(batch: None) -> None:
 
 def _drain(executor: Executor, tasks: set[int], deadline: float) -> None:
     """Wait until ``deadline`` (monotonic) for the tasks (their results and errors dropped: a worker
-    whose start fails fails its first batch alike), cancel those left, and take every report of them
-    off the executor, so that its user sees none."""
-    left = _wait_for(executor, tasks, deadline)
-    if left:
-        executor.cancel(left)
-        _wait_for(executor, left, time.monotonic() + MAP_DRAIN_S)
-
-
-def _wait_for(executor: Executor, tasks: set[int], deadline: float) -> set[int]:
-    """Poll until every task is reported or ``deadline`` passes; the tasks not reported."""
+    whose start fails fails its first batch alike), then cancel those left unseen (cancel_unseen)."""
     left = set(tasks)
     while left and (seconds := deadline - time.monotonic()) > 0:
         left -= {done.task for done in executor.poll(seconds)}
-    return left
+    if left:
+        cancel_unseen(executor, left)

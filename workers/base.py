@@ -188,13 +188,19 @@ def map_batches(
                 yield index, done.result
     finally:
         if pending:
-            executor.cancel(list(pending))
-            deadline = time.monotonic() + MAP_DRAIN_S
-            while pending and executor.in_flight() and time.monotonic() < deadline:
-                for done in executor.poll(min(MAP_POLL_S, max(0.0, deadline - time.monotonic()))):
-                    pending.pop(done.task, None)
+            cancel_unseen(executor, pending)
         for handle in handles:
             executor.release(handle)
+
+
+def cancel_unseen(executor: Executor, tasks: Iterable[int]) -> None:
+    """Cancel the tasks and take their reports off the executor (waiting up to ``MAP_DRAIN_S``), so
+    that its next poll does not return them."""
+    left = set(tasks)
+    executor.cancel(left)
+    deadline = time.monotonic() + MAP_DRAIN_S
+    while left and executor.in_flight() and time.monotonic() < deadline:
+        left -= {done.task for done in executor.poll(min(MAP_POLL_S, max(0.0, deadline - time.monotonic())))}
 
 
 class ExecutorMixin:
