@@ -238,9 +238,14 @@ class DifferentialEvolution:
         return float(self._fitness[0]) if self._fitness.size else math.nan
 
     # ------------------------------------------------------------------ state
-    def state(self) -> dict[str, Any]:
-        """Everything needed to continue the run, as plain JSON types (NaN -> None)."""
-        return {
+    def state(self, *, history: bool = True) -> dict[str, Any]:
+        """Everything needed to continue the run, as plain JSON types (NaN -> None).
+
+        ``history=False`` leaves out the per-generation records (``history``), which continuing
+        does not need: a caller that stores every generation's state and record keeps each state
+        O(NP) rather than O(generations), and the stored states O(generations) in all.
+        """
+        out = {
             "version": STATE_VERSION,
             "config": {
                 "lower": self._lower.tolist(),
@@ -263,12 +268,15 @@ class DifferentialEvolution:
             "stop_reason": self.stop_reason,
             "pending": None if self._pending is None else self._pending.tolist(),
             "rng": _jsonable(self._rng.bit_generator.state),
-            "history": [{k: _encode(v) for k, v in h.items()} for h in self.history],
         }
+        if history:
+            out["history"] = [{k: _encode(v) for k, v in h.items()} for h in self.history]
+        return out
 
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> DifferentialEvolution:
-        """Rebuild an optimiser from :meth:`state` (also after a JSON round trip)."""
+        """Rebuild an optimiser from :meth:`state` (also after a JSON round trip); from a state
+        taken with ``history=False`` its ``history`` starts empty and gains the records to come."""
         if state.get("version") != STATE_VERSION:
             raise ValueError(f"unsupported DE state version {state.get('version')!r}")
         rng_state = state["rng"]
@@ -286,7 +294,7 @@ class DifferentialEvolution:
         de.stop_reason = state["stop_reason"]
         pending = state["pending"]
         de._pending = None if pending is None else np.array(pending, dtype=float).reshape(-1, d)
-        de.history = [{k: _decode(v) for k, v in h.items()} for h in state["history"]]
+        de.history = [{k: _decode(v) for k, v in h.items()} for h in state.get("history", [])]
         return de
 
     # ------------------------------------------------------------------ algorithm

@@ -149,7 +149,9 @@ for _name in DIAGNOSTICS:  # the run's extremes and energy ledger, one column ea
 class Generation(Base):
     """One told DE generation of a run (run = road index for ``de``, 0 for ``robust-de``).
 
-    ``generation`` counts tells: 1 is the initial population. ``state`` resumes the run.
+    ``generation`` counts tells: 1 is the initial population. ``state`` resumes the run (the
+    optimiser's state without its history: each row holds its own generation's record, the
+    best and mean fitness of the population and the evaluations so far and failed in it).
     """
 
     __tablename__ = "generations"
@@ -162,7 +164,9 @@ class Generation(Base):
     fitness_m: Mapped[list[float | None]] = mapped_column(JSON)
     state: Mapped[dict[str, Any]] = mapped_column(JSON)
     best_fitness_m: Mapped[float | None] = mapped_column(Float)
+    mean_fitness_m: Mapped[float | None] = mapped_column(Float, nullable=True)
     n_evals: Mapped[int] = mapped_column(Integer)
+    n_failed: Mapped[int] = mapped_column(Integer, server_default="0")
     created_at: Mapped[datetime] = mapped_column(DateTime)
 
     __table_args__ = (UniqueConstraint("job_id", "run", "generation", name="uq_generations_step"),)

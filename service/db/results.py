@@ -110,6 +110,22 @@ def last_generations(session: Session, job_id: int) -> dict[int, Generation]:
     return {g.run: g for g in session.scalars(query)}
 
 
+def generation_records(session: Session, job_id: int, run: int | None = None) -> dict[int, list[dict[str, Any]]]:
+    """Each DE run's history, one record per told generation in the outputs' names (generation
+    counted from 0, the initial population, as the optimiser counts): run -> records in order."""
+    g = Generation
+    query = (select(g.run, g.generation, g.n_evals, g.n_failed, g.best_fitness_m, g.mean_fitness_m)
+             .where(g.job_id == job_id).order_by(g.run, g.generation))
+    if run is not None:
+        query = query.where(g.run == run)
+    out: dict[int, list[dict[str, Any]]] = {}
+    for row in session.execute(query):
+        out.setdefault(row.run, []).append({
+            "generation": row.generation - 1, "n_evals": row.n_evals, "n_failed": row.n_failed,
+            "best_fitness_m": row.best_fitness_m, "mean_fitness_m": row.mean_fitness_m})
+    return out
+
+
 def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequence[Row],
                   generations: Sequence[dict[str, Any]]) -> int:
     """Insert evaluations (then told DE generations), bump the job's counters and each road's best;
@@ -134,11 +150,12 @@ def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequen
     _update_best(session, job_id, rows)
     if generations:
         now = _bound_now(session, Generation)
-        columns = ("job_id", "run", "generation", "population", "fitness_m", "state", "best_fitness_m", "n_evals",
-                   "created_at")
+        columns = ("job_id", "run", "generation", "population", "fitness_m", "state", "best_fitness_m",
+                   "mean_fitness_m", "n_evals", "n_failed", "created_at")
         _insert_many(session, "generations", columns, [
             (job_id, g["run"], g["generation"], json.dumps(g["population"]), json.dumps(g["fitness_m"]),
-             json.dumps(g["state"]), g["best_fitness_m"], g["n_evals"], now) for g in generations],
+             json.dumps(g["state"]), g["best_fitness_m"], g["mean_fitness_m"], g["n_evals"], g["n_failed"], now)
+            for g in generations],
             ("job_id", "run", "generation"))
     return inserted
 

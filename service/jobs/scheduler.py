@@ -356,11 +356,12 @@ class Scheduler:
             return
         run = job.runs[part.run]
         if run.tell(part.road, part.step, part.candidates, fitness) and isinstance(run, DERun):
-            de = run.de
-            job.writes.generations.append({
-                "run": run.index, "generation": run.generation, "state": de.state(),
+            de, record = run.de, run.de.history[-1]
+            job.writes.generations.append({  # the state without its history: each row holds its own record
+                "run": run.index, "generation": run.generation, "state": de.state(history=False),
                 "population": de.population.tolist(), "fitness_m": nullable(de.fitness),
-                "best_fitness_m": nullable([de.best_f])[0], "n_evals": de.n_evals,
+                "best_fitness_m": nullable([de.best_f])[0], "mean_fitness_m": nullable([record["mean_f"]])[0],
+                "n_evals": de.n_evals, "n_failed": record["n_failed"],
             })
 
     def _finish_ready(self) -> None:

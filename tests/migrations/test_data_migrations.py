@@ -2,11 +2,13 @@
 
 v0.2.0.b derives the indexed cache hash from each stored key; v0.2.0.c renames the design columns
 with their units (a2 converted from radians to degrees) and rewrites stored grid specs and
-recording requests in the new names. Downgrading restores the earlier rows.
+recording requests in the new names; v0.2.0.e moves each DE generation's record out of its stored
+state. Downgrading restores the earlier rows.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from datetime import datetime
 from pathlib import Path
@@ -18,6 +20,7 @@ import sqlalchemy as sa
 from alembic import command
 
 from finaldrive.engine import parse_grid
+from finaldrive.engine.optimize import DifferentialEvolution
 from finaldrive.service.db.migrate import alembic_config
 from finaldrive.service.db.results import key_hash
 
@@ -97,3 +100,45 @@ def test_cache_hash_and_units_rewrite_stored_rows(url: str) -> None:
     assert evaluation["a2"] == pytest.approx(A2_RAD, rel=1e-14)
     assert "cache_hash" not in evaluation
     assert recording["spec"]["designs"][0]["l2"] == 0.05
+
+
+def test_generation_records_come_out_of_the_stored_states(url: str) -> None:
+    """v0.2.0.e: each old row's state held the whole history; its own record goes to its columns,
+    the state keeps the rest, and downgrading puts every state's history back as it was."""
+    de = DifferentialEvolution([0.0, 0.0], [1.0, 1.0], pop_size=6, max_iter=4, seed=3)
+    old_states = []
+    while not de.done:
+        rows = de.ask()
+        values = -((rows - 0.3) ** 2).sum(axis=1)
+        values[0] = np.nan  # a failed evaluation in every generation: n_failed 1, the mean of the rest
+        de.tell(values)
+        old_states.append(json.loads(json.dumps(de.state())))
+    config = alembic_config(url)
+    command.upgrade(config, "v0.2.0.d")
+    engine = sa.create_engine(url)
+    with engine.begin() as conn:
+        _insert(conn, "jobs", id=1, kind="de", state="succeeded", spec={})
+        for g, state in enumerate(old_states, start=1):
+            _insert(conn, "generations", job_id=1, run=0, generation=g, state=state,
+                    best_fitness_m=state["history"][-1]["best_f"], n_evals=state["n_evals"])
+    engine.dispose()
+
+    command.upgrade(config, "head")
+    engine = sa.create_engine(url)
+    with engine.connect() as conn:
+        rows = sorted(_rows(conn, "generations"), key=lambda r: r["generation"])
+    engine.dispose()
+    for row, state in zip(rows, old_states, strict=True):
+        record = state["history"][-1]
+        assert (row["mean_fitness_m"], row["n_failed"]) == (record["mean_f"], 1)
+        assert row["state"] == {k: v for k, v in state.items() if k != "history"}
+    resumed = DifferentialEvolution.from_state(rows[2]["state"])
+    assert resumed.history == [] and resumed.generation == 2
+
+    command.downgrade(config, "v0.2.0.d")
+    engine = sa.create_engine(url)
+    with engine.connect() as conn:
+        rows = sorted(_rows(conn, "generations"), key=lambda r: r["generation"])
+    engine.dispose()
+    assert [row["state"] for row in rows] == old_states
+    assert "n_failed" not in rows[0]

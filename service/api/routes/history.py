@@ -6,12 +6,11 @@ import math
 
 from fastapi import APIRouter
 
-from finaldrive.engine import history_record
 from finaldrive.service.api.deps import JobId, ServicesDep
 from finaldrive.service.api.problems import ApiProblem, documented
 from finaldrive.service.db.models import Job
 from finaldrive.service.db.repository import roads_of
-from finaldrive.service.db.results import last_generations
+from finaldrive.service.db.results import generation_records
 from finaldrive.service.schemas import GenerationRecord, HistoryOut, RunHistory
 
 router = APIRouter(prefix="/jobs", tags=["results"])
@@ -32,15 +31,13 @@ def history(job_id: JobId, services: ServicesDep) -> HistoryOut:
             raise ApiProblem(409, f"job {job_id} is a sweep; a history needs a de, robust-de or paper-study job",
                              slug="wrong-kind")
         names = {r.road_index: r.name for r, _ in roads_of(session, [job_id])[job_id]}
-        generations = last_generations(session, job_id)
         runs = []
-        for run, generation in sorted(generations.items()):
-            records = [history_record(h) for h in generation.state["history"]]
+        for run, records in sorted(generation_records(session, job_id).items()):
             runs.append(RunHistory(
                 run=run, road=None if job.kind == "robust-de" else names.get(run),
                 generations=[GenerationRecord(
-                    generation=int(r["generation"]), n_evals=int(r["n_evals"]), n_failed=int(r.get("n_failed", 0)),
-                    best_fitness_m=_finite(r.get("best_fitness_m")), mean_fitness_m=_finite(r.get("mean_fitness_m")),
+                    generation=r["generation"], n_evals=r["n_evals"], n_failed=r["n_failed"],
+                    best_fitness_m=_finite(r["best_fitness_m"]), mean_fitness_m=_finite(r["mean_fitness_m"]),
                 ) for r in records],
             ))
     return HistoryOut(job_id=job_id, kind=job.kind, runs=runs)

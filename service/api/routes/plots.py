@@ -12,12 +12,12 @@ import numpy as np
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
-from finaldrive.engine import DEFAULT_TOLERANCE_PCT, MAX_TOLERANCE_PCT, history_record, near_mask
+from finaldrive.engine import DEFAULT_TOLERANCE_PCT, MAX_TOLERANCE_PCT, near_mask
 from finaldrive.service.api.deps import JobId, RendersDep, ServicesDep
 from finaldrive.service.api.lookups import job_road, job_version
 from finaldrive.service.api.problems import ApiProblem, documented
 from finaldrive.service.db.columns import road_points
-from finaldrive.service.db.results import last_generations
+from finaldrive.service.db.results import generation_records, last_generations
 from finaldrive.service.services import Services
 
 router = APIRouter(prefix="/jobs", tags=["results"])
@@ -77,12 +77,13 @@ def _de_history(services: Services, job_id: int, road: str | None, value: str, t
         job, chosen = job_road(session, job_id, road)
         if job.kind == "sweep":
             raise ApiProblem(409, f"job {job_id} is a sweep; de-history needs a de or robust-de job", slug="wrong-kind")
-        generation = last_generations(session, job_id).get(0 if job.kind == "robust-de" else chosen.road_index)
+        run = 0 if job.kind == "robust-de" else chosen.road_index
+        generation = last_generations(session, job_id).get(run)
+        records = generation_records(session, job_id, run).get(run, [])
     if generation is None:
         raise ApiProblem(409, f"job {job_id} has no stored DE generation yet", slug="no-results")
     fitness = [math.nan if f is None else f for f in generation.fitness_m]
     population = np.column_stack([np.array(generation.population, float), fitness])
-    history = [{k: (math.nan if v is None else v) for k, v in history_record(h).items()}
-               for h in generation.state["history"]]
+    history = [{k: (math.nan if v is None else v) for k, v in r.items()} for r in records]
     where = "all roads" if job.kind == "robust-de" else chosen.name
     return _png(plots.de_history_png, history, population, title=f"job {job_id} ({job.kind}) on {where}")

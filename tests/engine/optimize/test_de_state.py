@@ -66,6 +66,23 @@ def test_resume_after_generation_k_is_bit_identical(stop_at: int) -> None:
     assert_same(resumed, reference)  # compares state() too: history, RNG state
 
 
+def test_a_state_without_its_history_resumes_the_same_run_and_stays_small() -> None:
+    reference = finish(make(max_iter=40))
+    de = make(max_iter=40)
+    sizes = []
+    while de.generation < 20:
+        de.tell(fitness(de.ask()))
+        state = de.state(history=False)
+        assert "history" not in state
+        sizes.append(len(json.dumps(state)))
+    assert max(sizes[1:]) - min(sizes[1:]) < 100, sizes  # O(NP), not growing with the generations
+    resumed = finish(DifferentialEvolution.from_state(json.loads(json.dumps(state))))
+    assert np.array_equal(resumed.population, reference.population)
+    assert np.array_equal(resumed.fitness, reference.fitness, equal_nan=True)
+    assert json.dumps(resumed.state(history=False)) == json.dumps(reference.state(history=False))
+    assert resumed.history == reference.history[21:]  # the records told after the resume
+
+
 def test_resume_before_the_first_tell_and_between_ask_and_tell() -> None:
     reference = finish(make())
     fresh = through_json(make())       # nothing evaluated yet: the initial population is pending

@@ -21,6 +21,7 @@ from sqlalchemy import select
 from finaldrive.service.config import Settings
 from finaldrive.service.db.leases import claim_jobs
 from finaldrive.service.db.models import Evaluation, Generation, Job
+from finaldrive.service.db.results import generation_records
 from finaldrive.service.jobs.scheduler import Scheduler, SchedulerConfig
 from finaldrive.service.jobs.writer_process import WriterProcess
 from finaldrive.service.main import create_app
@@ -106,6 +107,21 @@ def test_a_de_resumes_and_ends_bit_identical_to_an_uninterrupted_run(settings: S
         assert _wait(settings, job_id)["state"] == "succeeded"
     assert sorted(_slots(settings, job_id)) == sorted(_slots(reference, ref_id))
     assert _final_population(settings, job_id) == _final_population(reference, ref_id)
+    history = _history(settings, job_id)
+    assert history == _history(reference, ref_id)  # resumed twice, the same record of every generation
+    assert [r["generation"] for r in history[0]] == list(range(9))
+    assert [r["n_evals"] for r in history[0]] == [6 * (g + 1) for g in range(9)]
+
+
+def _history(settings: Settings, job_id: int) -> dict[int, list[dict[str, Any]]]:
+    """The job's DE history as its rows hold it; each stored state is O(NP), without the history."""
+    db = open_database(settings)
+    with db.read() as session:
+        states = session.scalars(select(Generation.state).where(Generation.job_id == job_id)).all()
+        records = generation_records(session, job_id)
+    db.dispose()
+    assert states and not any("history" in state for state in states)
+    return records
 
 
 def test_a_failed_simulation_is_stored_and_the_sweep_succeeds(client: TestClient, fake: ToyTask) -> None:
