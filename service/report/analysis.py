@@ -108,16 +108,16 @@ def sweep_table(data: StudyData) -> tuple[np.ndarray, np.ndarray]:
 
 
 def de_history(data: StudyData, road: int, np_size: int) -> list[dict[str, Any]]:
-    """Per DE generation of a road (1 = initial population, as engine.optimize.de counts):
-    best and mean fitness of the population, i.e. of the ``np_size`` best successful
-    evaluations so far ((mu + lambda) selection), and evaluations so far."""
+    """Per DE generation of a road (0 = the initial population, as the optimiser and the API's
+    /history count): best and mean fitness of the population, i.e. of the ``np_size`` best
+    successful evaluations so far ((mu + lambda) selection), and evaluations so far."""
     e = data.evals
     on_road = (e["road_index"] == road) & (e["step"] >= 0)
     out: list[dict[str, Any]] = []
     for g in np.unique(e["step"][on_road]):
         upto = on_road & (e["step"] <= g)
         f = np.sort(e["fitness_m"][upto & e["ok"]])[::-1][:np_size]
-        out.append({"generation": int(g) + 1, "n_evals": int(upto.sum()),
+        out.append({"generation": int(g), "n_evals": int(upto.sum()),
                     "best_fitness_m": _r(float(f[0]) if f.size else None, 6),
                     "mean_fitness_m": _r(float(f.mean()) if f.size else None, 6)})
     return out

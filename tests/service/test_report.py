@@ -11,8 +11,10 @@ from fastapi.testclient import TestClient
 from finaldrive.service.cli import main
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
+from finaldrive.service.services import open_database
 from finaldrive.service.report import write_paper_study
-from finaldrive.service.report.analysis import alignment_deg, offset_mm
+from finaldrive.service.db.results import generation_records
+from finaldrive.service.report.analysis import alignment_deg, de_history, offset_mm
 from finaldrive.service.report.data import StudyNotFound, from_database, from_server
 
 ROADS = ["flat", "sine-h4cm-l3m"]
@@ -68,6 +70,23 @@ def test_the_server_and_the_database_give_the_same_study(study: str, tmp_path: P
     a = write_paper_study(from_db, tmp_path / "db" / "r.md", figures=False)
     b = write_paper_study(via_api, tmp_path / "api" / "r.md", figures=False)
     assert a.markdown.read_bytes() == b.markdown.read_bytes() and a.json.read_bytes() == b.json.read_bytes()
+
+
+def test_the_reports_de_history_is_the_one_the_store_holds(study: str) -> None:
+    """The report recomputes each road's DE history from the evaluations; the API's /history reads
+    the optimiser's own records: the same generations, evaluations, best and mean."""
+    data = from_database(study, 1)
+    db = open_database(Settings(db_url=study))
+    with db.read() as session:
+        stored = generation_records(session, 1)
+    db.dispose()
+    for road in range(len(ROADS)):
+        report = de_history(data, road, 4)
+        assert [r["generation"] for r in report] == [r["generation"] for r in stored[road]] == [0, 1]
+        for ours, theirs in zip(report, stored[road], strict=True):
+            assert ours["n_evals"] == theirs["n_evals"]
+            assert ours["best_fitness_m"] == pytest.approx(theirs["best_fitness_m"], abs=1e-6)
+            assert ours["mean_fitness_m"] == pytest.approx(theirs["mean_fitness_m"], abs=1e-6)
 
 
 def test_a_job_that_is_not_a_paper_study_is_refused(study: str, capsys: pytest.CaptureFixture[str]) -> None:
