@@ -102,43 +102,60 @@ def test_cache_hash_and_units_rewrite_stored_rows(url: str) -> None:
     assert recording["spec"]["designs"][0]["l2"] == 0.05
 
 
-def test_generation_records_come_out_of_the_stored_states(url: str) -> None:
-    """v0.2.0.e: each old row's state held the whole history; its own record goes to its columns,
-    the state keeps the rest, and downgrading puts every state's history back as it was."""
-    de = DifferentialEvolution([0.0, 0.0], [1.0, 1.0], pop_size=6, max_iter=4, seed=3)
-    old_states = []
+def _old_states(seed: int, max_iter: int) -> list[dict[str, Any]]:
+    """A DE run's state after each tell, as the schema before v0.2.0.e stored it (with its history)."""
+    de = DifferentialEvolution([0.0, 0.0], [1.0, 1.0], pop_size=6, max_iter=max_iter, seed=seed)
+    states = []
     while not de.done:
         rows = de.ask()
         values = -((rows - 0.3) ** 2).sum(axis=1)
         values[0] = np.nan  # a failed evaluation in every generation: n_failed 1, the mean of the rest
         de.tell(values)
-        old_states.append(json.loads(json.dumps(de.state())))
+        states.append(json.loads(json.dumps(de.state())))
+    return states
+
+
+def test_generation_records_come_out_of_the_stored_states(url: str) -> None:
+    """v0.2.0.e: each old row's state held the whole history; its own record goes to its columns,
+    the state keeps the rest, and downgrading puts every state's history back as it was. Two jobs'
+    rows interleaved, more of them than the migration reads at a time."""
+    runs = {1: _old_states(3, 60), 2: _old_states(4, 60)}
     config = alembic_config(url)
     command.upgrade(config, "v0.2.0.d")
     engine = sa.create_engine(url)
     with engine.begin() as conn:
-        _insert(conn, "jobs", id=1, kind="de", state="succeeded", spec={})
-        for g, state in enumerate(old_states, start=1):
-            _insert(conn, "generations", job_id=1, run=0, generation=g, state=state,
-                    best_fitness_m=state["history"][-1]["best_f"], n_evals=state["n_evals"])
+        for job_id in (1, 2, 3):
+            _insert(conn, "jobs", id=job_id, kind="de", state="succeeded", spec={})
+        for g in range(1, 62):
+            for job_id, states in runs.items():
+                state = states[g - 1]
+                _insert(conn, "generations", job_id=job_id, run=0, generation=g, state=state,
+                        best_fitness_m=state["history"][-1]["best_f"], n_evals=state["n_evals"])
+        bare = {k: v for k, v in runs[1][0].items() if k != "history"}  # a state with no history: left as it is
+        _insert(conn, "generations", job_id=3, run=0, generation=1, state=bare, best_fitness_m=1.0, n_evals=6)
     engine.dispose()
 
+    def generations() -> dict[int, list[dict[str, Any]]]:
+        engine = sa.create_engine(url)
+        with engine.connect() as conn:
+            rows = sorted(_rows(conn, "generations"), key=lambda r: (r["job_id"], r["generation"]))
+        engine.dispose()
+        return {job_id: [r for r in rows if r["job_id"] == job_id] for job_id in (1, 2, 3)}
+
     command.upgrade(config, "head")
-    engine = sa.create_engine(url)
-    with engine.connect() as conn:
-        rows = sorted(_rows(conn, "generations"), key=lambda r: r["generation"])
-    engine.dispose()
-    for row, state in zip(rows, old_states, strict=True):
-        record = state["history"][-1]
-        assert (row["mean_fitness_m"], row["n_failed"]) == (record["mean_f"], 1)
-        assert row["state"] == {k: v for k, v in state.items() if k != "history"}
-    resumed = DifferentialEvolution.from_state(rows[2]["state"])
+    upgraded = generations()
+    for job_id, states in runs.items():
+        for row, state in zip(upgraded[job_id], states, strict=True):
+            record = state["history"][-1]
+            assert (row["mean_fitness_m"], row["n_failed"]) == (record["mean_f"], 1)
+            assert row["state"] == {k: v for k, v in state.items() if k != "history"}
+    ((bare_row),) = upgraded[3]
+    assert bare_row["state"] == bare and (bare_row["mean_fitness_m"], bare_row["n_failed"]) == (None, 0)
+    resumed = DifferentialEvolution.from_state(upgraded[1][2]["state"])
     assert resumed.history == [] and resumed.generation == 2
 
     command.downgrade(config, "v0.2.0.d")
-    engine = sa.create_engine(url)
-    with engine.connect() as conn:
-        rows = sorted(_rows(conn, "generations"), key=lambda r: r["generation"])
-    engine.dispose()
-    assert [row["state"] for row in rows] == old_states
-    assert "n_failed" not in rows[0]
+    downgraded = generations()
+    for job_id, states in runs.items():
+        assert [row["state"] for row in downgraded[job_id]] == states
+    assert "n_failed" not in downgraded[1][0]

@@ -10,12 +10,12 @@ from fastapi.testclient import TestClient
 
 from finaldrive.service.cli import main
 from finaldrive.service.config import Settings
-from finaldrive.service.main import create_app
-from finaldrive.service.services import open_database
-from finaldrive.service.report import write_paper_study
 from finaldrive.service.db.results import generation_records
+from finaldrive.service.main import create_app
+from finaldrive.service.report import write_paper_study
 from finaldrive.service.report.analysis import alignment_deg, de_history, offset_mm
 from finaldrive.service.report.data import StudyNotFound, from_database, from_server
+from finaldrive.service.services import open_database
 
 ROADS = ["flat", "sine-h4cm-l3m"]
 

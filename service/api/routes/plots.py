@@ -84,6 +84,7 @@ def _de_history(services: Services, job_id: int, road: str | None, value: str, t
         raise ApiProblem(409, f"job {job_id} has no stored DE generation yet", slug="no-results")
     fitness = [math.nan if f is None else f for f in generation.fitness_m]
     population = np.column_stack([np.array(generation.population, float), fitness])
-    history = [{k: (math.nan if v is None else v) for k, v in r.items()} for r in records]
+    history = [{k: (math.nan if v is None else v) for k, v in r.items()}  # up to the population drawn
+               for r in records if r["generation"] < generation.generation]
     where = "all roads" if job.kind == "robust-de" else chosen.name
     return _png(plots.de_history_png, history, population, title=f"job {job_id} ({job.kind}) on {where}")

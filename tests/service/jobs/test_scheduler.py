@@ -113,6 +113,25 @@ def test_a_de_resumes_and_ends_bit_identical_to_an_uninterrupted_run(settings: S
     assert [r["n_evals"] for r in history[0]] == [6 * (g + 1) for g in range(9)]
 
 
+def test_each_generation_row_holds_its_own_record(settings: Settings) -> None:
+    job_id = _submit(settings, {**DE, "de": {"np": 6, "iters": 6}})
+    with running_scheduler(settings, ToyTask(fail_above_l2=0.12)):
+        job = _wait(settings, job_id)
+    assert job["state"] == "succeeded" and job["failed"] > 0
+    db = open_database(settings)
+    with db.read() as session:
+        rows = session.execute(select(Generation.generation, Generation.fitness_m, Generation.mean_fitness_m,
+                                      Generation.n_failed, Generation.n_evals)
+                               .where(Generation.job_id == job_id).order_by(Generation.generation)).all()
+    db.dispose()
+    assert [r.generation for r in rows] == list(range(1, 8))
+    assert [r.n_evals for r in rows] == [6 * g for g in range(1, 8)]
+    for row in rows:  # the population's mean over its successful designs, as the row's own fitness gives it
+        finite = [f for f in row.fitness_m if f is not None]
+        assert row.mean_fitness_m == pytest.approx(sum(finite) / len(finite), rel=1e-12)
+    assert sum(r.n_failed for r in rows) == job["failed"]  # each generation's failures, once
+
+
 def _history(settings: Settings, job_id: int) -> dict[int, list[dict[str, Any]]]:
     """The job's DE history as its rows hold it; each stored state is O(NP), without the history."""
     db = open_database(settings)
