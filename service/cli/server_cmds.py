@@ -137,6 +137,11 @@ class SchedulerChild:
         self._thread.join(SCHEDULER_STOP_S)
 
 
+#: At shutdown, how long open requests (a dashboard's event streams) may take to end before they are
+#: cancelled [s]: some uvicorn versions (0.30) wait for an open event stream without end.
+GRACEFUL_SHUTDOWN_S = 5
+
+
 def run_serve(args: argparse.Namespace) -> int:
     settings = _settings(args)
     _check_store(settings)
@@ -155,7 +160,8 @@ def run_serve(args: argparse.Namespace) -> int:
 
         from finaldrive.service.main import create_app
 
-        uvicorn.run(create_app(settings), host=settings.host, port=settings.port, workers=1)
+        uvicorn.run(create_app(settings), host=settings.host, port=settings.port, workers=1,
+                    timeout_graceful_shutdown=GRACEFUL_SHUTDOWN_S)
     finally:
         if child is not None:
             child.stop()

@@ -89,7 +89,10 @@ async function defaults() {
   fill("np", s.DESpec.properties.np.default);
   fill("iters", s.DESpec.properties.iters.default);
   fill("duration", s.SimulationSpec.properties.duration.default);
-  for (const name of s.JobSpec.properties.kind.enum ?? s.JobKind?.enum ?? []) $("filter-kind").append(el("option", {}, name));
+  // FastAPI names a model's request schema "JobSpec-Input" where its JSON schema differs from the
+  // response's (it does with the lowest FastAPI and pydantic pyproject.toml allows), "JobSpec" otherwise
+  const spec = s.JobSpec ?? s["JobSpec-Input"];
+  for (const name of spec.properties.kind.enum ?? s.JobKind?.enum ?? []) $("filter-kind").append(el("option", {}, name));
   for (const name of s.JobOut.properties.state.enum ?? s.JobStateName?.enum ?? []) $("filter-state").append(el("option", {}, name));
 }
 
