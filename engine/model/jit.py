@@ -6,8 +6,10 @@ yet a compiled function carries copies of every compiled function it calls, from
 the integrator steps built by engine.solver.integrators.make_steppers carry the right-hand side
 they close over). Editing engine/model/tyre.py alone would leave the cached right-hand sides of
 both solvers running the old tyre. So the cache lives in a directory named after a hash of the
-engine's source files: any change to any of them compiles everything afresh. A NUMBA_CACHE_DIR
-set by the user is respected as it is.
+engine's source files and of the toolchain (Python, and where numba and llvmlite are installed and
+when: another venv on the same checkout, or numba upgraded in place, has a cache of its own and
+compiles afresh rather than finding the compile markers of code it cannot load): any change to any
+of them compiles everything afresh. A NUMBA_CACHE_DIR set by the user is respected as it is.
 
 ``@jit`` makes a :class:`Kernel`: numba is imported, and the function compiled (or loaded from the
 cache), at its first call, not when the engine is imported. Called from compiled code, a kernel is
@@ -42,6 +44,7 @@ import contextlib
 import functools
 import gc
 import os
+import sys
 import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -66,10 +69,16 @@ _FOR_CALLERS: dict[str, Any] = {"no_cfunc_wrapper": True, "no_cpython_wrapper": 
 
 
 def _source_fingerprint() -> str:
-    """sha256 (16 hex digits) of the engine's Python sources, path and content."""
+    """sha256 (16 hex digits) of the engine's Python sources (path and content) and of the toolchain
+    that compiles them: this Python's version, and numba's and llvmlite's files (path, time)."""
     import hashlib
+    import importlib.util
 
-    digest = hashlib.sha256()
+    digest = hashlib.sha256(sys.version.encode())
+    for name in ("numba", "llvmlite"):  # found, not imported
+        spec = importlib.util.find_spec(name)
+        origin = spec.origin if spec is not None and spec.origin else ""
+        digest.update(f"{name}:{origin}:{os.stat(origin).st_mtime_ns if origin else 0}".encode())
     for path in sorted(_ENGINE.rglob("*.py")):
         digest.update(path.relative_to(_ENGINE).as_posix().encode())
         digest.update(path.read_bytes())
@@ -78,7 +87,8 @@ def _source_fingerprint() -> str:
 
 def cache_dir() -> Path:
     """Where the compiled code is cached: NUMBA_CACHE_DIR if set, else engine/__pycache__/numba-<hash of
-    the engine's sources> (in the temporary directory if the engine's folder is read-only)."""
+    the engine's sources and the toolchain> (in the temporary directory if the engine's folder is
+    read-only)."""
     if os.environ.get("NUMBA_CACHE_DIR"):
         return Path(os.environ["NUMBA_CACHE_DIR"])
     import tempfile  # here: it imports shutil, lzma, bz2 (~5 ms), which the static geometry never needs

@@ -35,6 +35,33 @@ def test_kernels_called_from_compiled_code_are_typed_with_plain_types() -> None:
     assert typed == [[types.float64, types.int64]] * 2
 
 
+def test_the_cache_directory_is_named_after_the_sources_and_the_toolchain(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """Another Python, or numba installed elsewhere or anew, gets a cache (and compile markers) of its own."""
+    import importlib.machinery
+    import importlib.util
+
+    from finaldrive.engine.model import jit as jit_module
+
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    here = jit_module.cache_dir()
+    assert here.name.startswith("numba-") and here == jit_module.cache_dir()
+    with monkeypatch.context() as m:
+        m.setattr(sys, "version", sys.version + " (another build)")
+        assert jit_module.cache_dir() != here
+    elsewhere = tmp_path / "numba" / "__init__.py"
+    elsewhere.parent.mkdir()
+    elsewhere.write_text("")
+    find_spec = importlib.util.find_spec
+    spec = importlib.machinery.ModuleSpec("numba", None, origin=str(elsewhere))
+    with monkeypatch.context() as m:
+        m.setattr(importlib.util, "find_spec", lambda name, *a: spec if name == "numba" else find_spec(name, *a))
+        moved = jit_module.cache_dir()
+        assert moved != here
+        os.utime(elsewhere, ns=(0, 10**18))  # the same place, installed anew
+        assert jit_module.cache_dir() != moved
+
+
 @jit
 def _both_ways(x):
     return 2.0 * x
