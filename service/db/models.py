@@ -150,8 +150,8 @@ class Generation(Base):
     """One told DE generation of a run (run = road index for ``de``, 0 for ``robust-de``).
 
     ``generation`` counts tells: 1 is the initial population. ``state`` resumes the run (the
-    optimiser's state without its history: each row holds its own generation's record, the
-    best and mean fitness of the population and the evaluations so far and failed in it).
+    optimiser's state without its history). Each row holds its own generation's record: the
+    population's best and mean fitness, the evaluations so far, and that generation's failures.
     """
 
     __tablename__ = "generations"
