@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import sqlite3
@@ -12,6 +13,7 @@ from typing import Any
 
 import httpx
 import numpy as np
+import psutil
 import pytest
 
 from finaldrive.engine import evaluate
@@ -29,6 +31,8 @@ DE = {"kind": "de", "roads": ["sine:0.02:3"], "de": {"np": 6, "iters": 3}, "seed
 LONG_DE = {"kind": "de", "roads": ["flat"], "de": {"np": 8, "iters": 14}, "seed": 11,
            "settings": {**SIM, "method": "reference"}}
 TERMINAL = {"succeeded", "failed", "cancelled"}
+#: a killed scheduler's job is taken over within seconds
+LEASES = {"FINALDRIVE_LEASE_SECONDS": "2", "FINALDRIVE_HEARTBEAT_SECONDS": "0.2"}
 
 
 @pytest.fixture
@@ -40,12 +44,20 @@ def server(tmp_path: Path) -> Iterator[Any]:
             self.proc: Server | None = None
 
         def start(self) -> httpx.Client:
-            self.proc = Server(f"sqlite:///{tmp_path / 'e2e.db'}", tmp_path / "server.log", "--executor", "serial")
+            self.proc = Server(f"sqlite:///{tmp_path / 'e2e.db'}", tmp_path / "server.log", "--executor", "serial",
+                               env=LEASES)
             return self.proc.start().client
 
         def kill(self) -> None:
+            """SIGKILL the server and its scheduler at once, as a crash of the machine would (killed
+            alone, the server leaves its scheduler half a second to notice, enough to finish a job)."""
             if self.proc is not None:
+                scheduler = self.proc.descendants()
+                for process in scheduler:
+                    with contextlib.suppress(psutil.NoSuchProcess):
+                        process.kill()
                 self.proc.kill()
+                psutil.wait_procs(scheduler, timeout=10)
 
     srv = Restartable()
     try:
