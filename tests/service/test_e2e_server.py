@@ -48,16 +48,18 @@ def server(tmp_path: Path) -> Iterator[Any]:
                                env=LEASES)
             return self.proc.start().client
 
-        def kill(self) -> None:
-            """SIGKILL the server and its scheduler at once, as a crash of the machine would (killed
-            alone, the server leaves its scheduler half a second to notice, enough to finish a job)."""
+        def kill(self, *, alone: bool = False) -> None:
+            """SIGKILL the server and its scheduler at once, as a crash of the machine would; ``alone``:
+            the server only, whose scheduler must then stop by itself (within half a second, time
+            enough to finish a short job)."""
             if self.proc is not None:
                 scheduler = self.proc.descendants()
-                for process in scheduler:
+                for process in [] if alone else scheduler:
                     with contextlib.suppress(psutil.NoSuchProcess):
                         process.kill()
                 self.proc.kill()
-                psutil.wait_procs(scheduler, timeout=10)
+                _, alive = psutil.wait_procs(scheduler, timeout=10)
+                assert not alive, "the scheduler outlived its server"
 
     srv = Restartable()
     try:
@@ -131,7 +133,7 @@ def test_de_survives_three_sigkills(server: Any, tmp_path: Path) -> None:
                 break
             time.sleep(0.05)
         assert job["state"] == "running", job
-        server.kill()
+        server.kill(alone=kill == 0)  # the first with three quarters of the job left
         client = server.start()
         assert client.get(f"/v1/jobs/{job_id}").json()["state"] in ("interrupted", "running")
     job = wait(client, job_id)
