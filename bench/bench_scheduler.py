@@ -150,7 +150,7 @@ def run(cpus: int, eval_ms: float, plan: str, db_url: str | None, executor_kind:
     tmp = tempfile.TemporaryDirectory(prefix="finaldrive-bench-")
     url = db_url or f"sqlite:///{Path(tmp.name) / 'bench.db'}"
     settings = Settings(db_url=url, executor="ray", num_workers=cpus)
-    db = open_database(settings, durable=False)  # as finaldrive.service.jobs.scheduler.run_scheduler
+    db = open_database(settings)  # as finaldrive.service.jobs.scheduler.run_scheduler
     executor: Any = (VirtualCluster(cpus, eval_ms) if executor_kind == "virtual"
                      else make_executor("ray", num_workers=cpus))
     try:

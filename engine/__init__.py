@@ -36,8 +36,9 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("StaticLoads", "calibration_design", "solve_chassis_cog", "solve_torque", "static_loads"),
                     "finaldrive.engine.calibrate"),
     "DifferentialEvolution": "finaldrive.engine.optimize",
-    **dict.fromkeys(("DEFAULT_TOLERANCE_PCT", "MAX_TOLERANCE_PCT", "SENSITIVITY_STEPS", "angle_arc", "near_mask",
-                     "near_optimal", "sensitivities", "sensitivity_sentences", "spread"),
+    **dict.fromkeys(("CONCENTRIC_L2_M", "DEFAULT_TOLERANCE_PCT", "MAX_TOLERANCE_PCT", "SENSITIVITY_STEPS", "angle_arc",
+                     "finite_differences", "near_mask", "near_optimal", "near_summary", "sensitivities",
+                     "sensitivity_sentences", "sensitivity_stencil", "spread"),
                     "finaldrive.engine.study.sharpness"),
     **dict.fromkeys(("PRESETS", "GROUPS", "NamedRoad", "ProfileResolver", "paper_row", "paper_tables", "preset_group",
                      "resolve_roads"), "finaldrive.engine.study.presets"),
@@ -143,14 +144,18 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         score as score,
     )
     from finaldrive.engine.study.sharpness import (
+        CONCENTRIC_L2_M as CONCENTRIC_L2_M,
         DEFAULT_TOLERANCE_PCT as DEFAULT_TOLERANCE_PCT,
         MAX_TOLERANCE_PCT as MAX_TOLERANCE_PCT,
         SENSITIVITY_STEPS as SENSITIVITY_STEPS,
         angle_arc as angle_arc,
+        finite_differences as finite_differences,
         near_mask as near_mask,
         near_optimal as near_optimal,
+        near_summary as near_summary,
         sensitivities as sensitivities,
         sensitivity_sentences as sensitivity_sentences,
+        sensitivity_stencil as sensitivity_stencil,
         spread as spread,
     )
     from finaldrive.engine.study.space import (

@@ -8,6 +8,7 @@ server answered 4xx/5xx; ``detail`` is the problem document's one-line detail) a
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -102,11 +103,24 @@ class ServiceClient:
     def cancel(self, job_id: int) -> dict[str, Any]:
         return self.object("POST", f"/v1/jobs/{job_id}/cancel")
 
-    def best(self, job_id: int, tolerance_pct: float | None = None, sensitivity: bool = False) -> dict[str, Any]:
+    def best(self, job_id: int, tolerance_pct: float | None = None, sensitivity: bool = False,
+             wait_s: float = 600.0) -> dict[str, Any]:
+        """The job's best designs; with ``sensitivity``, polled (as Retry-After asks) until the
+        scheduler has simulated the finite differences, at most ``wait_s`` (then ApiError 504)."""
         params = {"sensitivity": "true"} if sensitivity else {}
         if tolerance_pct is not None:
             params["tolerance_pct"] = repr(tolerance_pct)
-        return self.object("GET", f"/v1/jobs/{job_id}/best", params=params)
+        deadline = time.monotonic() + wait_s
+        while True:
+            response = self.request("GET", f"/v1/jobs/{job_id}/best", params=params)
+            if response.status_code != 202:
+                body: dict[str, Any] = response.json()
+                return body
+            if time.monotonic() > deadline:
+                raise ApiError(504, f"job {job_id}: its sensitivity job {response.json().get('sensitivity_job')} "
+                               f"has not finished within {wait_s:g} s")
+            retry = response.headers.get("Retry-After", "")
+            time.sleep(min(float(retry), 10.0) if retry.isdigit() else 2.0)
 
     def evaluations_csv(self, job_id: int, road: str | None = None, page: int = 10_000) -> Iterator[str]:
         """The job's evaluations as CSV text, page by page (the header only in the first)."""

@@ -36,7 +36,7 @@ class Settings(BaseSettings):
     ray_address: str | None = Field(None, description="Ray cluster address (ray executor)")
     batch_size: int | None = Field(None, ge=1, description="designs per worker task")
     api_token: SecretStr | None = Field(None, description="bearer token for every route (reads included); "
-                                        "browsers may send it as the cookie finaldrive_token on GET/HEAD")
+                                        "browsers sign in with it (POST /v1/session: an HttpOnly cookie)")
     allowed_hosts: Annotated[list[str], NoDecode] = Field(
         default_factory=lambda: list(LOOPBACK_HOSTS),
         description="Host header names the service answers (ports ignored; comma-separated or a JSON list; "
@@ -44,7 +44,16 @@ class Settings(BaseSettings):
     max_body_bytes: int = Field(1_048_576, ge=1024, description="request body size limit")
     max_job_evaluations: int = Field(250_000, ge=1, description="largest job accepted")
     max_job_cpu_hours: float = Field(100.0, gt=0, description="largest estimated cost of a job accepted, in "
-                                     "CPU-hours of simulation (the estimate is in the job's cost_cpu_s)")
+                                     "CPU-hours of simulation (the estimate is in the job's cost_cpu_s); a running "
+                                     "job is stopped (failed) once its simulations have taken this long")
+    max_active_jobs: int = Field(1000, ge=1, description="jobs queued, running or interrupted at once; more "
+                                 "submissions are refused (429) until some finish")
+    max_pending_recordings: int = Field(32, ge=1, description="recordings queued or being produced at once "
+                                        "(429 above)")
+    max_profiles: int = Field(1000, ge=1, description="road profiles the store keeps (429 above; a profile is at "
+                              "most FINALDRIVE_MAX_BODY_BYTES)")
+    idempotency_key_hours: float = Field(24.0, gt=0, description="how long an Idempotency-Key replays its job; "
+                                         "after that the key may name a new job")
     max_simulation_seconds: float = Field(60.0, gt=0, description="wall-time limit of one simulation; beyond it "
                                           "the evaluation fails with reason 'time limit'")
     lease_seconds: float = Field(15.0, ge=1, description="how long a scheduler's claim on a job lasts without a "
@@ -55,7 +64,9 @@ class Settings(BaseSettings):
     niceness: int = Field(10, ge=0, le=19, description="OS priority offset of the simulation worker processes "
                           "(the API keeps its core)")
     events_poll_seconds: float = Field(0.5, gt=0, description="SSE progress poll interval")
-    status_cache_seconds: float = Field(0.25, ge=0, description="max age of a cached GET /v1/jobs/{id} (0: off)")
+    status_cache_seconds: float = Field(0.25, ge=0, description="GET /v1/jobs/{id} answers from a snapshot the "
+                                        "event hub rebuilds at its ticks when the job changed and, while it runs, "
+                                        "when older than this (its clocks); 0: every GET reads the store")
     auto_create_db: bool = Field(True, description="create the schema in an empty database")
     max_streams: int = Field(1000, ge=1, description="event streams open at once (429 above)")
     max_streams_per_client: int = Field(16, ge=1, description="event streams open at once from one client "

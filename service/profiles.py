@@ -10,7 +10,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 
 from finaldrive.engine import ProfileResolver, Road, RoadError
 
@@ -31,7 +31,7 @@ def parse_csv(text: str) -> tuple[list[float], list[float], list[int]]:
     ys: list[float] = []
     lines: list[int] = []
     header = False
-    for number, row in enumerate(csv.reader(text.splitlines()), start=1):
+    for number, row in _rows(text):
         if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
             continue
         if not xs and not header and not _is_number(row[0]):
@@ -48,6 +48,20 @@ def parse_csv(text: str) -> tuple[list[float], list[float], list[int]]:
         ys.append(y)
         lines.append(number)
     return xs, ys, lines
+
+
+def _rows(text: str) -> Iterator[tuple[int, list[str]]]:
+    """(1-based line number, fields) of each row of CSV text; a row the csv module refuses (a field longer
+    than ``csv.field_size_limit()``, 128 KiB) is a ProfileError naming its line."""
+    reader = csv.reader(text.splitlines())
+    while True:
+        try:
+            row = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as exc:
+            raise ProfileError(f"not a CSV row: {exc}", reader.line_num) from None
+        yield reader.line_num, row
 
 
 def road_from_csv(text: str, name: str) -> Road:

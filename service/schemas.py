@@ -137,9 +137,16 @@ class VehicleFile(BaseModel):
     parameters: dict[Name, dict[Name, VehicleValue]] = Field(max_length=32)
 
 
+#: A design of a ``designs`` job: [a2_deg, l2_m, rws_m].
+DesignRow = tuple[Num, Num, Num]
+#: Designs of a ``designs`` job on each road, at most.
+MAX_ROAD_DESIGNS = 100
+
+
 class JobSpec(BaseModel):
-    """A job: a sweep over a design grid, a DE (per road, or robust over all roads), or a
-    paper-study (the sweep and the per-road DE on the same roads, under one job)."""
+    """A job: a sweep over a design grid, a DE (per road, or robust over all roads), a
+    paper-study (the sweep and the per-road DE on the same roads, under one job), or explicit
+    designs on each road (``designs``: what /best's sensitivity queues)."""
 
     model_config = _STRICT
 
@@ -152,16 +159,20 @@ class JobSpec(BaseModel):
     bounds: Bounds | None = Field(None, description="de / robust-de / paper-study (default: Table 8)")
     de: DESpec | None = Field(None, description="de / robust-de / paper-study (default: Table 10)")
     aggregate: Literal["mean", "worst"] | None = Field(None, description="robust-de only (default mean)")
+    designs: list[Annotated[list[DesignRow], Field(min_length=1, max_length=MAX_ROAD_DESIGNS)]] | None = Field(
+        None, max_length=64, description="designs only: for each road (in order) its designs, [a2_deg, l2_m, rws_m]")
     seed: Whole = Field(0, ge=0, le=2**32 - 1)
     settings: SimulationSpec = Field(default_factory=SimulationSpec)
     vehicle: VehicleFile | None = Field(None, description="vehicle parameters (default: the paper's)")
 
     @model_validator(mode="after")
     def _kind_fields(self) -> JobSpec:
-        if self.kind == "sweep":
-            for name in ("bounds", "de", "aggregate"):
+        if (self.kind == "designs") != (self.designs is not None):
+            raise ValueError("designs: required for (and only for) kind designs")
+        if self.kind in ("sweep", "designs"):
+            for name in ("bounds", "de", "aggregate", *(("grid",) if self.kind == "designs" else ())):
                 if getattr(self, name) is not None:
-                    raise ValueError(f"{name}: not allowed for a sweep")
+                    raise ValueError(f"{name}: not allowed for a {self.kind} job")
         elif self.grid is not None and self.kind != "paper-study":
             raise ValueError(f"grid: not allowed for {self.kind}")
         if self.kind in ("de", "paper-study") and self.aggregate is not None:
@@ -173,7 +184,7 @@ class JobSpec(BaseModel):
         fill: dict[str, Any] = {}
         if self.kind in ("sweep", "paper-study"):
             fill["grid"] = self.grid or "table9"
-        if self.kind != "sweep":
+        if self.kind not in ("sweep", "designs"):
             fill["bounds"] = self.bounds or Bounds()
             fill["de"] = self.de or DESpec()
             if self.kind == "robust-de":
@@ -279,6 +290,10 @@ class BestOut(BaseModel):
     roads: list[RoadProgress]
     robust_best: RobustBest | None = None
     sharpness: list[SharpnessOut] = Field([], description="per road, then (robust-de) by the aggregate score")
+    sensitivity_job: int | None = Field(None, description="sensitivity=true: the job (kind designs) that simulates "
+                                        "the finite differences")
+    sensitivity_state: JobStateName | None = Field(None, description="sensitivity=true: that job's state (the "
+                                                   "sensitivities are there once it has succeeded)")
 
 
 class RoadOut(BaseModel):
@@ -335,6 +350,8 @@ class SchedulerOut(BaseModel):
     capacity: int = Field(description="simulation tasks it keeps in flight")
     heartbeat_age_s: float = Field(description="since its last heartbeat, on the database's clock [s]")
     alive: bool = Field(description="its heartbeat is younger than a lease")
+    store_error: str | None = Field(None, description="why its last write of results failed (null once one passes "
+                                    "again): the store takes small writes but not its results, e.g. a full disk")
 
 
 class HealthOut(BaseModel):

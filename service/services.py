@@ -6,16 +6,13 @@ The API validates, reads and writes the store, nothing more: jobs are run by sch
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 
 from finaldrive.engine import ENGINE_VERSION
 from finaldrive.service.config import Settings
-from finaldrive.service.db.engine import Database, display_url
-from finaldrive.service.db.migrate import check_revision, head_revision, is_empty, upgrade
+from finaldrive.service.db.engine import Database
+from finaldrive.service.db.migrate import ensure_schema, head_revision
 from finaldrive.service.status_cache import StatusCache
-
-log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -30,15 +27,13 @@ class Services:
         self.db.dispose()
 
 
-def open_database(settings: Settings, *, durable: bool = True) -> Database:
-    """Open the store; create the schema in an empty database; refuse any other revision.
-    ``durable=False``: for a scheduler (finaldrive.service.db.engine)."""
-    db = Database(settings.db_url, durable=durable)
+def open_database(settings: Settings) -> Database:
+    """Open the store; create the schema in an empty database; refuse any other revision. A
+    migration another process is running (processes started together on an empty store) is
+    waited for, at most ``migrate.MIGRATION_WAIT_S``."""
+    db = Database(settings.db_url)
     try:
-        if settings.auto_create_db and is_empty(db.engine):
-            log.info("creating the schema in the empty database %s", display_url(settings.db_url))
-            upgrade(settings.db_url)
-        check_revision(db.engine, settings.db_url)
+        ensure_schema(db.engine, settings.db_url, create=settings.auto_create_db)
     except Exception:
         db.dispose()
         raise

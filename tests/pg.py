@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 import tempfile
+import time
 import uuid
 from pathlib import Path
 
@@ -47,9 +49,32 @@ class PostgresServer:
 
     def start(self) -> PostgresServer:
         self._run("initdb", "-D", str(self.data), "-A", "trust", "-U", "postgres", "--no-sync", "-E", "UTF8")
+        self._start()
+        return self
+
+    def _start(self) -> None:
+        # fsync off: a crash of the server (below) loses nothing a commit flushed to the OS; only a crash of
+        # the machine would, which these tests do not make
         options = f"-p {self.port} -k {self.dir} -c listen_addresses=127.0.0.1 -c fsync=off -c max_connections=200"
         self._run("pg_ctl", "-D", str(self.data), "-o", options, "-l", str(self.dir / "log"), "-w", "start")
-        return self
+
+    def crash(self, *, kill: bool = False) -> None:
+        """Crash the server and start it again: ``pg_ctl restart -m immediate`` (every process quits
+        without a checkpoint; recovery replays the WAL), or with ``kill`` SIGKILL of the postmaster."""
+        if not kill:  # pg_ctl restart would start the server without its log file (-l), on our pipes
+            self._run("pg_ctl", "-D", str(self.data), "-m", "immediate", "-w", "stop")
+            self._start()
+            return
+        postmaster = int((self.data / "postmaster.pid").read_text().split()[0])
+        os.kill(postmaster, signal.SIGKILL)
+        deadline = time.monotonic() + 30  # its backends notice and quit; then the shared memory is free
+        while time.monotonic() < deadline:
+            try:
+                self._start()
+                return
+            except subprocess.CalledProcessError:
+                time.sleep(0.2)
+        self._start()
 
     def stop(self) -> None:
         try:

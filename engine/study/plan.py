@@ -5,7 +5,8 @@ One definition for the command line and the job service. Kinds:
 - ``sweep``: a design grid (Table 9 by default) on every road;
 - ``de``: the paper's DE (Table 10) on each road separately (run i on road i, seed + i);
 - ``robust-de``: one DE whose designs are scored over all the roads (``objective``);
-- ``paper-study``: the sweep and the per-road DE on the same roads (paper section 5).
+- ``paper-study``: the sweep and the per-road DE on the same roads (paper section 5);
+- ``designs``: explicit designs on each road (e.g. the finite-difference stencils at a job's best).
 """
 
 from __future__ import annotations
@@ -24,8 +25,8 @@ from finaldrive.engine.study.space import Bounds, DESettings, SpaceError
 from finaldrive.engine.study.sweep import parse_grid, table9_grid
 from finaldrive.engine.vehicle import Vehicle, default_vehicle
 
-StudyKind = Literal["sweep", "de", "robust-de", "paper-study"]
-STUDY_KINDS: tuple[str, ...] = ("sweep", "de", "robust-de", "paper-study")
+StudyKind = Literal["sweep", "de", "robust-de", "paper-study", "designs"]
+STUDY_KINDS: tuple[str, ...] = ("sweep", "de", "robust-de", "paper-study", "designs")
 #: Run index of a study's sweep (DE runs are 0, 1, ...).
 SWEEP_RUN = -1
 #: Step of a paper-study's sweep evaluations, apart from the DE generations 0, 1, ...
@@ -53,6 +54,7 @@ class StudyPlan:
     kind: StudyKind
     roads: tuple[NamedRoad, ...]
     designs: np.ndarray | None = None      # sweep / paper-study: the grid, (n, 3)
+    road_designs: tuple[np.ndarray, ...] | None = None  # designs: each road's own, (n_i, 3)
     bounds: Bounds | None = None           # de / robust-de / paper-study
     de: DESettings | None = None
     objective: Objective = "mean"          # robust-de
@@ -70,6 +72,8 @@ class StudyPlan:
         return PAPER_SWEEP_STEP if self.kind == "paper-study" else 0
 
     def sweep_total(self) -> int:
+        if self.road_designs is not None:
+            return sum(len(d) for d in self.road_designs)
         return 0 if self.designs is None else len(self.designs) * len(self.roads)
 
     def de_total(self) -> int:
@@ -94,6 +98,8 @@ class StudyPlan:
         ``de_states``: DE run index -> (optimiser state, generations told).
         """
         out: list[Run] = []
+        for i, designs in enumerate(self.road_designs or ()):  # a run a road: SWEEP_RUN, SWEEP_RUN - 1, ...
+            out.append(SweepRun(SWEEP_RUN - i, [i], designs, done=sweep_done))
         if self.designs is not None:
             out.append(SweepRun(SWEEP_RUN, range(len(self.roads)), self.designs, step=self.sweep_step,
                                 done=sweep_done))
@@ -113,6 +119,7 @@ def plan_study(
     kind: str, roads: Sequence[str], *, grid: str | np.ndarray | None = None, bounds: Bounds | None = None,
     de: DESettings | None = None, objective: str | None = None, seed: int = 0,
     profiles: ProfileResolver | None = None, vehicle: Vehicle | None = None,
+    road_designs: Sequence[np.ndarray] | None = None,
 ) -> StudyPlan:
     """Resolve a study; raises :class:`PlanError` naming the field (``roads``, ``grid``, ...).
 
@@ -131,6 +138,10 @@ def plan_study(
         named += [r for r in found if r.road not in {n.road for n in named}]
     if not named:
         raise PlanError(("roads",), "give at least one road")
+    if (kind == "designs") != (road_designs is not None):
+        raise PlanError(("designs",), "required for (and only for) a designs study")
+    if road_designs is not None:
+        return _designs_plan(tuple(named), road_designs, seed, vehicle)
     sweeping = kind in ("sweep", "paper-study")
     if not sweeping and grid is not None:
         raise PlanError(("grid",), f"not used by a {kind} study")
@@ -173,3 +184,23 @@ def plan_study(
                          objective=objective or "mean", seed=seed)  # type: ignore[arg-type]
     except SpaceError as exc:
         raise PlanError((exc.field,), exc.msg) from None
+
+
+def _designs_plan(roads: tuple[NamedRoad, ...], road_designs: Sequence[np.ndarray], seed: int,
+                  vehicle: Vehicle | None) -> StudyPlan:
+    """A designs study: one list of designs (rows a2 [rad], L2, R_WS) for each road, in order."""
+    if len(road_designs) != len(roads):
+        raise PlanError(("designs",), f"{len(road_designs)} lists of designs for {len(roads)} roads")
+    limits = (vehicle or default_vehicle()).design_limits()
+    out = []
+    for i, designs in enumerate(road_designs):
+        rows = np.asarray(designs, dtype=float)
+        if rows.ndim != 2 or rows.shape[1] != 3 or len(rows) == 0 or not np.all(np.isfinite(rows)):
+            raise PlanError(("designs", i), "expected at least one design of three finite numbers")
+        for column, name in ((1, "l2_m"), (2, "rws_m")):
+            low = 0.0 if name == "l2_m" else np.nextafter(0.0, 1.0)
+            if np.any(rows[:, column] < low) or np.any(rows[:, column] > limits[name]):
+                raise PlanError(("designs", i), f"{name} must be in [{low:g}, {limits[name]:g}] m "
+                                f"({_LIMIT_SOURCE[name]})")
+        out.append(rows)
+    return StudyPlan("designs", roads, road_designs=tuple(out), seed=seed)

@@ -68,6 +68,17 @@ class SweepRun:
             for road in roads
         ]
         self._left = sum(len(c) for _, c in self._pending)
+        self._slots = len(self._designs) * len(roads)
+
+    @property
+    def evaluations(self) -> int:
+        """The evaluations this run makes in all (a stored job holds exactly these once it is done)."""
+        return self._slots
+
+    @property
+    def generations(self) -> int:
+        """A sweep tells no generations."""
+        return 0
 
     def take(self) -> list[Request]:
         """The requests not handed out yet (everything, the first time)."""
@@ -132,3 +143,13 @@ class DERun:
     @property
     def done(self) -> bool:
         return self.de.done
+
+    @property
+    def evaluations(self) -> int:
+        """The evaluations of the generations told so far (each design once on each road)."""
+        return self.de.n_evals * len(self.roads)
+
+    @property
+    def generations(self) -> int:
+        """The generations told so far (the initial population is the first)."""
+        return self.generation

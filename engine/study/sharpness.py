@@ -80,24 +80,33 @@ def near_optimal(designs: np.ndarray, fitness: np.ndarray, distance: np.ndarray 
     f = np.asarray(fitness, dtype=float)
     ok = np.isfinite(f)
     if not ok.any():
-        return {"tolerance_pct": tolerance_pct, "count": 0, "evaluated": 0, "sentences": ["no successful evaluation"]}
+        return near_summary(tolerance_pct, math.nan, math.nan, {}, {}, 0, 0, 0)
     near, explored = spread(rows[mask], f[mask]), spread(rows[ok], f[ok])
     if distance is not None:
         d = np.asarray(distance, dtype=float)[mask]
         d = d[np.isfinite(d)]
         if d.size:
             near["distance_m"] = [float(d.min()), float(d.max())]
+    return near_summary(tolerance_pct, best, tol, near, explored, int(mask.sum()), int(ok.sum()),
+                        int((rows[mask, 1] <= CONCENTRIC_L2_M).sum()))
+
+
+def near_summary(tolerance_pct: float, best: float, tol: float, near: dict[str, list[float]],
+                 explored: dict[str, list[float]], count: int, evaluated: int, concentric: int) -> dict[str, Any]:
+    """What :func:`near_optimal` reports, from the ranges (:func:`spread`) over the near-optimal set
+    (``count`` designs, ``concentric`` of them with L2 = 0) and over the ``evaluated`` designs."""
+    if not evaluated:
+        return {"tolerance_pct": tolerance_pct, "count": 0, "evaluated": 0, "sentences": ["no successful evaluation"]}
     verdicts: dict[str, str] = {}
     sentences = []
     for name in VARIABLES:
-        verdicts[name], sentence = _verdict(name, near[name], explored[name], tol, int(mask.sum()), int(ok.sum()))
+        verdicts[name], sentence = _verdict(name, near[name], explored[name], tol, count, evaluated)
         sentences.append(sentence)
-    concentric = int((rows[mask, 1] <= CONCENTRIC_L2_M).sum())
     if concentric:
         sentences.append(f"{concentric} of them {'has' if concentric == 1 else 'have'} L2 = 0 (engine sprocket on "
                          "the pivot), where a2 has no effect")
     return {"tolerance_pct": tolerance_pct, "tolerance_m": tol, "best_fitness_m": best,
-            "count": int(mask.sum()), "evaluated": int(ok.sum()), "ranges": near, "explored": explored,
+            "count": count, "evaluated": evaluated, "ranges": near, "explored": explored,
             "verdicts": verdicts, "sentences": sentences}
 
 
@@ -144,6 +153,16 @@ def sensitivities(design: Design, road: Road, settings: SimSettings, vehicle: Ve
     :data:`SENSITIVITY_STEPS`, forward ones where the step would cross ``lower`` (L2, R_WS) [m]."""
     from finaldrive.engine.simulation import evaluate  # the compiled model loads only when simulating
 
+    rows, schemes = sensitivity_stencil(design, lower)
+    batch = evaluate(rows, road, settings, vehicle)
+    return finite_differences(schemes, batch.distance_m, batch.fitness_m)
+
+
+def sensitivity_stencil(design: Design, lower: tuple[float, float] = (0.0, 0.0)
+                        ) -> tuple[np.ndarray, dict[str, str]]:
+    """The 7 designs (rows a2 [rad], L2, R_WS) whose simulations :func:`finite_differences` takes:
+    ``design``, then for a2, L2, R_WS in turn the step up and the step down (``design`` again where
+    the step down would cross ``lower`` (L2, R_WS) [m]: a forward difference); and each scheme."""
     h = SENSITIVITY_STEPS
     rows = [design.row()]
     schemes: dict[str, str] = {}
@@ -156,14 +175,20 @@ def sensitivities(design: Design, road: Road, settings: SimSettings, vehicle: Ve
         plus = design.row()
         plus[k] += step
         rows += [plus, minus if central else design.row()]
-    batch = evaluate(np.array(rows), road, settings, vehicle)
-    out: dict[str, Any] = {"steps": dict(h), "schemes": schemes, "simulations": len(rows),
-                           "distance_m": float(batch.distance_m[0]), "fitness_m": float(batch.fitness_m[0])}
+    return np.array(rows, dtype=float), schemes
+
+
+def finite_differences(schemes: dict[str, str], distance: np.ndarray, fitness: np.ndarray) -> dict[str, Any]:
+    """The sensitivities from the distance and fitness [m] of the :func:`sensitivity_stencil` designs, in order."""
+    h = SENSITIVITY_STEPS
+    distance, fitness = np.asarray(distance, dtype=float), np.asarray(fitness, dtype=float)
+    out: dict[str, Any] = {"steps": dict(h), "schemes": dict(schemes), "simulations": len(distance),
+                           "distance_m": float(distance[0]), "fitness_m": float(fitness[0])}
     per = {"a2_deg": ("a2", "deg"), "l2_m": ("l2", "m"), "rws_m": ("rws", "m")}  # units of docs/fields.md
     for i, name in enumerate(VARIABLES):
         var, unit = per[name]
         width = (2.0 if schemes[name] == "central" else 1.0) * h[name]
-        for what, values in (("distance", batch.distance_m), ("fitness", batch.fitness_m)):
+        for what, values in (("distance", distance), ("fitness", fitness)):
             out[f"d{what}_d{var}_m_per_{unit}"] = float((values[1 + 2 * i] - values[2 + 2 * i]) / width)
     return out
 

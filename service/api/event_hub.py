@@ -1,10 +1,12 @@
-"""One poll of the store for every open event stream, fanned out to the streams.
+"""One poll of the store for every open event stream and status snapshot, fanned out to them.
 
 Each tick (``events_poll_seconds``) reads, in one query and in a worker thread, the progress of
 the jobs that are not finished plus those streams watch, and hands each stream the jobs that
 changed. A stream's mailbox keeps only the latest state of each job: a slow reader skips
-intermediate progress and never holds the hub up. The hub runs while streams are open; the
-number of streams is capped in total and per client address.
+intermediate progress and never holds the hub up. The same tick rebuilds the GET /v1/jobs/{id}
+snapshots (finaldrive.service.status_cache) of the jobs that changed. The hub runs while streams
+are open or unfinished jobs' snapshots are read; the number of streams is capped in total and per
+client address.
 """
 
 from __future__ import annotations
@@ -18,16 +20,21 @@ from dataclasses import dataclass
 from typing import Any
 
 import anyio
+from sqlalchemy import select
 from sqlalchemy.exc import SQLAlchemyError
 
+from finaldrive.service.api.views import job_out
 from finaldrive.service.db.engine import Database
-from finaldrive.service.db.models import TERMINAL_STATES, JobState
-from finaldrive.service.db.repository import job_progress
+from finaldrive.service.db.models import TERMINAL_STATES, Job, JobState
+from finaldrive.service.db.repository import job_progress, roads_of
+from finaldrive.service.status_cache import Snapshot, StatusCache
 
 log = logging.getLogger(__name__)
 #: Streams woken together; the hub yields to the event loop between batches, so that a request
 #: arriving during a tick waits for at most one batch of streams, not for all of them.
 WAKE_BATCH = 16
+#: States in which a job's body changes with time alone (elapsed_s, eta_s).
+_STARTED_STATES = frozenset({JobState.running.value, JobState.interrupted.value})
 
 
 @dataclass(frozen=True)
@@ -69,6 +76,18 @@ def read_progress(db: Database, job_ids: list[int]) -> list[JobProgress]:
         return [JobProgress(*row) for row in job_progress(session, job_ids)]
 
 
+def status_snapshots(db: Database, job_ids: list[int]) -> dict[int, Snapshot]:
+    """The GET /v1/jobs/{id} bodies of the jobs of ``job_ids`` that exist, serialised, from one read."""
+    with db.read() as session:
+        jobs = session.scalars(select(Job).where(Job.id.in_(job_ids))).all()
+        roads = roads_of(session, [job.id for job in jobs])
+        return {job.id: Snapshot(
+            body=job_out(session, job, roads[job.id], detail=True).model_dump_json().encode(),
+            version=JobProgress(job.id, job.kind, job.state, job.n_done, job.n_failed, job.total),
+            final=JobState(job.state) in TERMINAL_STATES,
+        ) for job in jobs}
+
+
 class TooManyStreams(Exception):
     """A cap on open streams is reached; the message names it."""
 
@@ -105,8 +124,10 @@ class Subscriber:
 
 
 class EventHub:
-    def __init__(self, db: Database, *, poll_s: float, max_streams: int, max_per_client: int) -> None:
+    def __init__(self, db: Database, status: StatusCache, *, poll_s: float, max_streams: int,
+                 max_per_client: int) -> None:
         self.db = db
+        self.status = status
         self.poll_s = poll_s
         self.max_streams = max_streams
         self.max_per_client = max_per_client
@@ -132,9 +153,13 @@ class EventHub:
         subscriber = Subscriber(client, job_id)
         self._subscribers.add(subscriber)
         self._per_client[client] += 1
+        self.start()
+        return subscriber
+
+    def start(self) -> None:
+        """Run the hub unless it runs (it stops once no stream is open and no unfinished job's snapshot is read)."""
         if self._task is None:
             self._task = asyncio.get_running_loop().create_task(self._run(), name="finaldrive-event-hub")
-        return subscriber
 
     def unsubscribe(self, subscriber: Subscriber) -> None:
         if subscriber in self._subscribers:
@@ -144,9 +169,10 @@ class EventHub:
                 del self._per_client[subscriber.client]
 
     async def tick(self) -> None:
-        """One read of the store, and its news to every subscriber."""
+        """One read of the store, its news to every subscriber, and the snapshots of changed jobs rebuilt."""
         watched = {s.job_id for s in self._subscribers if s.job_id is not None}
         watched |= {p.id for p in self._known.values() if not p.finished}  # so their end is seen
+        watched.update(self.status.watched())
         try:
             rows = await anyio.to_thread.run_sync(self._read, sorted(watched))
         except SQLAlchemyError as exc:  # the store is unavailable: streams wait for the next tick
@@ -158,6 +184,20 @@ class EventHub:
             subscriber.deliver(changed, self._known)
             if i % WAKE_BATCH == 0:
                 await asyncio.sleep(0)  # let what else waits on the loop (an API request) run between batches
+        await self._refresh_snapshots(rows)
+
+    async def _refresh_snapshots(self, rows: list[JobProgress]) -> None:
+        started = {p.id for p in rows if p.state in _STARTED_STATES}  # their elapsed_s grows
+        stale = self.status.outdated(self._known, started)
+        if not stale:
+            return
+        since = self.status.generation
+        try:
+            built = await anyio.to_thread.run_sync(status_snapshots, self.db, stale)
+        except SQLAlchemyError as exc:  # kept until the next tick; not served once STALE_S old
+            log.warning("event hub: status snapshots not rebuilt: %s", " ".join(str(exc).split())[:300])
+            return
+        self.status.store(built, since)
 
     def _read(self, job_ids: list[int]) -> list[JobProgress]:
         self.reads += 1
@@ -165,7 +205,7 @@ class EventHub:
 
     async def _run(self) -> None:
         try:
-            while self._subscribers:
+            while self._subscribers or self.status.watched():
                 await self.tick()
                 await anyio.sleep(self.poll_s)
         finally:

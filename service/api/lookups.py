@@ -11,11 +11,16 @@ from finaldrive.service.db.models import Job, JobRoad
 from finaldrive.service.db.repository import roads_of
 from finaldrive.service.schemas import JobOut
 
+#: The most digits a cursor (a row id, at most MAX_ID) has.
+CURSOR_DIGITS = len(str(MAX_ID))
+
 
 def parse_cursor(cursor: str | None) -> int | None:
+    """A page cursor (a row id) from the query; 422 naming ``cursor`` unless it is 1 to 19 ASCII digits
+    within MAX_ID (checked before ``int()``, which refuses more than 4,300 digits with a ValueError)."""
     if cursor is None:
         return None
-    if not (cursor.isascii() and cursor.isdigit()) or int(cursor) > MAX_ID:
+    if not (0 < len(cursor) <= CURSOR_DIGITS and cursor.isascii() and cursor.isdigit()) or int(cursor) > MAX_ID:
         raise validation_problem(("query", "cursor"), "not a cursor returned by this API")
     return int(cursor)
 

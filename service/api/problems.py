@@ -11,7 +11,9 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from sqlalchemy.exc import InterfaceError, OperationalError, TimeoutError as PoolTimeout
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from finaldrive.service.db.repository import LimitReached
 from finaldrive.service.schemas import Problem, ProblemItem
 
 log = logging.getLogger(__name__)
@@ -85,18 +87,49 @@ async def _on_store_unavailable(request: Request, exc: Exception) -> JSONRespons
                             headers={"Retry-After": str(RETRY_AFTER_S)})
 
 
-async def _on_unexpected(request: Request, exc: Exception) -> JSONResponse:
-    log.exception("unhandled error on %s %s", request.method, request.url.path, exc_info=exc)
-    return problem_response(request, 500, "internal error; see the server log")
+async def _on_limit_reached(request: Request, exc: Exception) -> JSONResponse:
+    return problem_response(request, 429, str(exc), slug="limit-reached", headers={"Retry-After": "30"})
+
+
+class ErrorsAsProblems:
+    """The safety net: an exception no handler took becomes a logged 500 problem document, and is not
+    raised further. Starlette's own net re-raises after answering, and uvicorn then drops the connection;
+    this one keeps it. Once a response has started (a stream) an exception can only end it: re-raised."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        started = False
+
+        async def watched(message: Message) -> None:
+            nonlocal started
+            started = started or message["type"] == "http.response.start"
+            await send(message)
+
+        try:
+            await self.app(scope, receive, watched)
+        except Exception as exc:
+            if started:
+                raise
+            request = Request(scope)
+            log.exception("unhandled error on %s %s", request.method, request.url.path, exc_info=exc)
+            await problem_response(request, 500, "internal error; see the server log")(scope, receive, send)
 
 
 def install(app: FastAPI) -> None:
+    """The problem handlers, and :class:`ErrorsAsProblems` as the outermost middleware added so far (call
+    this after adding the others)."""
     app.add_exception_handler(ApiProblem, _on_api_problem)
+    app.add_exception_handler(LimitReached, _on_limit_reached)
     app.add_exception_handler(StarletteHTTPException, _on_http_exception)
     app.add_exception_handler(RequestValidationError, _on_validation_error)
     for error in (OperationalError, InterfaceError, PoolTimeout):
         app.add_exception_handler(error, _on_store_unavailable)
-    app.add_exception_handler(Exception, _on_unexpected)
+    app.add_middleware(ErrorsAsProblems)
 
 
 def documented(*statuses: int) -> dict[int | str, dict[str, Any]]:
@@ -110,8 +143,9 @@ def documented(*statuses: int) -> dict[int | str, dict[str, Any]]:
         413: "request body larger than FINALDRIVE_MAX_BODY_BYTES",
         415: "the body's Content-Type is not one this operation takes",
         422: "invalid request; `errors` names each field and the reason",
-        429: "too many event streams open (FINALDRIVE_MAX_STREAMS_PER_CLIENT, FINALDRIVE_MAX_STREAMS); "
-             "retry after Retry-After seconds",
+        429: "too many at once: event streams open (FINALDRIVE_MAX_STREAMS_PER_CLIENT, FINALDRIVE_MAX_STREAMS), "
+             "jobs unfinished (FINALDRIVE_MAX_ACTIVE_JOBS), recordings pending (FINALDRIVE_MAX_PENDING_RECORDINGS) "
+             "or road profiles stored (FINALDRIVE_MAX_PROFILES); retry after Retry-After seconds",
         503: "the results store is unavailable (locked, full or unreachable), or the server is busy rendering "
              "(plots, points); retry after Retry-After seconds",
     }

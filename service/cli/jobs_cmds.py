@@ -233,8 +233,8 @@ def register(sub: Any) -> None:
     p = sub.add_parser("jobs", help="list the service's jobs, newest first", **parser_options())
     p.add_argument("--state", choices=("queued", "running", "succeeded", "failed", "cancelled", "interrupted"),
                    help="only jobs in this state (default: any)")
-    p.add_argument("--kind", choices=("sweep", "de", "robust-de", "paper-study"), help="only jobs of this kind "
-                   "(default: any)")
+    p.add_argument("--kind", choices=("sweep", "de", "robust-de", "paper-study", "designs"),
+                   help="only jobs of this kind (default: any)")
     p.add_argument("--limit", type=int, default=20, help="how many jobs to list")
     add_server_args(p)
     p.set_defaults(run=run_jobs)
@@ -259,7 +259,8 @@ def register(sub: Any) -> None:
     p.add_argument("id", type=int, help="job id")
     add_tolerance_arg(p)
     p.add_argument("--sensitivity", action="store_true",
-                   help="also the finite differences at each road's best (the server runs 7 simulations a road)")
+                   help="also the finite differences at each road's best (of a finished job: its scheduler runs 7 "
+                   "simulations a road as a job of kind designs; waits for them, at most 10 minutes)")
     add_server_args(p)
     p.set_defaults(run=run_best)
 

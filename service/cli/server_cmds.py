@@ -27,6 +27,15 @@ SCHEDULER_STOP_S = 15.0
 RESTART_BACKOFF_S = (1.0, 30.0)
 
 
+def _scheduler_name(value: str) -> str:
+    """``--id``: a name the store can hold (schedulers.id)."""
+    from finaldrive.service.db.leases import MAX_SCHEDULER_ID
+
+    if not value or len(value) > MAX_SCHEDULER_ID:
+        raise argparse.ArgumentTypeError(f"a scheduler id has 1 to {MAX_SCHEDULER_ID} characters, not {len(value)}")
+    return value
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     from finaldrive.service.config import Settings
 
@@ -48,7 +57,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     _store_and_executor(scheduler, defaults)
     scheduler.add_argument("--workers", type=int, help="worker processes / Ray CPUs (default: all cores; "
                            "FINALDRIVE_NUM_WORKERS)")
-    scheduler.add_argument("--id", dest="scheduler_id", help="this scheduler's name in the store (default: "
+    scheduler.add_argument("--id", dest="scheduler_id", type=_scheduler_name,
+                           help="this scheduler's name in the store, at most 64 characters (default: "
                            "host:pid:random); a restart with the same id takes its jobs back at once")
     scheduler.add_argument("--exit-with-parent", action="store_true",
                            help="stop (giving the jobs back) when the parent process ends; finaldrive serve uses it")
@@ -151,17 +161,20 @@ def run_serve(args: argparse.Namespace) -> int:
             from finaldrive.engine import compile_engine
 
             compile_engine()   # now, so it overlaps the start of the app and of the scheduler's pool
-        # the same id across restarts: a restarted scheduler takes its jobs back at once
+        from finaldrive.service.db.leases import scheduler_id
+
         env = {**os.environ, "FINALDRIVE_DB_URL": settings.db_url, "FINALDRIVE_EXECUTOR": settings.executor}
-        child = SchedulerChild(["--id", f"serve-{os.uname().nodename}-{os.getpid()}",
+        # the same id across restarts: a restarted scheduler takes its jobs back at once
+        child = SchedulerChild(["--id", scheduler_id(f"serve-{os.uname().nodename}", f"-{os.getpid()}"),
                                 "--exit-with-parent"], env).start()
     try:
         import uvicorn  # after the scheduler's start, which takes longer (Ray's start)
 
+        from finaldrive.service.api.head_limit import server_options
         from finaldrive.service.main import create_app
 
         uvicorn.run(create_app(settings), host=settings.host, port=settings.port, workers=1,
-                    timeout_graceful_shutdown=GRACEFUL_SHUTDOWN_S)
+                    timeout_graceful_shutdown=GRACEFUL_SHUTDOWN_S, **server_options())
     finally:
         if child is not None:
             child.stop()
@@ -193,9 +206,12 @@ def _stop_with_parent(parent: int, stop: threading.Event) -> None:
 
 def run_db_upgrade(args: argparse.Namespace) -> int:
     from finaldrive.service.db.engine import display_url
-    from finaldrive.service.db.migrate import head_revision, upgrade
+    from finaldrive.service.db.migrate import MigrationBusyError, head_revision, upgrade
 
     url = _settings(args).db_url
-    upgrade(url)
+    try:
+        upgrade(url)
+    except MigrationBusyError as exc:
+        raise UsageError(str(exc)) from None
     print(f"database {display_url(url)} is at schema revision {head_revision()}")
     return 0

@@ -1,21 +1,23 @@
 """Database engine and sessions.
 
 SQLite (the default) gets, on every new connection, ``journal_mode=WAL``, ``synchronous=FULL``
-(``NORMAL`` for a store opened with ``durable=False``) and ``foreign_keys=ON``. pysqlite's
+and ``foreign_keys=ON``. pysqlite's
 implicit transactions are replaced by explicit ``BEGIN`` (SQLAlchemy's SQLite recipe), each
 preceded by the transaction's ``busy_timeout``, and write transactions start with
 ``BEGIN IMMEDIATE`` so a reader never has to upgrade its lock.
 PostgreSQL connections time out after 5 s and a write transaction waits for locks at most its
 timeout (``lock_timeout``). Any other SQLAlchemy URL is used as is.
 
-``durable=False`` is for writers whose last commits can be recomputed (a scheduler's results):
-a commit survives the process being killed but not the machine losing power (SQLite WAL with
-``synchronous=NORMAL``, PostgreSQL ``synchronous_commit=off``); the database stays consistent
-either way. Submissions and cancels go through the API's durable store.
+Every commit is durable on every store, results included: a commit that returned survives the
+database's crash (PostgreSQL's default ``synchronous_commit=on``; SQLite ``synchronous=FULL``).
+An asynchronous commit once lost acknowledged results whole steps at a time when PostgreSQL was
+restarted; a scheduler's results are committed in batches, so the flush costs little.
 """
 
 from __future__ import annotations
 
+import sqlite3
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -43,11 +45,10 @@ def display_url(url: str) -> str:
 class Database:
     """An engine plus read and write session factories."""
 
-    def __init__(self, url: str, *, lock_timeout_s: float = LOCK_TIMEOUT_S, durable: bool = True) -> None:
+    def __init__(self, url: str, *, lock_timeout_s: float = LOCK_TIMEOUT_S) -> None:
         self.url = url
         self.lock_timeout_s = lock_timeout_s
-        self.durable = durable
-        self.engine = make_engine(url, durable=durable)
+        self.engine = make_engine(url)
         self._postgres = self.engine.dialect.name == "postgresql"
 
     @contextmanager
@@ -66,8 +67,6 @@ class Database:
         with Session(bind, expire_on_commit=False) as session, session.begin():
             if self._postgres:
                 session.execute(text(f"SET LOCAL lock_timeout = '{int(timeout * 1000)}ms'"))
-                if not self.durable:
-                    session.execute(text("SET LOCAL synchronous_commit = off"))
             yield session
 
     def dispose(self) -> None:
@@ -80,7 +79,21 @@ def in_memory(url: str) -> bool:
     return parsed.get_backend_name() == "sqlite" and parsed.database in (None, "", ":memory:")
 
 
-def make_engine(url: str, *, durable: bool = True, **kwargs: Any) -> Engine:
+def _journal_mode_wal(cur: Any) -> Any:
+    """``PRAGMA journal_mode = WAL``, retried for up to LOCK_TIMEOUT_S: processes opening a new file
+    together deadlock in the switch, which SQLite reports at once ("database is locked"), busy
+    timeout or not."""
+    deadline = time.monotonic() + LOCK_TIMEOUT_S
+    while True:
+        try:
+            return cur.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+        except sqlite3.OperationalError as exc:
+            if "locked" not in str(exc) or time.monotonic() >= deadline:
+                raise
+            time.sleep(0.01)
+
+
+def make_engine(url: str, **kwargs: Any) -> Engine:
     """``create_engine`` with the SQLite connection set-up described in the module docstring."""
     backend = make_url(url).get_backend_name()
     if backend == "postgresql":
@@ -98,10 +111,10 @@ def make_engine(url: str, *, durable: bool = True, **kwargs: Any) -> Engine:
         cur = dbapi_conn.cursor()
         try:
             if not memory:
-                mode = cur.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+                mode = _journal_mode_wal(cur)
                 if str(mode).lower() != "wal":
                     raise RuntimeError(f"SQLite refused WAL mode (journal_mode is {mode!r})")
-            cur.execute(f"PRAGMA synchronous = {'FULL' if durable else 'NORMAL'}")
+            cur.execute("PRAGMA synchronous = FULL")
             cur.execute("PRAGMA foreign_keys = ON")
         finally:
             cur.close()

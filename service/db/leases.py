@@ -38,6 +38,16 @@ def db_now(session: Session) -> datetime:
 
 
 # ---------------------------------------------------------------------- schedulers
+#: The longest scheduler id the store keeps (``schedulers.id``, ``jobs.owner``, ``recordings.owner``).
+MAX_SCHEDULER_ID = SchedulerRow.__table__.c.id.type.length  # type: ignore[attr-defined]
+
+
+def scheduler_id(name: str, suffix: str) -> str:
+    """``name + suffix`` cut to fit the store: the name (a host name may be long) gives way, the suffix
+    (a pid, a random tag) is kept whole."""
+    return name[:max(0, MAX_SCHEDULER_ID - len(suffix))] + suffix
+
+
 def register_scheduler(session: Session, scheduler_id: str, *, host: str, pid: int, executor: str,
                        capacity: int) -> str:
     """Insert (or revive, after a restart with the same id) this scheduler's row; returns its id."""
@@ -69,6 +79,12 @@ def beat(session: Session, scheduler_id: str, *, lease_s: float, capacity: int) 
                     .values(lease_until=until))
     return set(session.scalars(select(Job.id).where(Job.owner == scheduler_id,
                                                     Job.state == JobState.running.value)))
+
+
+def report_store_error(session: Session, scheduler_id: str, error: str | None) -> None:
+    """Record why this scheduler's results could not be stored (None: they can again)."""
+    session.execute(update(SchedulerRow).where(SchedulerRow.id == scheduler_id)
+                    .values(store_error=None if error is None else error[:500]))
 
 
 def stop_scheduler(session: Session, scheduler_id: str) -> None:
@@ -131,12 +147,13 @@ def owns(session: Session, scheduler_id: str, job_id: int) -> bool:
 
 
 def finish_job(session: Session, scheduler_id: str, job_id: int, state: JobState, *,
-               error: str | None = None) -> bool:
-    """Running -> ``state`` if this scheduler still owns the job; a success fixes ``total``."""
+               error: str | None = None, total: int | None = None) -> bool:
+    """Running -> ``state`` if this scheduler still owns the job; ``total``: the evaluations the job
+    made, when it made fewer than planned (a DE that stopped early), checked stored by the caller."""
     values: dict[str, object] = {"state": state.value, "finished_at": db_now(session), "error": error,
                                  "owner": None, "lease_until": None}
-    if state is JobState.succeeded:
-        values["total"] = Job.n_done + Job.n_failed
+    if total is not None:
+        values["total"] = total
     result = session.execute(update(Job).where(Job.id == job_id, Job.owner == scheduler_id,
                                                Job.state == JobState.running.value).values(**values))
     return bool(result.rowcount)  # type: ignore[attr-defined]

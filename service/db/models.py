@@ -138,6 +138,9 @@ class Evaluation(Base):
         UniqueConstraint("job_id", "road_index", "step", "candidate", name="uq_evaluations_slot"),
         Index("ix_evaluations_job_id", "job_id", "id"),
         Index("ix_evaluations_job_road_id", "job_id", "road_index", "id"),
+        Index("ix_evaluations_job_road_fitness", "job_id", "road_index", "status", "fitness_m"),  # /best
+        Index("ix_evaluations_job_road_a2", "job_id", "road_index", "status", "a2_deg", "l2_m", "rws_m", "fitness_m",
+              "distance_m"),
         Index("ix_evaluations_cache_hash", "cache_hash"),
     )
 
@@ -224,3 +227,4 @@ class Scheduler(Base):
     started_at: Mapped[datetime] = mapped_column(DateTime)
     heartbeat_at: Mapped[datetime] = mapped_column(DateTime)
     stopped_at: Mapped[datetime | None] = mapped_column(DateTime)
+    store_error: Mapped[str | None] = mapped_column(String(500))   # why its last result write failed, if it did

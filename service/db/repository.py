@@ -7,7 +7,7 @@ in :mod:`finaldrive.service.db.leases` and :mod:`finaldrive.service.db.results`.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from typing import Any
 
 from sqlalchemy import Row, func, or_, select, update
@@ -43,6 +43,12 @@ def create_job(
 
 def job_by_idempotency_key(session: Session, key: str) -> Job | None:
     return session.scalars(select(Job).where(Job.idempotency_key == key)).one_or_none()
+
+
+def expire_idempotency_key(session: Session, key: str, *, older_than: timedelta) -> None:
+    """Take ``key`` from the job it names if that job was created more than ``older_than`` ago."""
+    session.execute(update(Job).where(Job.idempotency_key == key, Job.created_at < utcnow() - older_than)
+                    .values(idempotency_key=None))
 
 
 def list_jobs(
@@ -82,6 +88,29 @@ def cancel_job(session: Session, job_id: int) -> bool:
         .values(state=JobState.cancelled.value, finished_at=utcnow(), owner=None, lease_until=None)
     )
     return bool(result.rowcount)  # type: ignore[attr-defined]
+
+
+class LimitReached(Exception):
+    """The store holds as many of something as the service allows (answered 429 with the setting)."""
+
+
+def check_room(session: Session, what: str, count_query: Any, limit: int, setting: str) -> None:
+    """Raise :class:`LimitReached` if ``count_query`` (a count in this transaction) is at ``limit``."""
+    count = int(session.scalar(count_query) or 0)
+    if count >= limit:
+        raise LimitReached(f"{count} {what} already, the limit is {limit} ({setting}); retry once some have finished")
+
+
+def active_jobs_count() -> Any:
+    return select(func.count()).select_from(Job).where(Job.state.in_([s.value for s in ACTIVE_STATES]))
+
+
+def pending_recordings_count() -> Any:
+    return select(func.count()).select_from(Recording).where(Recording.status.in_(("queued", "running")))
+
+
+def profiles_count() -> Any:
+    return select(func.count()).select_from(RoadProfile)
 
 
 def count_active(session: Session) -> int:

@@ -17,7 +17,7 @@ from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
 from finaldrive.engine import DIAGNOSTICS
-from finaldrive.service.db.leases import db_now
+from finaldrive.service.db.leases import db_now, finish_job, owns, release_jobs
 from finaldrive.service.db.models import EvalStatus, Evaluation, Generation, Job, JobState
 
 #: Rows per ``IN (...)`` query, well under SQLite's variable limit.
@@ -158,6 +158,28 @@ def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequen
             for g in generations],
             ("job_id", "run", "generation"))
     return inserted
+
+
+def finish_if_complete(session: Session, scheduler_id: str, job_id: int, *, evaluations: int,
+                       generations: int, planned: int) -> str:
+    """Finish a job whose runs are done as ``succeeded``, if the store holds each of its
+    ``evaluations`` and ``generations`` (counted here, in the finishing transaction); else give it
+    back ``interrupted``, so that it resumes and recomputes what is missing. Returns "finished",
+    "reopened", or "lost" (the job was no longer this scheduler's).
+
+    ``total`` becomes ``evaluations`` only when the runs made fewer than the ``planned`` ones (a DE
+    that stopped early), and only then: it is never fitted to what the store happens to hold.
+    """
+    if not owns(session, scheduler_id, job_id):
+        return "lost"
+    stored = session.scalar(select(func.count()).where(Evaluation.job_id == job_id)) or 0
+    told = session.scalar(select(func.count()).where(Generation.job_id == job_id)) or 0
+    if (stored, told) != (evaluations, generations):
+        release_jobs(session, scheduler_id, [job_id])
+        return "reopened"
+    _recount(session, job_id)
+    total = evaluations if evaluations < planned else None
+    return "finished" if finish_job(session, scheduler_id, job_id, JobState.succeeded, total=total) else "lost"
 
 
 def _bound_now(session: Session, model: Any) -> Any:

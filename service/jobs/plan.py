@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+
+import numpy as np
 
 from finaldrive.engine import (
     Bounds,
@@ -51,8 +54,10 @@ def build_plan(spec: JobSpec, *, profiles: ProfileResolver | None = None,
         de = None if spec.de is None else DESettings(**spec.de.model_dump())
     except SpaceError as exc:
         raise PlanError(("bounds" if exc.field in Bounds.__dataclass_fields__ else "de", exc.field), exc.msg) from None
+    road_designs = None if spec.designs is None else [
+        np.array([(math.radians(a2), l2, rws) for a2, l2, rws in designs]) for designs in spec.designs]
     study = plan_study(spec.kind, spec.roads, grid=spec.grid, bounds=bounds, de=de, objective=spec.aggregate,
-                       seed=spec.seed, profiles=profiles, vehicle=vehicle)
+                       seed=spec.seed, profiles=profiles, vehicle=vehicle, road_designs=road_designs)
     try:
         settings = SimSettings(duration=spec.settings.duration, dt=spec.settings.dt, method=spec.settings.method,
                                max_wall_s=max_simulation_s)

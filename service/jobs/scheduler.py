@@ -49,11 +49,13 @@ from finaldrive.engine import (
 from finaldrive.service.config import Settings
 from finaldrive.service.db.engine import Database, in_memory
 from finaldrive.service.db.leases import (
+    MAX_SCHEDULER_ID,
     beat,
     claim_jobs,
     finish_job,
     newest_queued,
     register_scheduler,
+    scheduler_id as fit_id,
     stop_scheduler,
 )
 from finaldrive.service.db.models import Job, JobState
@@ -61,10 +63,12 @@ from finaldrive.service.db.repository import profile_roads
 from finaldrive.service.db.results import (
     FITNESS,
     cached_evaluations,
+    finish_if_complete,
     last_generations,
     stored_fitness,
     stored_slots,
 )
+from finaldrive.service.jobs.budget import Budget, spent_s
 from finaldrive.service.jobs.cache import context_prefix, design_keys
 from finaldrive.service.jobs.plan import JobPlan, build_plan
 from finaldrive.service.jobs.recordings import RecordingProducer
@@ -88,6 +92,8 @@ _IDLE_WAIT_S, _IDLE_POLL_S = 0.02, 0.2
 #: Between heartbeats, a scheduler with room for a job looks this often for a newly queued one (a
 #: read) and claims it at once rather than at the next heartbeat [s].
 _LOOK_S = 0.2
+#: Times a job found with a hole in the store is given back to resume before it is failed.
+_MAX_REOPEN = 2
 
 
 @dataclass(frozen=True)
@@ -101,6 +107,7 @@ class SchedulerConfig:
     max_backlog_rows: int = 50_000  # results waiting for the store before dispatching pauses
     batch_size: int | None = None  # designs per task (None: adaptive)
     max_simulation_s: float | None = 60.0  # wall-time limit of one simulation (reason "time limit ...")
+    max_job_cpu_s: float = 100.0 * 3600  # a job's budget of simulation time: failed beyond it (budget.py)
     recordings: bool = True        # also produce queued recordings
 
 
@@ -119,6 +126,7 @@ class ActiveJob:
         self.prefixes = [context_prefix(r.road, plan.settings, plan.vehicle, engine_version)
                          for r in plan.study.roads]
         self.work: Work | None = None
+        self.budget = Budget()
 
     def done(self) -> bool:
         """Every run is complete and nothing waits to be dispatched (tasks may still be in flight)."""
@@ -143,7 +151,9 @@ class Scheduler:
         self.db = db
         self.executor = executor
         self.config = config
-        self.id = scheduler_id or f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
+        self.id = scheduler_id or fit_id(socket.gethostname(), f":{os.getpid()}:{uuid.uuid4().hex[:8]}")
+        if len(self.id) > MAX_SCHEDULER_ID:
+            raise ValueError(f"a scheduler id has at most {MAX_SCHEDULER_ID} characters, not {len(self.id)}")
         self.executor_kind = executor_kind
         self.engine_version = engine_version
         self.dispatcher = Dispatcher(executor, task, warmup=warmup, batch_size=config.batch_size)
@@ -156,6 +166,8 @@ class Scheduler:
         self._next_look = 0.0
         self._newest_seen = 0   # the newest queued job's id at the last look
         self._next_flush = 0.0
+        self._reopened: dict[int, int] = {}   # job -> times re-opened for a hole in the store
+        self._beaten = 0.0                    # when the last heartbeat was stored (monotonic)
 
     # ------------------------------------------------------------------ the loop
     def run(self, stop: threading.Event) -> None:
@@ -164,6 +176,10 @@ class Scheduler:
                  self.executor.capacity)
         if self.recordings is not None:
             self.recordings.start()
+        done = threading.Event()
+        keeper = threading.Thread(target=self._keep_alive, args=(done,), name="finaldrive-heartbeat", daemon=True)
+        if not in_memory(self.db.url):  # an in-memory database is one connection's: no second thread sees it
+            keeper.start()
         try:
             while not stop.is_set():
                 finished = self.turn(0.05 if self.dispatcher.in_flight() else 0.2)
@@ -172,7 +188,21 @@ class Scheduler:
                     # spin (an idle loop held a core and the GIL the recordings' thread needs)
                     stop.wait(_IDLE_WAIT_S if self.jobs else _IDLE_POLL_S)
         finally:
+            done.set()
+            if keeper.is_alive():
+                keeper.join()
             self.shutdown()
+
+    def _keep_alive(self, done: threading.Event) -> None:
+        """Renew the heartbeat and leases whenever the loop is late with them: a task the loop runs
+        itself (the serial executor: the engine's warm-up, a long simulation) or a slow store must
+        not cost the scheduler its jobs. A thread of its own, with a store guard of its own."""
+        guard = Guard(self.db, f"scheduler {self.id} (heartbeat)")
+        while not done.wait(self.config.heartbeat_s / 2):
+            late = self._registered and time.monotonic() > self._beaten + 1.5 * self.config.heartbeat_s
+            if late and guard(lambda s: beat(s, self.id, lease_s=self.config.lease_s,
+                                             capacity=self.executor.capacity), "heartbeat") is not None:
+                self._beaten = time.monotonic()
 
     def turn(self, timeout: float) -> int:
         """One turn of the loop (tests drive it step by step); returns how many tasks finished."""
@@ -220,6 +250,7 @@ class Scheduler:
                          "heartbeat")
         if owned is None:
             return
+        self._beaten = time.monotonic()
         for job_id in [j for j in self.jobs if j not in owned]:
             log.info("scheduler %s: job %s is no longer ours (cancelled or taken over); stopping it", self.id, job_id)
             self._drop(job_id)
@@ -261,6 +292,11 @@ class Scheduler:
             on_result=partial(self._on_result, job),
             on_failure=partial(self._on_failure, job),
         )
+        spent = self._db(partial(spent_s, job_id=job_id), f"job {job_id}'s cost", write=False) if resumed else 0.0
+        if spent is None:
+            return  # retried at the next heartbeat
+        job.budget = Budget(self.config.max_job_cpu_s, spent)
+        job.work.on_result = job.budget.metered(job.work.on_result)
         self.dispatcher.add(job.work)
         self.jobs[job_id] = job
         log.info("scheduler %s: job %s %s", self.id, job_id, "resumed" if resumed else "started")
@@ -367,6 +403,9 @@ class Scheduler:
 
     def _finish_ready(self) -> None:
         for job in list(self.jobs.values()):
+            if job.budget.exceeded and not job.done():
+                self._stop_at_budget(job)
+                continue
             if not job.done() or self.dispatcher.in_flight(job.id):
                 continue
             writes = job.take_writes()  # its last results: to the writer now rather than at the next flush
@@ -374,10 +413,50 @@ class Scheduler:
                 self.writer.put(job.id, writes)
             if self.writer.pending(job.id):
                 continue
-            finished = partial(finish_job, scheduler_id=self.id, job_id=job.id, state=JobState.succeeded)
-            if self._db(finished, f"finish job {job.id}") is not None:
-                log.info("scheduler %s: job %s succeeded", self.id, job.id)
+            self._finish(job)
+
+    def _stop_at_budget(self, job: ActiveJob) -> None:
+        """A job over its CPU budget: cancel its simulations, store what arrived, then fail it."""
+        self.dispatcher.remove(job.id)
+        job.intake.clear()
+        writes = job.take_writes()
+        if writes is not None:
+            self.writer.put(job.id, writes)
+        if self.writer.pending(job.id):
+            return
+        error = job.budget.error()
+        if self._db(lambda s: finish_job(s, self.id, job.id, JobState.failed, error=error),
+                    f"fail job {job.id}") is not None:
+            log.warning("scheduler %s: job %s %s", self.id, job.id, error)
+            self._drop(job.id)
+
+    def _finish(self, job: ActiveJob) -> None:
+        """Succeed a job whose runs are done, once the store is seen to hold all they made; a hole
+        (results the store acknowledged and then lost) re-opens it to resume, twice at most, then
+        fails it saying so: never a success over a hole."""
+        runs = job.runs.values()
+        evaluations, generations = sum(r.evaluations for r in runs), sum(r.generations for r in runs)
+        if self._reopened.get(job.id, 0) >= _MAX_REOPEN:
+            message = (f"the store lost results it had acknowledged, and still lacks some after {_MAX_REOPEN} "
+                       "resumes: see the scheduler's log")
+            if self._db(lambda s: finish_job(s, self.id, job.id, JobState.failed, error=message),
+                        f"fail job {job.id}") is not None:
                 self._drop(job.id)
+            return
+        finished = self._db(partial(finish_if_complete, scheduler_id=self.id, job_id=job.id, evaluations=evaluations,
+                                    generations=generations, planned=job.plan.total()), f"finish job {job.id}")
+        if finished == "lost":
+            self._drop(job.id)  # no longer ours: cancelled or taken over
+        elif finished == "finished":
+            log.info("scheduler %s: job %s succeeded", self.id, job.id)
+            self._reopened.pop(job.id, None)
+            self._drop(job.id)
+        elif finished == "reopened":
+            self._reopened[job.id] = self._reopened.get(job.id, 0) + 1
+            log.error("scheduler %s: job %s: the store lacks results it had acknowledged (expected %d evaluations "
+                      "and %d generations); the job is given back to resume and recompute them",
+                      self.id, job.id, evaluations, generations)
+            self._drop(job.id)
 
     def _flush(self) -> None:
         """Hand each job's new results to the writer; drop the jobs it found lost."""
@@ -448,7 +527,7 @@ def run_scheduler(settings: Settings, stop: threading.Event, *, scheduler_id: st
     from finaldrive.service.services import open_database
     from finaldrive.workers import make_executor
 
-    db = open_database(settings, durable=False)  # results lost with the machine's power are recomputed
+    db = open_database(settings)
     db.lock_timeout_s = SCHEDULER_LOCK_TIMEOUT_S
     if not in_memory(db.url):
         start_fork_server()   # the writer's, while Ray starts and the engine compiles
@@ -456,7 +535,8 @@ def run_scheduler(settings: Settings, stop: threading.Event, *, scheduler_id: st
                              niceness=settings.niceness)
     config = SchedulerConfig(lease_s=settings.lease_seconds, heartbeat_s=settings.heartbeat_seconds,
                              max_jobs=settings.max_jobs, batch_size=settings.batch_size,
-                             max_simulation_s=settings.max_simulation_seconds)
+                             max_simulation_s=settings.max_simulation_seconds,
+                             max_job_cpu_s=settings.max_job_cpu_hours * 3600)
     if handle_signals:
         for signum in (signal.SIGTERM, signal.SIGINT):
             signal.signal(signum, lambda *_: stop.set())

@@ -20,6 +20,7 @@ from typing import Any, TypeVar
 from sqlalchemy.exc import SQLAlchemyError
 
 from finaldrive.service.db.engine import Database
+from finaldrive.service.db.leases import report_store_error
 from finaldrive.service.db.results import LeaseLost, Row, store_results
 from finaldrive.service.jobs.rows import Block, Finished, block_from_results, rows_from_block
 
@@ -72,6 +73,11 @@ class Writes:
         self.blocks, self.finished_rows = [], 0
 
 
+#: An outage is logged as over once the store has answered without a failure for this long [s]
+#: (some transactions failing while others pass, as on a full disk, is one outage, logged once).
+OUTAGE_OVER_S = 5.0
+
+
 class Guard:
     """Transactions that survive the store's outages: an error is logged, backs off, returns None."""
 
@@ -80,6 +86,8 @@ class Guard:
         self.name = name
         self._retry_at = 0.0
         self._down_since: float | None = None
+        self._up_since: float | None = None   # the first success since the last failure, in an outage
+        self.last_error: str | None = None    # the database's message of the last failure (no SQL)
 
     def waiting(self) -> float:
         """Seconds until the next attempt is allowed (0: now)."""
@@ -97,16 +105,21 @@ class Guard:
             raise
         except SQLAlchemyError as exc:
             now = time.monotonic()
+            self._up_since = None
+            self.last_error = " ".join(str(getattr(exc, "orig", None) or type(exc).__name__).split())[:300]
             if self._down_since is None:
                 self._down_since = now
                 log.warning("%s: the store is unavailable (%s): %s; retrying", self.name, what,
                             " ".join(str(exc).split())[:500])
             self._retry_at = now + min(5.0, 0.25 + 0.5 * (now - self._down_since))
             return None
-        if self._down_since is not None:
-            log.warning("%s: the store is back after %.1f s", self.name, time.monotonic() - self._down_since)
-            self._down_since = None
         self._retry_at = 0.0
+        if self._down_since is not None:  # an outage ends once the store has answered for a while
+            now = time.monotonic()
+            self._up_since = self._up_since or now
+            if now - self._up_since >= OUTAGE_OVER_S:
+                log.warning("%s: the store is back after %.1f s", self.name, self._up_since - self._down_since)
+                self._down_since = self._up_since = None
         return result
 
 
@@ -127,6 +140,7 @@ class Writer:
         self._waiting: dict[int, Writes] = {}       # job -> its writes not yet taken by the thread
         self._busy: dict[int, int] = {}             # job -> rows+generations being written now
         self._lost: list[int] = []
+        self._reported: str | None = None          # the failure recorded in the scheduler's row
         self._stop = False
         self._thread = threading.Thread(target=self._run, name="finaldrive-writer", daemon=True)
         self._thread.start()
@@ -215,4 +229,16 @@ class Writer:
             return True
         if done is not None and self._on_stored is not None:
             self._on_stored(job_id, writes.seq, False)
+        if (done is None) != (self._reported is not None):
+            self._report(None if done is not None else self._guard.last_error or "unknown error")
         return done is not None
+
+    def _report(self, error: str | None) -> None:
+        """Best effort: say in the scheduler's row (for /v1/health) that results cannot be stored, or can
+        again. A full disk fails the results' transactions while this small one still passes."""
+        try:
+            with self._guard.db.write(timeout_s=1.0) as session:
+                report_store_error(session, self.scheduler_id, error)
+        except SQLAlchemyError:
+            return
+        self._reported = error

@@ -63,7 +63,7 @@ class WriterProcess:
 
     def __init__(self, db: Database, scheduler_id: str) -> None:
         self.scheduler_id = scheduler_id
-        self._store = (db.url, db.lock_timeout_s, db.durable)
+        self._store = (db.url, db.lock_timeout_s)
         self._cond = threading.Condition()
         self._unacked: dict[int, deque[tuple[int, Writes]]] = {}  # job -> (seq, writes) handed over
         self._pending: dict[int, int] = {}                         # job -> rows and generations of those
@@ -204,14 +204,14 @@ class WriterProcess:
         self._cond.notify_all()
 
 
-def _serve(url: str, lock_timeout_s: float, durable: bool, scheduler_id: str, log_level: int,
+def _serve(url: str, lock_timeout_s: float, scheduler_id: str, log_level: int,
            inbox: Connection, outbox: Connection) -> None:
     """The child: a :class:`Writer` fed from ``inbox``, acknowledging on ``outbox``, until told to
     stop or the scheduler's process is gone (a Ctrl-C in the terminal is the scheduler's to obey:
     it still drains what it has into this child)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     logging.basicConfig(level=log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    db = Database(url, lock_timeout_s=lock_timeout_s, durable=durable)
+    db = Database(url, lock_timeout_s=lock_timeout_s)
     sending = threading.Lock()
 
     def stored(job_id: int, seq: int, lost: bool) -> None:

@@ -1,12 +1,19 @@
 """The dashboard's routes: its pages, their static files, the offline API docs and rerun's viewer.
 
-Pages are static HTML shells whose scripts read the /v1 API (with the session's token, when the
-server has one). Every HTML answer carries a Content-Security-Policy that lets a page load and fetch
-only from this origin: nothing a page (or the viewer inside it) asks for leaves the machine.
+Pages are static HTML shells whose scripts read the /v1 API (with the session's HttpOnly cookie, when
+the server has a token) and build the DOM from text, never HTML. Every HTML answer carries a
+Content-Security-Policy that lets a page load and fetch only from this origin (nothing a page, or the
+viewer inside it, asks for leaves the machine) and runs no inline script: the dashboard's scripts are
+files; the inline scripts of pages made by others (Swagger UI's from FastAPI, rerun's viewer) are
+allowed by their SHA-256 hashes only (:func:`policy`). ``'wasm-unsafe-eval'`` is for rerun's viewer.
 """
 
 from __future__ import annotations
 
+import base64
+import hashlib
+import re
+from functools import lru_cache
 from pathlib import Path
 
 import anyio
@@ -19,10 +26,12 @@ from finaldrive.service.api.deps import JobId
 from finaldrive.service.web import viewer
 
 STATIC = Path(__file__).parent / "static"
-CSP = ("default-src 'self'; script-src 'self' 'unsafe-inline' 'wasm-unsafe-eval'; style-src 'self' 'unsafe-inline'; "
+SCRIPT_SRC = "script-src 'self' 'wasm-unsafe-eval'"
+CSP = (f"default-src 'self'; {SCRIPT_SRC}; style-src 'self' 'unsafe-inline'; object-src 'none'; "
        "img-src 'self' data: blob:; font-src 'self' data:; connect-src 'self'; worker-src 'self' blob:; "
        "frame-src 'self'; frame-ancestors 'self'; base-uri 'self'; form-action 'self'")
 HEADERS = {"Content-Security-Policy": CSP, "X-Content-Type-Options": "nosniff", "Referrer-Policy": "same-origin"}
+_INLINE_SCRIPT = re.compile(rb"<script(?![^>]*\ssrc\s*=)[^>]*>(.*?)</script\s*>", re.S | re.I)
 _VIEWER_TYPES = {".html": "text/html", ".js": "text/javascript", ".wasm": "application/wasm",
                  ".ico": "image/x-icon"}
 
@@ -33,9 +42,28 @@ def _page(name: str) -> FileResponse:
     return FileResponse(STATIC / name, media_type="text/html", headers=HEADERS)
 
 
-def login_page() -> bytes:
-    """The page a browser gets (with 401) when the server has a token and the session none."""
-    return (STATIC / "login.html").read_bytes()
+def policy(html: bytes) -> str:
+    """The CSP for a page made by others: :data:`CSP`, its script-src also allowing exactly the page's inline
+    scripts (by hash)."""
+    hashes = [f"'sha256-{base64.b64encode(hashlib.sha256(body).digest()).decode()}'"
+              for body in _INLINE_SCRIPT.findall(html)]
+    return CSP.replace(SCRIPT_SRC, " ".join([SCRIPT_SRC, *hashes]))
+
+
+def _with_policy(page: HTMLResponse) -> HTMLResponse:
+    page.headers.update({**HEADERS, "Content-Security-Policy": policy(bytes(page.body))})
+    return page
+
+
+@lru_cache(maxsize=4)
+def _viewer_policy(index: Path) -> str:
+    return policy(index.read_bytes())
+
+
+def login_page() -> Response:
+    """The sign-in page a browser gets (a 401) when the server has a token and the request no session."""
+    return Response((STATIC / "login.html").read_bytes(), status_code=401, media_type="text/html",
+                    headers={**HEADERS, "WWW-Authenticate": "Bearer"})
 
 
 @router.get("/")
@@ -61,8 +89,7 @@ def swagger_ui() -> HTMLResponse:
         swagger_css_url="/static/vendor/swagger-ui/swagger-ui.css",
         swagger_favicon_url="/static/vendor/swagger-ui/favicon-32x32.png",
     )
-    page.headers.update(HEADERS)
-    return page
+    return _with_policy(page)
 
 
 @router.get("/redoc")
@@ -70,8 +97,7 @@ def redoc() -> HTMLResponse:
     page = get_redoc_html(openapi_url="/openapi.json", title="finaldrive API",
                           redoc_js_url="/static/vendor/redoc/redoc.standalone.js",
                           redoc_favicon_url="/static/vendor/swagger-ui/favicon-32x32.png", with_google_fonts=False)
-    page.headers.update(HEADERS)
-    return page
+    return _with_policy(page)
 
 
 @router.get("/viewer/")
@@ -85,7 +111,8 @@ async def viewer_file(name: str = "index.html") -> Response:
     except viewer.ViewerUnavailable as exc:
         return Response(f"rerun's web viewer is unavailable: {exc}", status_code=503, media_type="text/plain")
     suffix = Path(name).suffix
-    return FileResponse(folder / name, media_type=_VIEWER_TYPES[suffix], headers=HEADERS if suffix == ".html" else None)
+    headers = {**HEADERS, "Content-Security-Policy": _viewer_policy(folder / name)} if suffix == ".html" else None
+    return FileResponse(folder / name, media_type=_VIEWER_TYPES[suffix], headers=headers)
 
 
 def install(app: FastAPI) -> None:

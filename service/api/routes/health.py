@@ -1,7 +1,8 @@
 """/v1/health: the store, the schedulers' heartbeats, and what the service runs with.
 
-Answers 503 (with the same body) when the store cannot be written or no scheduler is alive: a
-load balancer or a supervisor then knows jobs would not progress.
+Answers 503 (with the same body) when the store cannot be written (the probe's write transaction
+fails, or a live scheduler reports that its last write of results failed) or no scheduler is
+alive: a load balancer or a supervisor then knows jobs would not progress.
 """
 
 from __future__ import annotations
@@ -35,7 +36,10 @@ def _check(services: Services) -> HealthOut:
         store = StoreOut(writable=False, latency_s=round(time.perf_counter() - start, 4))
         active, rows = None, []
     found = [SchedulerOut(id=row.id, host=row.host, pid=row.pid, executor=row.executor, capacity=row.capacity,
-                          heartbeat_age_s=round(age, 3), alive=age <= alive_within) for row, age in rows]
+                          heartbeat_age_s=round(age, 3), alive=age <= alive_within, store_error=row.store_error)
+             for row, age in rows]
+    if any(s.alive and s.store_error for s in found):  # results cannot be stored, though the probe passed
+        store = StoreOut(writable=False, latency_s=store.latency_s)
     ok = store.writable and any(s.alive for s in found)
     return HealthOut(status="ok" if ok else "unavailable", store=store, schedulers=found,
                      schema_revision=services.schema_revision, engine_version=services.engine_version,

@@ -1,13 +1,22 @@
-"""/v1/jobs: submit, list, inspect and cancel jobs."""
+"""/v1/jobs: submit, list, inspect and cancel jobs.
+
+A job's status (GET /v1/jobs/{id}) is answered from its snapshot (finaldrive.service.status_cache),
+kept fresh by the event hub: :class:`StatusFromSnapshot` serves it in front of the framework's
+routing; the route below builds the snapshot when there is none.
+"""
 
 from __future__ import annotations
 
+import re
+from functools import partial
 from typing import Annotated
 
 import anyio
-from fastapi import APIRouter, Header, Query, Response
+from fastapi import APIRouter, Header, Query, Request, Response
+from starlette.types import ASGIApp, Receive, Scope, Send
 
 from finaldrive.service.api.deps import JobId, ServicesDep
+from finaldrive.service.api.event_hub import EventHub, status_snapshots
 from finaldrive.service.api.lookups import load_job, parse_cursor
 from finaldrive.service.api.problems import ApiProblem, documented, validation_problem
 from finaldrive.service.api.views import jobs_out
@@ -16,6 +25,8 @@ from finaldrive.service.db.repository import cancel_job, list_jobs
 from finaldrive.service.jobs.plan import PlanError
 from finaldrive.service.jobs.submit import IdempotencyKeyReused, submit_job
 from finaldrive.service.schemas import JobKind, JobOut, JobPage, JobSpec, JobStateName
+from finaldrive.service.services import Services
+from finaldrive.service.status_cache import Snapshot
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
 
@@ -23,12 +34,13 @@ router = APIRouter(prefix="/jobs", tags=["jobs"])
 @router.post(
     "", status_code=201, response_model=JobOut,
     responses={200: {"model": JobOut, "description": "replay of an earlier request with the same Idempotency-Key"},
-               **documented(400, 401, 413, 422)},
+               **documented(400, 401, 413, 422, 429)},
     summary="Submit a job",
     description=(
         "Creates a job and answers 201 with a Location header. With an `Idempotency-Key` header, "
-        "repeating the same body returns the existing job with 200; reusing the key with a different "
-        "body is refused with 422 (problem type `urn:finaldrive:problem:idempotency-key-reused`)."
+        "repeating the same body returns the existing job with 200 (for FINALDRIVE_IDEMPOTENCY_KEY_HOURS); "
+        "reusing the key with a different body is refused with 422 (problem type "
+        "`urn:finaldrive:problem:idempotency-key-reused`). 429 when FINALDRIVE_MAX_ACTIVE_JOBS jobs are unfinished."
     ),
 )
 def submit(
@@ -40,6 +52,7 @@ def submit(
             services.db, spec, idempotency_key=idempotency_key,
             max_evaluations=services.settings.max_job_evaluations,
             max_cpu_hours=services.settings.max_job_cpu_hours,
+            max_active_jobs=services.settings.max_active_jobs, key_hours=services.settings.idempotency_key_hours,
         )
     except PlanError as exc:
         raise validation_problem(("body", *exc.loc), exc.msg) from None
@@ -69,13 +82,53 @@ def list_(
 
 
 @router.get("/{job_id}", response_model=JobOut, responses=documented(404, 422), summary="A job's state and progress")
-async def get(job_id: JobId, services: ServicesDep) -> Response:
-    """Answers from the status cache when a fresh enough copy exists (see StatusCache)."""
+async def get(job_id: JobId, request: Request) -> Response:
+    """From the job's snapshot, built now if there is none (one build for concurrent requests); no
+    dependency runs in a worker thread."""
+    services: Services = request.app.state.services
     body = services.status_cache.get(job_id)
     if body is None:
-        body = (await anyio.to_thread.run_sync(load_job, services, job_id)).model_dump_json().encode()
-        services.status_cache.put(job_id, body)
+        build = partial(_one_snapshot, services, job_id)
+        if services.status_cache.enabled:
+            snapshot = await services.status_cache.load(job_id, build)
+            events: EventHub = request.app.state.events
+            events.start()  # which keeps the snapshot fresh while the job runs
+        else:
+            snapshot = await anyio.to_thread.run_sync(build)
+        if snapshot is None:
+            raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
+        body = snapshot.body
     return Response(body, media_type="application/json")
+
+
+def _one_snapshot(services: Services, job_id: int) -> Snapshot | None:
+    return status_snapshots(services.db, [job_id]).get(job_id)
+
+
+#: GET /v1/jobs/{id} (an id has at most 19 digits: MAX_ID).
+_STATUS_PATH = re.compile(r"/v1/jobs/([0-9]{1,19})")
+
+
+class StatusFromSnapshot:
+    """ASGI middleware: GET /v1/jobs/{id} answered with the job's snapshot when one is held, without
+    the framework's routing, dependencies and response model (the route answers otherwise). It goes
+    inside the access control: a request it answers has passed the Host and token checks."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] == "http" and scope["method"] == "GET":
+            match = _STATUS_PATH.fullmatch(scope["path"])
+            if match is not None:
+                services: Services = scope["app"].state.services
+                body = services.status_cache.get(int(match[1]))
+                if body is not None:
+                    await send({"type": "http.response.start", "status": 200, "headers": [
+                        (b"content-length", str(len(body)).encode()), (b"content-type", b"application/json")]})
+                    await send({"type": "http.response.body", "body": body})
+                    return
+        await self.app(scope, receive, send)
 
 
 @router.post(
@@ -89,5 +142,5 @@ def cancel(job_id: JobId, services: ServicesDep) -> JobOut:
             raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
         changed = cancel_job(session, job_id)
     if changed:  # the scheduler running it stops it at its next heartbeat
-        services.status_cache.invalidate(job_id)
+        anyio.from_thread.run_sync(services.status_cache.invalidate, job_id)  # the cache lives on the event loop
     return load_job(services, job_id)

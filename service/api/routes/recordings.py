@@ -18,7 +18,7 @@ from finaldrive.service.api.deps import MAX_ID, ServicesDep
 from finaldrive.service.api.lookups import load_job
 from finaldrive.service.api.problems import ApiProblem, documented, validation_problem
 from finaldrive.service.db.models import Job, Recording
-from finaldrive.service.db.repository import create_recording, profile_roads
+from finaldrive.service.db.repository import check_room, create_recording, pending_recordings_count, profile_roads
 from finaldrive.service.profiles import profile_ids, resolver
 from finaldrive.service.schemas import (
     JobOut,
@@ -113,11 +113,13 @@ def _load(services: Services, recording_id: int) -> Recording:
 
 
 @router.post("", status_code=202, response_model=RecordingOut,
-             responses=documented(400, 401, 404, 409, 413, 422),
+             responses=documented(400, 401, 404, 409, 413, 422, 429),
              summary="Request a recording (produced in the background; poll GET until succeeded)")
 def create(request: RecordingRequest, services: ServicesDep, response: Response) -> RecordingOut:
     spec = _spec(request, services)
     with services.db.write() as session:
+        check_room(session, "recordings pending", pending_recordings_count(), services.settings.max_pending_recordings,
+                   "FINALDRIVE_MAX_PENDING_RECORDINGS")
         job_id = None
         if request.job_id is not None and session.get(Job, request.job_id) is not None:
             job_id = request.job_id

@@ -1,4 +1,4 @@
-"""/v1/jobs/{id}/evaluations and /best: stored results, paginated, as JSON or CSV."""
+"""/v1/jobs/{id}/evaluations and /best: stored results, paginated, as JSON or CSV; the best designs' summary."""
 
 from __future__ import annotations
 
@@ -7,17 +7,23 @@ import io
 from collections.abc import Iterator
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response, StreamingResponse
 
 from finaldrive.engine import DEFAULT_TOLERANCE_PCT, MAX_TOLERANCE_PCT
 from finaldrive.service.api.deps import JobId, ServicesDep
 from finaldrive.service.api.lookups import find_road, load_job, parse_cursor
 from finaldrive.service.api.problems import ApiProblem, documented, validation_problem
-from finaldrive.service.api.sharpness import job_sharpness
+from finaldrive.service.api.sharpness import (
+    RETRY_AFTER_S,
+    InFlight,
+    job_sharpness,
+    sensitivity_job,
+    stored_sensitivities,
+)
 from finaldrive.service.api.views import evaluation_out
 from finaldrive.service.db.columns import page_end, row_chunks
-from finaldrive.service.db.models import Job
+from finaldrive.service.db.models import TERMINAL_STATES, Job, JobState
 from finaldrive.service.db.repository import list_evaluations, roads_of
 from finaldrive.service.schemas import BestOut, EvaluationOut, EvaluationPage
 
@@ -87,19 +93,44 @@ def _csv(chunks: Iterator[list[tuple[Any, ...]]], names: dict[int, str]) -> Iter
         out.truncate()
 
 
-@router.get("/{job_id}/best", response_model=BestOut, responses=documented(404, 422),
-            summary="Best design per road (and by aggregate score for robust-de), with how sharp each optimum is")
+#: /best requests in flight, per client address.
+IN_FLIGHT = InFlight()
+
+
+@router.get(
+    "/{job_id}/best", response_model=BestOut, responses={202: {"model": BestOut, "description": (
+        "sensitivity=true: its job is queued or running (sensitivity_job names it); ask again after Retry-After")},
+        **documented(404, 409, 422, 429)},
+    summary="Best design per road (and by aggregate score for robust-de), with how sharp each optimum is",
+    description=(
+        "Computed in the database (bounded memory whatever the job's size); at most 2 requests in flight a "
+        "client (else 429 with Retry-After). With sensitivity=true on a finished job, the finite differences "
+        "are simulated by a scheduler as a small job of kind `designs`, queued once per job: 202 with "
+        "Retry-After until it has finished, then 200 with each road's sensitivity."),
+)
 def best(
-    job_id: JobId, services: ServicesDep,
+    job_id: JobId, services: ServicesDep, request: Request, response: Response,
     tolerance_pct: Annotated[float, Query(gt=0, le=MAX_TOLERANCE_PCT, description="near-optimal set: evaluated "
                                           "designs within this % of the best fitness")] = DEFAULT_TOLERANCE_PCT,
     sensitivity: Annotated[bool, Query(description="also finite differences of distance and fitness at each "
-                                       "road's best (7 simulations a road, the job's settings)")] = False,
+                                       "road's best (7 simulations a road, the job's settings), run by a "
+                                       "scheduler: 202 until they are stored")] = False,
 ) -> BestOut:
-    job = load_job(services, job_id)
-    with services.db.read() as session:
-        row = session.get(Job, job_id)
-        if row is None:
-            raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
-        sharp = job_sharpness(session, row, tolerance_pct, sensitivity)
-    return BestOut(job_id=job.id, roads=job.roads, robust_best=job.robust_best, sharpness=sharp)
+    with IN_FLIGHT.slot(request.client.host if request.client else ""):
+        job = load_job(services, job_id)
+        with services.db.read() as session:
+            row = session.get(Job, job_id)
+            if row is None:
+                raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
+        designs = sensitivity_job(services, row) if sensitivity else None
+        with services.db.read() as session:
+            ready = designs is not None and designs.state == JobState.succeeded.value
+            derivatives = stored_sensitivities(session, row, designs) if ready and designs is not None else None
+            sharp = job_sharpness(session, row, tolerance_pct, derivatives)
+    if designs is not None and designs.state not in {s.value for s in TERMINAL_STATES}:
+        response.status_code = 202
+        response.headers["Retry-After"] = str(RETRY_AFTER_S)
+        response.headers["Location"] = f"/v1/jobs/{designs.id}"
+    return BestOut(job_id=job.id, roads=job.roads, robust_best=job.robust_best, sharpness=sharp,
+                   sensitivity_job=None if designs is None else designs.id,
+                   sensitivity_state=None if designs is None else designs.state)

@@ -17,7 +17,7 @@ from finaldrive.service.api.deps import MAX_ID, ServicesDep
 from finaldrive.service.api.lookups import parse_cursor
 from finaldrive.service.api.problems import ApiProblem, documented, validation_problem
 from finaldrive.service.db.models import RoadProfile
-from finaldrive.service.db.repository import create_profile, list_profiles, profile_by_hash
+from finaldrive.service.db.repository import check_room, create_profile, list_profiles, profile_by_hash, profiles_count
 from finaldrive.service.profiles import ProfileError, content_hash, road_from_csv
 from finaldrive.service.schemas import RoadOut, RoadProfileDetail, RoadProfileIn, RoadProfileOut, RoadProfilePage
 from finaldrive.service.services import Services
@@ -41,7 +41,7 @@ def roads() -> list[RoadOut]:
 @router.post(
     "", status_code=201, response_model=RoadProfileOut,
     responses={200: {"model": RoadProfileOut, "description": "a profile with the same points exists: it is returned"},
-               **documented(400, 401, 413, 415, 422)},
+               **documented(400, 401, 413, 415, 422, 429)},
     openapi_extra={"requestBody": {"required": True, "content": {
         "application/json": {"schema": RoadProfileIn.model_json_schema()},
         "text/csv": {"schema": {"type": "string", "description": "lines x,y [m]; an optional header line, # comments"}},
@@ -102,6 +102,8 @@ def _store(services: Services, road: Road) -> tuple[RoadProfileOut, bool]:
             return _out(existing), False
     try:
         with services.db.write() as session:
+            check_room(session, "road profiles stored", profiles_count(), services.settings.max_profiles,
+                       "FINALDRIVE_MAX_PROFILES")
             return _out(create_profile(session, road, name=road.name, digest=digest)), True
     except IntegrityError:  # the same points uploaded concurrently
         with services.db.read() as session:

@@ -1,16 +1,10 @@
-// The /v1 API as the pages use it: the session's token, JSON requests, problem documents, SSE.
-// The token lives in a session cookie (finaldrive_token, set by the sign-in page): the browser sends it
-// on the page's own GETs, streams, images and the viewer's download; POSTs carry it as a Bearer header.
+// The /v1 API as the pages use it: JSON requests, problem documents, SSE, and DOM built from text only.
+// When the server has a token, the session is an HttpOnly cookie set by POST /v1/session (the sign-in page):
+// no script here can read it; the browser sends it on the page's own requests, writes included (the server
+// takes it for a write only from this origin).
 
-export const TOKEN_COOKIE = "finaldrive_token";
-
-export function token() {
-  const hit = document.cookie.split("; ").find((c) => c.startsWith(TOKEN_COOKIE + "="));
-  return hit ? decodeURIComponent(hit.slice(TOKEN_COOKIE.length + 1)) : null;
-}
-
-export function signOut() {
-  document.cookie = `${TOKEN_COOKIE}=; path=/; max-age=0; SameSite=Strict`;
+export async function signOut() {
+  await fetch("/v1/session", { method: "DELETE", credentials: "same-origin" });
   location.reload();
 }
 
@@ -25,8 +19,6 @@ export class ApiError extends Error {
 
 export async function api(path, { method = "GET", body, headers = {} } = {}) {
   const init = { method, headers: { Accept: "application/json", ...headers }, credentials: "same-origin" };
-  const t = token();
-  if (t && method !== "GET") init.headers.Authorization = `Bearer ${t}`;
   if (body !== undefined) {
     if (typeof body === "string") init.body = body;
     else {
@@ -89,8 +81,8 @@ function fieldOf(form, path, msg) {
   const named = /^(\w+):/.exec(msg)?.[1];
   for (let n = path.length; n > 0; n--) {
     const key = path.slice(0, n).join(".");
-    const target = (named && form.querySelector(`[data-field="${key}.${named}"]`))
-      || form.querySelector(`[data-field="${key}"]`);
+    const target = (named && form.querySelector(`[data-field="${CSS.escape(`${key}.${named}`)}"]`))
+      || form.querySelector(`[data-field="${CSS.escape(key)}"]`);
     if (target) return target;
   }
   return null;
@@ -127,12 +119,44 @@ export function duration(seconds) {
   return `${(seconds / 3600).toFixed(1)} h`;
 }
 
+// ---- safe DOM building: text nodes, attributes, links that can only be http(s) ----
+const URL_ATTRIBUTES = new Set(["href", "src", "action", "formaction", "xlink:href"]);
+
+/** ``value`` when it is an http(s) URL or a path (resolved on this page), else null: a link built from data
+ * is never ``javascript:``, ``data:`` or ``blob:``. */
+export function safeUrl(value) {
+  try {
+    const { protocol } = new URL(String(value), location.href);
+    return protocol === "http:" || protocol === "https:" ? String(value) : null;
+  } catch {
+    return null;
+  }
+}
+
+/** The absolute URL of ``path`` on this origin; throws for anything that would leave it. */
+export function localUrl(path) {
+  const url = new URL(String(path), location.origin);
+  if (url.origin !== location.origin) throw new Error(`not a path of this server: ${path}`);
+  return url.href;
+}
+
+/** A link to ``path`` with the query ``pairs`` ([[key, value], ...]), URL-encoded. */
+export function pageLink(path, pairs) {
+  return `${path}?${new URLSearchParams(pairs)}`;
+}
+
+/** An element: ``attrs`` set as attributes (``on*``: listeners; URL attributes through safeUrl), ``children``
+ * appended as nodes or text, never parsed as HTML. */
 export function el(tag, attrs = {}, ...children) {
   const node = document.createElement(tag);
   for (const [k, v] of Object.entries(attrs)) {
     if (k === "class") node.className = v;
     else if (k.startsWith("on")) node.addEventListener(k.slice(2), v);
-    else if (v !== null && v !== undefined && v !== false) node.setAttribute(k, v === true ? "" : v);
+    else if (v === null || v === undefined || v === false) continue;
+    else if (URL_ATTRIBUTES.has(k)) {
+      const url = safeUrl(v);
+      if (url !== null) node.setAttribute(k, url);
+    } else node.setAttribute(k, v === true ? "" : v);
   }
   for (const c of children.flat()) node.append(c instanceof Node ? c : document.createTextNode(String(c)));
   return node;
@@ -145,6 +169,7 @@ export function progressBar(fraction, state) {
             el("div", { class: "fill", style: `width:${pct.toFixed(1)}%` }));
 }
 
-export function designQuery(d, prefix) {
-  return `${prefix}=${[d.a2_deg, d.l2_m, d.rws_m].map((v) => +v.toPrecision(6)).join(",")}`;
+/** The design page's query pair for design ``d`` as ``prefix`` ("a" or "b"). */
+export function designParam(d, prefix) {
+  return [prefix, [d.a2_deg, d.l2_m, d.rws_m].map((v) => +v.toPrecision(6)).join(",")];
 }

@@ -48,8 +48,13 @@ function canvasIn(container, height) {
   return { canvas, ctx, width, height, tip };
 }
 
-function showTip(tip, x, y, html) {
-  tip.innerHTML = html;
+/** Show ``lines`` in the tooltip, one a row; a line is text or a list of nodes and text (never HTML). */
+function showTip(tip, x, y, lines) {
+  tip.replaceChildren(...lines.map((line) => {
+    const row = document.createElement("div");
+    row.append(...[line].flat());
+    return row;
+  }));
   tip.style.left = `${x + 12}px`;
   tip.style.top = `${y + 12}px`;
   tip.hidden = false;
@@ -103,7 +108,7 @@ function colourBar(ctx, x, y, h, lo, hi, label) {
  * show the highest value. ``near``: optional booleans (outlined). Returns {positionOf(i), select(i)}.
  */
 export function polarMap(container, data, { valueLabel = "value [m]", near = null, onSelect = () => {},
-                                            describe = () => "" } = {}) {
+                                            describe = () => [] } = {}) {
   const { canvas, ctx, width, height, tip } = canvasIn(container, 460);
   const n = data.a2_deg.length;
   const keep = new Map(); // (a2, l2) -> index with the highest value
@@ -283,19 +288,22 @@ export function lineChart(container, series, { xLabel = "", yLabel = "", height 
     const rows = series.map((s) => {
       let k = 0;
       for (let i = 1; i < s.x.length; i++) if (Math.abs(s.x[i] - xv) < Math.abs(s.x[k] - xv)) k = i;
-      return `<span style="color:${s.colour}">■</span> ${s.name}: ${s.y[k] === null ? "–" : (+s.y[k]).toPrecision(5)}`;
+      const square = document.createElement("span");
+      square.style.color = s.colour;
+      square.textContent = "■";
+      return [square, ` ${s.name}: ${s.y[k] === null ? "–" : (+s.y[k]).toPrecision(5)}`];
     });
     cursor.setAttribute("x1", mx);
     cursor.setAttribute("x2", mx);
     cursor.setAttribute("visibility", "visible");
-    showTip(tip, mx, e.clientY - r.top, `${xLabel}: ${xv.toPrecision(4)}<br>${rows.join("<br>")}`);
+    showTip(tip, mx, e.clientY - r.top, [`${xLabel}: ${xv.toPrecision(4)}`, ...rows]);
   });
   svg.addEventListener("mouseleave", () => ((tip.hidden = true), cursor.setAttribute("visibility", "hidden")));
   return svg;
 }
 
 /** A scatter plot on canvas: points (x, y) coloured by c; hover describes, click selects. */
-export function scatter(container, { x, y, c, xLabel, yLabel, cLabel, describe = () => "", onSelect = () => {} }) {
+export function scatter(container, { x, y, c, xLabel, yLabel, cLabel, describe = () => [], onSelect = () => {} }) {
   const { canvas, ctx, width, height, tip } = canvasIn(container, 340);
   const m = { l: 64, r: 90, t: 12, b: 40 };
   const ok = x.map((v, i) => v !== null && y[i] !== null && Number.isFinite(v) && Number.isFinite(y[i]));

@@ -1,6 +1,6 @@
 // The design page: one or two designs on a road, simulated by a recording request; their Fig. 13 time
 // series (interactive) and the rerun recording of both, side by side, in rerun's web viewer.
-import { api, clearProblem, el, num, showBanner, showProblem } from "/static/api.js";
+import { api, clearProblem, el, localUrl, num, showBanner, showProblem } from "/static/api.js";
 import { lineChart } from "/static/charts.js";
 
 const $ = (id) => document.getElementById(id);
@@ -78,9 +78,9 @@ async function show(rec) {
   SERIES.forEach(([key, label], i) => lineChart(boxes[i], data.runs.map((r, k) => ({
     name: r.label, x: data.t_s, y: r.series[key], colour: COLOURS[k],
   })), { xLabel: "t [s]", yLabel: label, title: label, height: 220 }));
-  $("download").href = `/v1/recordings/${rec.id}/file`;
+  $("download").href = localUrl(`/v1/recordings/${encodeURIComponent(rec.id)}/file`);
   $("viewer-card").hidden = false;
-  const file = location.origin + rec.viewer_file; // ends in .rrd (how the viewer knows it) and signed when needed
+  const file = localUrl(rec.viewer_file); // ends in .rrd (how the viewer knows it) and signed when needed
   $("viewer").src = `/viewer/?url=${encodeURIComponent(file)}&hide_welcome_screen&persist=0`;
 }
 

@@ -1,6 +1,6 @@
 // The job page: live progress and ETA, the best design per road with its near-optimal set, the interactive
 // sweep map, the DE history, a scatter of every evaluation and the evaluations table.
-import { api, designQuery, duration, el, num, progressBar, showBanner, stream } from "/static/api.js";
+import { api, designParam, duration, el, num, pageLink, progressBar, showBanner, stream } from "/static/api.js";
 import { lineChart, polarMap, scatter } from "/static/charts.js";
 
 const $ = (id) => document.getElementById(id);
@@ -41,7 +41,8 @@ function bestTable() {
   const sharp = new Map((best?.sharpness ?? []).map((s) => [s.road, s]));
   const rows = [];
   const design = (d) => [num(d.a2_deg, 2), num(d.l2_m, 4), num(d.rws_m, 4)].map((v) => el("td", { class: "num" }, v));
-  const link = (d, road) => el("a", { href: `/design?road=${encodeURIComponent(road)}&${designQuery(d, "a")}&label_a=job ${jobId} best` }, "design page");
+  const link = (d, road) => el("a", { href: pageLink("/design", [["road", road], designParam(d, "a"), ["label_a", `job ${jobId} best`]]) },
+                               "design page");
   for (const r of job.roads) {
     const s = sharp.get(r.name);
     rows.push(el("tr", {}, el("td", {}, r.name), ...(r.best ? design(r.best) : [el("td", { colspan: 3, class: "muted" }, "no result yet")]),
@@ -65,7 +66,7 @@ const describe = (i) => [
   `a2 = ${num(points.a2_deg[i], 2)} deg, L2 = ${num(points.l2_m[i], 4)} m, R_WS = ${num(points.rws_m[i], 4)} m`,
   `distance = ${num(points.distance_m[i], 4)} m, fitness = ${num(points.fitness_m[i], 4)} m`,
   points.status[i] === "ok" ? "" : `failed${points.reason ? `: ${points.reason[i]}` : ""}`,
-].filter(Boolean).join("<br>");
+].filter(Boolean); // tooltip lines (text)
 
 let map = null;
 function select(i) {
@@ -77,9 +78,9 @@ function select(i) {
   $("selected").dataset.evaluation = points.id[i];
   const a = $("open-design");
   const top = road?.best;
-  const query = [`road=${encodeURIComponent(road?.spec ?? "")}`, designQuery(d, "a"), `label_a=evaluation ${points.id[i]}`];
-  if (top) query.push(designQuery(top, "b"), `label_b=job ${jobId} best`);
-  a.href = `/design?${query.join("&")}`;
+  const query = [["road", road?.spec ?? ""], designParam(d, "a"), ["label_a", `evaluation ${points.id[i]}`]];
+  if (top) query.push(designParam(top, "b"), ["label_b", `job ${jobId} best`]);
+  a.href = pageLink("/design", query);
   a.hidden = false;
 }
 
@@ -158,7 +159,7 @@ async function loadPoints() {
     return;
   }
   $("points-note").textContent = `${points.id.length} evaluations on ${road}`;
-  $("csv").href = `/v1/jobs/${jobId}/evaluations?format=csv&limit=100000&road=${encodeURIComponent(road)}`;
+  $("csv").href = pageLink(`/v1/jobs/${jobId}/evaluations`, [["format", "csv"], ["limit", "100000"], ["road", road]]);
   drawMap();
   drawScatter();
   drawTable();
@@ -183,7 +184,7 @@ async function loadHistory() {
 }
 
 async function loadAll() {
-  [job, best] = await Promise.all([api(`/v1/jobs/${jobId}`), api(`/v1/jobs/${jobId}/best`).catch(() => null)]);
+  [job, best] = await Promise.all([api(`/v1/jobs/${jobId}`), api(`/v1/jobs/${jobId}/best`).catch(() => best)]); // 429: keep the last
   summary();
   bestTable();
   await Promise.all([loadPoints(), loadHistory()]);
@@ -195,7 +196,8 @@ function live() {
     progress: async () => {
       job = await api(`/v1/jobs/${jobId}`);
       summary();
-      if (!refresh) refresh = setTimeout(async () => ((refresh = null), await loadAll()), 3000); // results, at most every 3 s
+      // results at most every 3 s, and one load (one /best) in flight: the next waits for the last to answer
+      if (!refresh) refresh = setTimeout(async () => { try { await loadAll(); } finally { refresh = null; } }, 3000);
     },
     end: async () => {
       source.close();

@@ -1,18 +1,18 @@
-"""Access: with a token every route wants it (a cookie only for reads); the Host allow-list."""
+"""Access: with a token every route wants it (the session cookie writes only from the same origin); the sign-in
+route; signed links; the Host allow-list."""
 
 from __future__ import annotations
 
 import re
 import time
 from collections.abc import Iterator
-from urllib.parse import quote
 
 import pytest
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
 from pydantic import SecretStr, ValidationError
 
-from finaldrive.service.api.access import COOKIE, SIGNED_LINK_S, host_name, signed_link
+from finaldrive.service.api.access import COOKIE, SIGNED_LINK_S, host_name, session_value, signature, signed_link
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
 from finaldrive.service.web import login_page
@@ -21,7 +21,7 @@ from tests.service.svc_helpers import SWEEP, ToyTask, running_scheduler, wait_do
 
 TOKEN = "s3cret"
 BEARER = {"Authorization": f"Bearer {TOKEN}"}
-COOKIE_HEADER = {"Cookie": f"{COOKIE}={TOKEN}"}
+COOKIE_HEADER = {"Cookie": f"{COOKIE}={session_value(TOKEN)}"}
 #: Path parameters filled in to reach every route.
 PARAMS = {"job_id": "1", "recording_id": "1", "profile_id": "1", "name": "sweep-map"}
 #: Paths of pages and files the dashboard will add: guarded like the API before they exist.
@@ -66,6 +66,7 @@ def test_every_get_route_wants_the_token(guarded: TestClient) -> None:
         assert status(guarded, path) == 401, path
         assert status(guarded, path, {"Authorization": "Bearer wrong"}) == 401, path
         assert status(guarded, path, {"Cookie": f"{COOKIE}=wrong"}) == 401, path
+        assert status(guarded, path, {"Cookie": f"{COOKIE}={TOKEN}"}) == 401, path  # the cookie is not the token
         assert status(guarded, path, BEARER) != 401, path
         assert status(guarded, path, COOKIE_HEADER) != 401, path
 
@@ -78,12 +79,24 @@ def test_the_refusal_is_a_problem_naming_the_credentials(guarded: TestClient) ->
     assert guarded.get("/v1/jobs/1", headers={"Authorization": f"bearer {TOKEN}"}).status_code == 200
 
 
-def test_a_cookie_never_authorises_a_write(guarded: TestClient) -> None:
+@pytest.mark.parametrize("browser", [
+    {}, {"Origin": "http://evil.example"}, {"Origin": "http://testserver:3000"},  # another service on the same host
+    {"Origin": "https://testserver"}, {"Origin": "null"}, {"Sec-Fetch-Site": "same-site"},
+    {"Sec-Fetch-Site": "cross-site", "Origin": "http://testserver"}, {"Sec-Fetch-Site": "none"}])
+def test_the_cookie_never_authorises_a_write_from_elsewhere(guarded: TestClient, browser: dict[str, str]) -> None:
     for path in ("/v1/jobs", "/v1/jobs/1/cancel"):
-        r = guarded.post(path, json=SWEEP, headers=COOKIE_HEADER)
+        r = guarded.post(path, json=SWEEP, headers={**COOKIE_HEADER, **browser})
         assert r.status_code == 401, path
     assert guarded.get("/v1/jobs", headers=BEARER).json()["items"][0]["state"] == "succeeded"
     assert guarded.post("/v1/jobs", json=SWEEP, headers=BEARER).status_code == 201
+
+
+@pytest.mark.parametrize("browser", [{"Sec-Fetch-Site": "same-origin"}, {"Origin": "http://testserver"},
+                                     {"Sec-Fetch-Site": "same-origin", "Origin": "http://TestServer"}])
+def test_the_cookie_authorises_the_dashboard_s_own_writes(guarded: TestClient, browser: dict[str, str]) -> None:
+    r = guarded.post("/v1/jobs", json=SWEEP, headers={**COOKIE_HEADER, **browser})
+    assert r.status_code == 201, r.text
+    assert guarded.post(f"/v1/jobs/{r.json()['id']}/cancel", headers={**COOKIE_HEADER, **browser}).status_code == 200
 
 
 def test_a_foreign_host_is_refused_even_with_the_token(guarded: TestClient) -> None:
@@ -132,16 +145,50 @@ def test_a_browser_gets_the_login_page(settings: Settings) -> None:
     secured = settings.model_copy(update={"api_token": SecretStr(TOKEN)})
     with TestClient(create_app(secured)) as c:
         page = c.get("/", headers={"Accept": "text/html,application/xhtml+xml"})
-        assert page.status_code == 401 and page.content == login_page() and b"needs its token" in page.content
+        assert page.status_code == 401 and page.content == login_page().body and b"needs its token" in page.content
         assert page.headers["content-type"].startswith("text/html")
+        assert "'unsafe-inline'" not in page.headers["content-security-policy"].split("script-src")[1].split(";")[0]
+        assert c.get("/static/login.js").status_code == 200  # its script: public, like signing in
+        assert c.get("/static/api.js").status_code == 401
         api = c.get("/v1/jobs", headers={"Accept": "text/html"})  # the API answers a problem whatever is asked
         assert api.status_code == 401 and api.headers["content-type"] == "application/problem+json"
         assert c.get("/").headers["content-type"] == "application/problem+json"
-    odd = "pass; word=%41 é"  # the sign-in page stores the token URL-encoded (encodeURIComponent)
-    with TestClient(create_app(settings.model_copy(update={"api_token": SecretStr(odd)}))) as c:
-        signed_in = c.get("/", headers={"Accept": "text/html"}, cookies={COOKIE: quote(odd, safe="")})
-        assert signed_in.status_code == 200 and b"<h1>Jobs</h1>" in signed_in.content
-        assert c.get("/", cookies={COOKIE: odd.replace("é", "e")}).status_code == 401
+
+
+def _cookie_attributes(set_cookie: str) -> set[str]:
+    return {part.strip().split("=")[0].lower() for part in set_cookie.split(";")[1:]}
+
+
+@pytest.mark.parametrize("token", [TOKEN, "pass; word=%41 é"])
+def test_signing_in_sets_an_httponly_strict_session_cookie(settings: Settings, token: str) -> None:
+    secured = settings.model_copy(update={"api_token": SecretStr(token)})
+    with TestClient(create_app(secured)) as c:
+        for wrong in (token + "x", token[:-1], "", "x" * 5000):
+            r = c.post("/v1/session", json={"token": wrong})
+            assert r.status_code in (401, 422) and "set-cookie" not in r.headers, wrong
+        assert c.post("/v1/session", json={}).status_code == 422
+        assert c.post("/v1/session", content=b"token=x", headers={"Content-Type": "text/plain"}).status_code == 422
+        assert c.get("/v1/jobs").status_code == 401
+        r = c.post("/v1/session", json={"token": token})
+        assert r.status_code == 204, r.text
+        cookie = r.headers["set-cookie"]
+        assert cookie.startswith(f"{COOKIE}={session_value(token)};") and token not in cookie
+        attributes = _cookie_attributes(cookie)
+        assert {"httponly", "samesite", "path"} <= attributes and "secure" not in attributes
+        assert "samesite=strict" in cookie.lower() and "path=/" in cookie.lower()
+        assert c.get("/v1/jobs").status_code == 200  # the client keeps the cookie
+        page = c.get("/", headers={"Accept": "text/html"})
+        assert page.status_code == 200 and b"<h1>Jobs</h1>" in page.content
+        assert c.post("/v1/jobs", json=SWEEP).status_code == 401  # a write without an origin
+        out = c.delete("/v1/session")
+        assert out.status_code == 204 and "max-age=0" in out.headers["set-cookie"].lower()
+        assert c.get("/v1/jobs").status_code == 401
+    with TestClient(create_app(secured), base_url="https://testserver") as c:
+        r = c.post("/v1/session", json={"token": token})
+        assert r.status_code == 204 and "secure" in _cookie_attributes(r.headers["set-cookie"])
+    with TestClient(create_app(settings)) as c:  # no token: nothing to sign in to
+        r = c.post("/v1/session", json={"token": "anything"})
+        assert r.status_code == 204 and "set-cookie" not in r.headers
 
 
 def test_openapi_documents_the_bearer_scheme(guarded: TestClient) -> None:
@@ -168,3 +215,23 @@ def test_a_signed_link_opens_one_recording_file_for_an_hour(settings: Settings) 
             assert c.get(refused).status_code == 401, refused
         assert c.post(link).status_code == 401
     assert signed_link(None, path) == path
+
+
+@pytest.mark.parametrize(("expires", "sig"), [
+    pytest.param(*case, id=name) for name, case in {
+        "superscript-two": ("²", None), "arabic-digits": ("١٢٣٤٥٦٧٨٩٠", None), "5000-digits": ("9" * 5000, None),
+        "13-digits": ("9" * 13, None), "negative": ("-1", None), "plus": ("+99999999999", None),
+        "space": (" 99999999999", None), "empty": ("", None), "non-ascii-signature": ("99999999999", "é" * 64),
+        "short-signature": ("99999999999", "0" * 63), "5000-char-signature": ("99999999999", "0" * 5000),
+        "nul-signature": ("99999999999", "\0" * 64), "non-hex-signature": ("99999999999", "g" * 64),
+        "no-signature": ("99999999999", ""),
+    }.items()])
+def test_odd_signed_link_fields_are_refused_never_a_500(settings: Settings, expires: str, sig: str | None) -> None:
+    secured = settings.model_copy(update={"api_token": SecretStr(TOKEN)})
+    path = "/v1/recordings/7/recording.rrd"
+    with TestClient(create_app(secured)) as c:  # a 500 would raise here
+        given = signature(TOKEN, path, 99999999999) if sig is None else sig
+        r = c.get(path, params={"expires": expires, "signature": given})
+        assert r.status_code == 401, (expires, given[:20])
+        assert c.get(path, params={"expires": "99999999999",
+                                   "signature": signature(TOKEN, path, 99999999999)}).status_code == 404

@@ -1,16 +1,20 @@
-"""/v1/jobs/{id}/evaluations: CSV pages stream rows in chunks; JSON pages are capped."""
+"""/v1/jobs/{id}/evaluations: CSV pages stream rows in chunks; JSON pages are capped. /best: sensitivity
+simulated by the scheduler, requests in flight limited per client."""
 
 from __future__ import annotations
 
 import csv
 import io
+import time
 
 import pytest
 from fastapi.testclient import TestClient
 
+from finaldrive.engine import finite_differences, resolve_roads
 from finaldrive.service.api.routes import results
+from finaldrive.service.api.sharpness import stencil
 from finaldrive.service.db import columns
-from tests.service.svc_helpers import SWEEP, wait_done
+from tests.service.svc_helpers import SWEEP, ToyTask, toy_batch, wait_done
 
 
 def test_csv_pages_stream_the_same_rows_as_json(client: TestClient, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -44,3 +48,72 @@ def test_json_pages_are_capped(client: TestClient) -> None:
     assert client.get(url, params={"limit": 10_000}).status_code == 200
     assert client.get(url, params={"limit": 100_000, "format": "csv"}).status_code == 200
     assert client.get("/v1/jobs/999/evaluations", params={"format": "csv"}).status_code == 404
+
+
+def test_best_sensitivity_is_simulated_by_the_scheduler(client: TestClient, fake: ToyTask) -> None:
+    """The API answers at once (202, the queued job named); the derivatives are those of the toy fitness
+    the scheduler's task computes, so no simulation ran in the API; one sensitivity job per job."""
+    job = wait_done(client, client.post("/v1/jobs", json=SWEEP | {"roads": ["flat"]}).json()["id"])
+    url = f"/v1/jobs/{job['id']}/best"
+    fake.gate.clear()  # the scheduler's task waits: the sensitivity job cannot finish yet
+    started = time.monotonic()
+    first = client.get(url, params={"sensitivity": "true"})
+    assert time.monotonic() - started < 1.0
+    assert first.status_code == 202 and first.headers["retry-after"] == "2"
+    pending = first.json()
+    assert pending["sensitivity_state"] in ("queued", "running") and pending["sharpness"][0]["sensitivity"] is None
+    assert first.headers["location"] == f"/v1/jobs/{pending['sensitivity_job']}"
+    again = client.get(url, params={"sensitivity": "true"}).json()
+    assert again["sensitivity_job"] == pending["sensitivity_job"]
+    designs = client.get(f"/v1/jobs/{pending['sensitivity_job']}").json()
+    assert designs["kind"] == "designs" and designs["total"] == 7
+    fake.gate.set()
+    wait_done(client, pending["sensitivity_job"])
+    done = client.get(url, params={"sensitivity": "true"})
+    assert done.status_code == 200 and done.json()["sensitivity_state"] == "succeeded"
+    s = done.json()["sharpness"][0]["sensitivity"]
+    best = job["roads"][0]["best"]
+    rows, schemes = stencil(best["a2_deg"], best["l2_m"], best["rws_m"])
+    toy = toy_batch(rows, resolve_roads("flat")[0].road)
+    expected = finite_differences(schemes, toy.distance_m, toy.fitness_m)
+    assert s["simulations"] == 7 and s["schemes"] == schemes
+    for name, value in expected.items():
+        assert s[name] == pytest.approx(value, rel=1e-9, abs=1e-12), name
+    assert len(client.get("/v1/jobs", params={"kind": "designs"}).json()["items"]) == 1
+
+
+def test_best_sensitivity_waits_for_the_job_to_finish(client: TestClient, fake: ToyTask) -> None:
+    fake.gate.clear()
+    job = client.post("/v1/jobs", json=SWEEP).json()
+    r = client.get(f"/v1/jobs/{job['id']}/best", params={"sensitivity": "true"})
+    fake.gate.set()
+    assert r.status_code == 409 and "once it has finished" in r.json()["detail"]
+    assert client.get(f"/v1/jobs/{job['id']}/best").status_code == 200
+
+
+def test_best_in_flight_is_limited_per_client(client: TestClient) -> None:
+    job = wait_done(client, client.post("/v1/jobs", json=SWEEP).json()["id"])
+    url = f"/v1/jobs/{job['id']}/best"
+    with results.IN_FLIGHT.slot("testclient"), results.IN_FLIGHT.slot("testclient"):
+        r = client.get(url)
+        assert r.status_code == 429 and r.headers["retry-after"] == "2"
+        with results.IN_FLIGHT.slot("elsewhere"):
+            pass  # another client still has room
+    assert client.get(url).status_code == 200
+
+
+def test_a_designs_job_evaluates_each_roads_own_designs(client: TestClient) -> None:
+    spec = {"kind": "designs", "roads": ["flat", "sine:0.025:3"],
+            "designs": [[[60.0, 0.1, 0.09]], [[0.0, 0.05, 0.09], [30.0, 0.15, 0.08]]]}
+    job = wait_done(client, client.post("/v1/jobs", json=spec).json()["id"])
+    assert job["state"] == "succeeded" and job["total"] == 3
+    items = client.get(f"/v1/jobs/{job['id']}/evaluations").json()["items"]
+    assert sorted((e["road"], e["candidate"], e["a2_deg"], e["l2_m"]) for e in items) == [
+        ("flat", 0, pytest.approx(60.0), 0.1), ("sine:0.025:3", 0, 0.0, 0.05),
+        ("sine:0.025:3", 1, pytest.approx(30.0), 0.15)]
+    wrong = ((spec | {"designs": spec["designs"][:1]}, "designs"),
+             (spec | {"designs": [[[0, 0.5, 0.09]]] * 2}, "designs"),  # L2 beyond the vehicle's limit
+             (SWEEP | {"designs": [[[0, 0.1, 0.09]]]}, "designs"), ({**spec, "grid": "table9"}, "grid"))
+    for bad, field in wrong:
+        r = client.post("/v1/jobs", json=bad)
+        assert r.status_code == 422 and field in r.text, bad

@@ -148,14 +148,6 @@ def test_best_reports_the_near_optimal_set(client: TestClient) -> None:
     assert client.get(f"/v1/jobs/{job['id']}/best", params={"tolerance_pct": 0}).status_code == 422
 
 
-def test_best_sensitivity_runs_the_engine_at_the_best(client: TestClient) -> None:
-    spec = {**SWEEP, "roads": ["flat"], "settings": {"duration": 0.2}}
-    job = wait_done(client, client.post("/v1/jobs", json=spec).json()["id"])
-    sharp = client.get(f"/v1/jobs/{job['id']}/best", params={"sensitivity": "true"}).json()["sharpness"]
-    s = sharp[0]["sensitivity"]
-    assert s["simulations"] == 7 and s["schemes"]["a2_deg"] == "central" and s["steps"]["l2_m"] == 0.001
-
-
 def test_best_of_a_de_reports_its_final_population(client: TestClient) -> None:
     job = wait_done(client, client.post("/v1/jobs", json=DE).json()["id"])
     sharp = client.get(f"/v1/jobs/{job['id']}/best").json()["sharpness"][0]

@@ -89,9 +89,10 @@ def test_submit_follow_results_record_plot(server: str, tmp_path: Path, monkeypa
     err = capsys.readouterr().err.splitlines()
     assert err[-2:] == ["finaldrive: error: HTTP 404: job 999 does not exist",
                         "finaldrive: error: HTTP 401: a valid token is required: the header `Authorization: Bearer "
-                        "<token>` (any method) or the cookie `finaldrive_token=<token>` (GET and HEAD only); the token "
-                        "is the server's FINALDRIVE_API_TOKEN; the client sends $FINALDRIVE_API_TOKEN, which here is "
-                        "set, but to another value"]
+                        "<token>` (any method) or the dashboard's session cookie `finaldrive_token` (set by `POST "
+                        "/v1/session`; writes only from the dashboard's own pages); the token is the server's "
+                        "FINALDRIVE_API_TOKEN; the client sends $FINALDRIVE_API_TOKEN, which here is set, but to "
+                        "another value"]
     assert main(["status", "1", *s]) == EXIT_HTTP  # reads need the token too
 
 

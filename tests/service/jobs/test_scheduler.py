@@ -19,7 +19,7 @@ from fastapi.testclient import TestClient
 from sqlalchemy import select
 
 from finaldrive.service.config import Settings
-from finaldrive.service.db.leases import claim_jobs
+from finaldrive.service.db.leases import claim_jobs, db_now, scheduler_id
 from finaldrive.service.db.models import Evaluation, Generation, Job
 from finaldrive.service.db.results import generation_records
 from finaldrive.service.jobs.scheduler import Scheduler, SchedulerConfig
@@ -340,3 +340,36 @@ def test_a_task_that_raises_fails_its_designs_never_the_job_and_is_never_reused(
         again = wait_done(client, client.post("/v1/jobs", json=SWEEP).json()["id"])
     client.__exit__(None, None, None)
     assert (again["done"], again["failed"], again["cached"]) == (24, 0, 16)
+
+
+def test_heartbeats_go_on_while_the_loop_runs_a_long_task(settings: Settings) -> None:
+    """The serial executor runs tasks in the loop's thread (the engine's warm-up, a long simulation):
+    the leases are renewed meanwhile, so the job stays this scheduler's."""
+    task = ToyTask()
+    task.gate.clear()   # the first task blocks the loop
+    config = SchedulerConfig(lease_s=1.0, heartbeat_s=0.1, flush_s=0.02)
+    with TestClient(create_app(settings)) as client, running_scheduler(settings, task, config=config) as scheduler:
+        job_id = client.post("/v1/jobs", json=SWEEP).json()["id"]
+        deadline = time.monotonic() + 10
+        while client.get(f"/v1/jobs/{job_id}").json()["state"] != "running":
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+        time.sleep(3.0)  # three leases
+        db = open_database(settings)
+        try:
+            with db.read() as session:
+                job = session.get(Job, job_id)
+                assert job is not None and job.owner == scheduler.id
+                assert job.lease_until is not None and job.lease_until > db_now(session)
+        finally:
+            db.dispose()
+        task.gate.set()
+        assert wait_done(client, job_id)["state"] == "succeeded"
+
+
+def test_scheduler_ids_fit_the_store(settings: Settings) -> None:
+    long = scheduler_id("h" * 300, ":4242:0123abcd")
+    assert len(long) == 64 and long.endswith(":4242:0123abcd")
+    assert scheduler_id("host", ":1:2") == "host:1:2"
+    with pytest.raises(ValueError, match="at most 64"):
+        Scheduler(open_database(settings), SerialExecutor(), scheduler_id="x" * 65)

@@ -4,14 +4,16 @@ result cache read back through the driver."""
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 
 from finaldrive.engine import DIAGNOSTICS, BatchResult, Request, Road
 from finaldrive.service.config import Settings
+from finaldrive.service.db.engine import Database
 from finaldrive.service.db.leases import claim_jobs, register_scheduler
-from finaldrive.service.db.models import Evaluation, JobRoad
-from finaldrive.service.db.results import CACHED_COLUMNS, cached_evaluations, store_results
+from finaldrive.service.db.models import Evaluation, Job, JobRoad
+from finaldrive.service.db.results import CACHED_COLUMNS, cached_evaluations, finish_if_complete, store_results
 from finaldrive.service.jobs.rows import rows_from_results
 from finaldrive.service.jobs.submit import submit_job
 from finaldrive.service.schemas import JobSpec
@@ -19,15 +21,20 @@ from finaldrive.service.services import open_database
 from tests.service.svc_helpers import SWEEP, toy_batch
 
 
+def _claimed_sweep(db: Database) -> Job:
+    """A sweep job, claimed by the scheduler "s1"."""
+    job, _ = submit_job(db, JobSpec.model_validate(SWEEP), idempotency_key=None, max_evaluations=1000,
+                        max_cpu_hours=1.0)
+    with db.write() as session:
+        register_scheduler(session, "s1", host="h", pid=1, executor="serial", capacity=1)
+        assert claim_jobs(session, "s1", lease_s=30.0, limit=1) == [job.id]
+    return job
+
+
 def test_rows_are_stored_once_with_the_roads_best_and_read_back_as_cache_hits(store_url: str) -> None:
     db = open_database(Settings(db_url=store_url))
     try:
-        job, _ = submit_job(db, JobSpec.model_validate(SWEEP), idempotency_key=None, max_evaluations=1000,
-                            max_cpu_hours=1.0)
-        with db.write() as session:
-            register_scheduler(session, "s1", host="h", pid=1, executor="serial", capacity=1)
-        with db.write() as session:
-            assert claim_jobs(session, "s1", lease_s=30.0, limit=1) == [job.id]
+        job = _claimed_sweep(db)
         k0, k1, k2, k3 = (f"{i:x}" * 64 for i in range(4))  # sha256-shaped keys
         designs = np.array([[0.5, 0.1, 0.09], [1.0, 0.2, 0.09], [1.5, 0.1, 0.09]])
         part = Request(0, 0, 1, np.arange(3), designs)
@@ -56,3 +63,32 @@ def test_rows_are_stored_once_with_the_roads_best_and_read_back_as_cache_hits(st
     assert hits[k1]["reason"] == "fake divergence"
     assert all(hits[k0][name] is None for name in DIAGNOSTICS)  # NaN stored as NULL
     assert best is not None and best.candidate == 0 and job_road.best_fitness_m == batch.fitness_m[0]
+
+
+def test_a_job_succeeds_only_over_a_complete_store_and_a_hole_reopens_it(store_url: str) -> None:
+    """finish_if_complete counts what the store holds in the finishing transaction: fewer rows than the
+    runs made (results lost after they were acknowledged) give the job back to resume, never a success."""
+    db = open_database(Settings(db_url=store_url))
+    try:
+        job = _claimed_sweep(db)
+        part = Request(0, 0, 0, np.arange(3), np.array([[0.5, 0.1, 0.09], [1.0, 0.1, 0.09], [1.5, 0.1, 0.09]]))
+        batch = toy_batch(part.designs, Road.parse("flat"))
+        rows = rows_from_results([(part, batch, batch.fitness_m, [f"{i:x}" * 64 for i in range(3)], False)])
+        with db.write() as session:
+            store_results(session, "s1", job.id, rows, [])
+        finish = partial(finish_if_complete, scheduler_id="s1", job_id=job.id, generations=0, planned=job.total)
+        with db.write() as session:  # the runs made 4: one is missing
+            assert finish(session, evaluations=4) == "reopened"
+        with db.read() as session:
+            reopened = session.get(Job, job.id)
+        with db.write() as session:
+            assert claim_jobs(session, "s1", lease_s=30.0, limit=1) == [job.id]
+            assert finish(session, evaluations=3) == "finished"
+        with db.write() as session:  # finished: no longer this scheduler's
+            assert finish(session, evaluations=3) == "lost"
+        with db.read() as session:
+            done = session.get(Job, job.id)
+    finally:
+        db.dispose()
+    assert reopened is not None and (reopened.state, reopened.owner) == ("interrupted", None)
+    assert done is not None and done.state == "succeeded" and (done.n_done, done.total) == (3, 3)

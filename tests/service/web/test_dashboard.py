@@ -7,10 +7,7 @@ Every request a page makes is recorded and must go to the server itself.
 from __future__ import annotations
 
 import io
-import os
-import shutil
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
@@ -18,82 +15,15 @@ from urllib.parse import urlsplit
 import numpy as np
 import pytest
 
+from finaldrive.service.api.access import COOKIE
 from tests.service.processes import Server
+from tests.service.web.browser import TOKEN, Page
 
 pytestmark = pytest.mark.slow
-TOKEN = "dashboard-test-token"
 #: run colours of the recording's first two geometries (service/recording.py)
 RUN_COLOURS = ((31, 119, 180), (214, 39, 40))
 #: a small sweep: 4 x 3 designs, 0.5 s each
 GRID = "a2_deg=0:270:90,l2_m=0.04:0.12:0.04,rws_m=0.093"
-
-
-def chromium() -> str | None:
-    return os.environ.get("FINALDRIVE_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
-
-
-@pytest.fixture(scope="module")
-def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
-    tmp = tmp_path_factory.mktemp("dashboard")
-    srv = Server(f"sqlite:///{tmp / 'fd.db'}", tmp / "serve.log", "--executor", "serial",
-                 env={"FINALDRIVE_API_TOKEN": TOKEN}).start()
-    try:
-        yield srv
-    finally:
-        srv.terminate()
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Any]:
-    executable = chromium()
-    if executable is None:
-        reason = "Chromium not found; install Debian's chromium (as .ci/run does) or set FINALDRIVE_CHROMIUM"
-        if os.environ.get("FINALDRIVE_REQUIRE_CHROMIUM"):
-            pytest.fail(reason)
-        pytest.skip(reason)
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=executable, args=[
-            "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
-            "--disable-sync", "--no-first-run"])
-        try:
-            yield b
-        finally:
-            b.close()
-
-
-class Page:
-    """A browser tab on the server that records every request the page (and its frames) makes."""
-
-    def __init__(self, browser: Any, server: Server, signed_in: bool) -> None:
-        self.base = server.url
-        self.context = browser.new_context(viewport={"width": 1400, "height": 1000})
-        if signed_in:
-            self.context.add_cookies([{"name": "finaldrive_token", "value": TOKEN, "url": self.base}])
-        self.page = self.context.new_page()
-        self.requests: list[str] = []
-        self.errors: list[str] = []
-        self.page.on("request", lambda r: self.requests.append(r.url))
-        self.page.on("pageerror", lambda e: self.errors.append(str(e)))
-
-    def goto(self, path: str) -> Any:
-        return self.page.goto(self.base + path)
-
-    def ready(self, timeout_s: float = 60) -> None:
-        self.page.wait_for_selector("body[data-ready]", timeout=timeout_s * 1000)
-
-    def foreign_requests(self) -> list[str]:
-        return [u for u in self.requests if not u.startswith((self.base + "/", "blob:" + self.base, "data:"))]
-
-
-@pytest.fixture
-def tab(browser: Any, server: Server) -> Iterator[Page]:
-    page = Page(browser, server, signed_in=True)
-    yield page
-    page.context.close()
-    assert page.foreign_requests() == [], "the page asked for something off this server"
-    assert page.errors == [], page.errors
 
 
 def submit_sweep(server: Server) -> int:
@@ -123,6 +53,10 @@ def test_without_the_token_the_page_asks_for_it_and_signs_in(browser: Any, serve
         page.ready()
         assert page.page.inner_text("h1") == "Jobs"
         assert page.foreign_requests() == []
+        assert page.page.evaluate("document.cookie") == ""  # the session cookie is out of scripts' reach
+        (cookie,) = page.context.cookies()
+        assert cookie["name"] == COOKIE and cookie["httpOnly"] and cookie["sameSite"] == "Strict"
+        assert TOKEN not in cookie["value"]
     finally:
         page.context.close()
 

@@ -3,6 +3,8 @@ viewer files, and the JSON the pages draw (DE history, a recording's series)."""
 
 from __future__ import annotations
 
+import base64
+import hashlib
 import re
 import tempfile
 import time
@@ -13,11 +15,19 @@ from fastapi.testclient import TestClient
 
 from finaldrive.service.recording import properties_of, scalars_of
 from finaldrive.service.web import viewer
-from finaldrive.service.web.pages import STATIC
+from finaldrive.service.web.pages import STATIC, policy
 from tests.service.svc_helpers import DE, wait_done
 
 #: anything a page could load from elsewhere
 FOREIGN = re.compile(r"""(?:src|href)\s*=\s*["'](?:https?:)?//""", re.I)
+#: inline script in the dashboard's own HTML: a <script> without src, an on* handler, a javascript: URL
+INLINE = re.compile(r"""<script(?![^>]*\ssrc=)[^>]*>|\son\w+\s*=|javascript:""", re.I)
+
+
+def script_src(csp: str) -> list[str]:
+    """The sources of a policy's script-src directive."""
+    directives = {d.split()[0]: d.split()[1:] for d in csp.split(";") if d.strip()}
+    return directives["script-src"]
 
 
 @pytest.mark.parametrize("path", ["/", "/jobs/1", "/design"])
@@ -26,7 +36,26 @@ def test_pages_are_html_with_a_same_origin_policy(client: TestClient, path: str)
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
     csp = r.headers["content-security-policy"]
     assert "default-src 'self'" in csp and "connect-src 'self'" in csp
+    assert script_src(csp) == ["'self'", "'wasm-unsafe-eval'"]  # no 'unsafe-inline', no 'unsafe-eval'
     assert not FOREIGN.search(r.text)
+
+
+def test_the_dashboard_s_html_has_no_inline_script() -> None:
+    pages = list(STATIC.glob("*.html"))
+    assert len(pages) >= 4
+    for path in pages:
+        assert not INLINE.search(path.read_text()), path
+
+
+def test_pages_made_by_others_may_run_only_their_own_inline_scripts(client: TestClient) -> None:
+    """Swagger UI's page (FastAPI's) has an inline script: allowed by its hash, nothing else inline."""
+    page = client.get("/docs")
+    sources = script_src(page.headers["content-security-policy"])
+    inline = re.findall(r"<script>(.*?)</script>", page.text, re.S)
+    assert inline and sources == ["'self'", "'wasm-unsafe-eval'", *(
+        f"'sha256-{base64.b64encode(hashlib.sha256(body.encode()).digest()).decode()}'" for body in inline)]
+    assert script_src(client.get("/redoc").headers["content-security-policy"]) == ["'self'", "'wasm-unsafe-eval'"]
+    assert "'unsafe-inline'" not in script_src(policy(b"<script>x</script><script src=a.js></script>"))
 
 
 def test_every_static_file_loads_nothing_from_elsewhere() -> None:
@@ -105,6 +134,8 @@ def test_rerun_s_viewer_is_served_from_the_installed_sdk(client: TestClient) -> 
     index = client.get("/viewer/")
     assert index.status_code == 200 and "re_viewer.js" in index.text and "fonts.googleapis" not in index.text
     assert "connect-src 'self'" in index.headers["content-security-policy"]
+    sources = script_src(index.headers["content-security-policy"])
+    assert "'unsafe-inline'" not in sources and len([s for s in sources if s.startswith("'sha256-")]) >= 2
     wasm = client.get("/viewer/re_viewer_bg.wasm")
     assert wasm.status_code == 200 and wasm.headers["content-type"] == "application/wasm"
     assert wasm.content[:4] == b"\0asm"

@@ -1,0 +1,119 @@
+"""What durable commits cost the scheduler's store: results stored through ``store_results`` with
+each commit flushed (what finaldrive does) against an asynchronous commit (SQLite
+``synchronous=NORMAL``, PostgreSQL ``synchronous_commit=off``: what it did before results were lost
+in a PostgreSQL crash), in one run, as a ratio.
+
+    python bench/bench_commit.py                                  # a temporary SQLite file
+    python bench/bench_commit.py --db postgresql+psycopg://...    # any store; repeat --db for several
+
+Each measurement stores ``--transactions`` transactions of ``--rows`` evaluations (the writer's
+transaction holds what arrived in one flush); printed: evaluations stored per second, the median of
+``--repeat`` runs for each mode, alternated, and durable/async.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from bench_scheduler import SleepTask
+from sqlalchemy import event
+
+from finaldrive.engine import Request
+from finaldrive.service.config import Settings
+from finaldrive.service.db.engine import Database
+from finaldrive.service.db.leases import claim_jobs, register_scheduler
+from finaldrive.service.db.results import store_results
+from finaldrive.service.jobs.rows import rows_from_results
+from finaldrive.service.jobs.submit import submit_job
+from finaldrive.service.machine import describe
+from finaldrive.service.schemas import JobSpec
+from finaldrive.service.services import open_database
+
+SPEC = {"kind": "sweep", "roads": ["flat"], "grid": "a2_deg=0:90:30"}
+
+
+def _rows(n: int, first: int) -> list[tuple[object, ...]]:
+    """``n`` evaluations of one road, candidates ``first`` on (the stand-in's results, engine-shaped)."""
+    rng = np.random.default_rng(first)
+    designs = np.column_stack([rng.uniform(0, 6.28, n), rng.uniform(0, 0.2, n), rng.uniform(0.05, 0.2, n)])
+    part = Request(0, 0, 0, np.arange(first, first + n), designs)
+    batch = SleepTask(0.0, sleep=False)._results(designs)
+    keys = [f"{first + i:064x}" for i in range(n)]
+    return rows_from_results([(part, batch, batch.fitness_m, keys, False)])
+
+
+def _store(db: Database, rows: int, transactions: int, first: int) -> float:
+    """Evaluations stored per second by ``transactions`` transactions of ``rows`` rows."""
+    job, _ = submit_job(db, JobSpec.model_validate(SPEC), idempotency_key=None, max_evaluations=10**9,
+                        max_cpu_hours=1e6)
+    with db.write() as session:
+        register_scheduler(session, "bench", host="h", pid=0, executor="serial", capacity=1)
+        claim_jobs(session, "bench", lease_s=3600, limit=100)
+    batches = [_rows(rows, first + i * rows) for i in range(transactions)]
+    start = time.perf_counter()
+    for batch in batches:
+        with db.write() as session:
+            store_results(session, "bench", job.id, batch, [])
+    return rows * transactions / (time.perf_counter() - start)
+
+
+def _database(url: str, durable: bool) -> Database:
+    """The store as finaldrive opens it, or with every commit asynchronous."""
+    db = Database(url)
+    if not durable:  # after finaldrive's own set-up of each new connection
+        if db.engine.dialect.name == "postgresql":
+            event.listen(db.engine, "connect", lambda c, _: c.execute("SET synchronous_commit = off"))
+        else:
+            event.listen(db.engine, "connect", lambda c, _: c.execute("PRAGMA synchronous = NORMAL"))
+    return db
+
+
+def measure(url: str, rows: int, transactions: int, repeat: int) -> dict[str, object]:
+    open_database(Settings(db_url=url)).dispose()  # the schema
+    found: dict[bool, list[float]] = {True: [], False: []}
+    store = ""
+    for r in range(repeat):
+        for durable in (True, False):
+            db = _database(url, durable)
+            store = db.engine.dialect.name
+            try:
+                found[durable].append(_store(db, rows, transactions, (2 * r + int(durable)) * rows * transactions))
+            finally:
+                db.dispose()
+    durable, fast = statistics.median(found[True]), statistics.median(found[False])
+    return {"store": store, "rows_per_transaction": rows, "transactions": transactions,
+            "durable_evaluations_per_s": round(durable), "async_evaluations_per_s": round(fast),
+            "durable_over_async": round(durable / fast, 3), "runs": repeat}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--db", action="append", help="SQLAlchemy URL (repeatable; default a temporary SQLite file)")
+    parser.add_argument("--rows", type=int, nargs="+", default=[100, 1000, 10000], help="rows a transaction")
+    parser.add_argument("--evaluations", type=int, default=20000, help="evaluations a measurement")
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        urls = args.db or [f"sqlite:///{Path(tmp) / 'commit.db'}"]
+        out = [measure(url, rows, max(1, args.evaluations // rows), args.repeat) for url in urls for rows in args.rows]
+    if args.json:
+        print(json.dumps({"machine": describe(), "results": out}, indent=1))
+    else:
+        print(describe())
+        for r in out:
+            print(f"{r['store']:10} {r['rows_per_transaction']:6} rows/commit: durable "
+                  f"{r['durable_evaluations_per_s']:8} /s, async {r['async_evaluations_per_s']:8} /s, "
+                  f"ratio {r['durable_over_async']}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
