@@ -16,12 +16,12 @@ from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
-from sqlalchemy import select
+from sqlalchemy import select, update
 from sqlalchemy.orm import Session
 
 from finaldrive.engine import Design, finite_differences, sensitivity_stencil, spread
 from finaldrive.service.api.problems import ApiProblem, validation_problem
-from finaldrive.service.db.models import TERMINAL_STATES, Evaluation, Generation, Job, JobRoad
+from finaldrive.service.db.models import TERMINAL_STATES, Evaluation, Generation, Job, JobRoad, JobState
 from finaldrive.service.db.repository import job_by_idempotency_key, roads_of
 from finaldrive.service.db.results import last_generations
 from finaldrive.service.db.summaries import aggregate_sharpness, road_sharpness
@@ -100,15 +100,20 @@ def sensitivity_key(job_id: int) -> str:
 
 
 def sensitivity_job(services: Services, job: Job) -> Job:
-    """The job's sensitivity job, queued now unless it exists (409 while ``job`` has not finished:
-    its best may still change)."""
+    """The job's sensitivity job, queued now unless one exists that has not failed or been cancelled
+    (such a one gives its key up: this request queues it again). 409 while ``job`` has not finished:
+    its best may still change."""
     if job.state not in {s.value for s in TERMINAL_STATES}:
         raise ApiProblem(409, f"job {job.id} is {job.state}: ask for its sensitivity once it has finished",
                          slug="not-finished")
     with services.db.read() as session:
         existing = job_by_idempotency_key(session, sensitivity_key(job.id))
-        if existing is not None:
-            return existing
+    if existing is not None and existing.state not in (JobState.failed.value, JobState.cancelled.value):
+        return existing
+    if existing is not None:
+        with services.db.write() as session:
+            session.execute(update(Job).where(Job.id == existing.id).values(idempotency_key=None))
+    with services.db.read() as session:
         bests = session.execute(
             select(JobRoad.spec, Evaluation.a2_deg, Evaluation.l2_m, Evaluation.rws_m)
             .join(Evaluation, Evaluation.id == JobRoad.best_evaluation_id)

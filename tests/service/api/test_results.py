@@ -82,6 +82,19 @@ def test_best_sensitivity_is_simulated_by_the_scheduler(client: TestClient, fake
     assert len(client.get("/v1/jobs", params={"kind": "designs"}).json()["items"]) == 1
 
 
+def test_a_cancelled_sensitivity_job_is_queued_again(client: TestClient, fake: ToyTask) -> None:
+    job = wait_done(client, client.post("/v1/jobs", json=SWEEP | {"roads": ["flat"]}).json()["id"])
+    url = f"/v1/jobs/{job['id']}/best"
+    fake.gate.clear()
+    first = client.get(url, params={"sensitivity": "true"}).json()["sensitivity_job"]
+    assert client.post(f"/v1/jobs/{first}/cancel").json()["state"] == "cancelled"
+    again = client.get(url, params={"sensitivity": "true"})
+    fake.gate.set()
+    assert again.status_code == 202 and again.json()["sensitivity_job"] != first
+    wait_done(client, again.json()["sensitivity_job"])
+    assert client.get(url, params={"sensitivity": "true"}).json()["sensitivity_state"] == "succeeded"
+
+
 def test_best_sensitivity_waits_for_the_job_to_finish(client: TestClient, fake: ToyTask) -> None:
     fake.gate.clear()
     job = client.post("/v1/jobs", json=SWEEP).json()
