@@ -38,7 +38,7 @@ _EXPORTS: dict[str, str] = {
     "DifferentialEvolution": "finaldrive.engine.optimize",
     **dict.fromkeys(("CONCENTRIC_L2_M", "DEFAULT_TOLERANCE_PCT", "MAX_TOLERANCE_PCT", "SENSITIVITY_STEPS", "angle_arc",
                      "finite_differences", "near_mask", "near_optimal", "near_summary", "sensitivities",
-                     "sensitivity_sentences", "sensitivity_stencil", "spread"),
+                     "sensitivity_sentences", "sensitivity_stencil", "spread", "upper_limits"),
                     "finaldrive.engine.study.sharpness"),
     **dict.fromkeys(("PRESETS", "GROUPS", "NamedRoad", "ProfileResolver", "paper_row", "paper_tables", "preset_group",
                      "resolve_roads"), "finaldrive.engine.study.presets"),
@@ -157,6 +157,7 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         sensitivity_sentences as sensitivity_sentences,
         sensitivity_stencil as sensitivity_stencil,
         spread as spread,
+        upper_limits as upper_limits,
     )
     from finaldrive.engine.study.space import (
         DE_LIMITS as DE_LIMITS,

@@ -50,7 +50,6 @@ BUMP_STEPS = 10_000.0
 DRIVE_MARGIN = 1.25
 #: Reach beyond the rear contact point's travel: the wheelbase and a margin [m].
 REACH_MARGIN_M = 5.0
-GRAVITY = 9.81
 
 
 @dataclass(frozen=True)

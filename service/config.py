@@ -50,7 +50,7 @@ class Settings(BaseSettings):
                                  "submissions are refused (429) until some finish")
     max_pending_recordings: int = Field(32, ge=1, description="recordings queued or being produced at once "
                                         "(429 above)")
-    max_profiles: int = Field(1000, ge=1, description="road profiles the store keeps (429 above; a profile is at "
+    max_profiles: int = Field(1000, ge=1, description="road profiles the store keeps (507 above; a profile is at "
                               "most FINALDRIVE_MAX_BODY_BYTES)")
     idempotency_key_hours: float = Field(24.0, gt=0, description="how long an Idempotency-Key replays its job; "
                                          "after that the key may name a new job")

@@ -502,7 +502,8 @@ class SensitivityOut(BaseModel):
     """Finite differences through the engine at the best design (engine study.sharpness)."""
 
     steps: dict[str, float] = Field(description="steps, units in the keys: a2_deg, l2_m, rws_m")
-    schemes: dict[str, Literal["central", "forward"]] = Field(description="difference scheme of each variable")
+    schemes: dict[str, Literal["central", "forward", "backward"]] = Field(
+        description="difference scheme of each variable (one-sided at a limit of the design space)")
     simulations: int
     distance_m: float = Field(description="distance at the best design [m]")
     fitness_m: float = Field(description="fitness at the best design [m]")

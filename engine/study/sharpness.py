@@ -150,31 +150,39 @@ def _verdict(name: str, near: list[float], explored: list[float], tol: float, si
 def sensitivities(design: Design, road: Road, settings: SimSettings, vehicle: Vehicle,
                   lower: tuple[float, float] = (0.0, 0.0)) -> dict[str, Any]:
     """d(distance)/dx and d(fitness)/dx for x = a2, L2, R_WS at ``design``: central differences with
-    :data:`SENSITIVITY_STEPS`, forward ones where the step would cross ``lower`` (L2, R_WS) [m]."""
+    :data:`SENSITIVITY_STEPS`, one-sided ones where a step would cross ``lower`` (L2, R_WS) [m] or the
+    vehicle's design limits."""
     from finaldrive.engine.simulation import evaluate  # the compiled model loads only when simulating
 
-    rows, schemes = sensitivity_stencil(design, lower)
+    rows, schemes = sensitivity_stencil(design, lower, upper_limits(vehicle))
     batch = evaluate(rows, road, settings, vehicle)
     return finite_differences(schemes, batch.distance_m, batch.fitness_m)
 
 
-def sensitivity_stencil(design: Design, lower: tuple[float, float] = (0.0, 0.0)
-                        ) -> tuple[np.ndarray, dict[str, str]]:
+def upper_limits(vehicle: Vehicle) -> tuple[float, float]:
+    """The largest L2 and R_WS a design may have on ``vehicle`` [m] (its design limits)."""
+    limits = vehicle.design_limits()
+    return limits["l2_m"], limits["rws_m"]
+
+
+def sensitivity_stencil(design: Design, lower: tuple[float, float] = (0.0, 0.0),
+                        upper: tuple[float, float] = (math.inf, math.inf)) -> tuple[np.ndarray, dict[str, str]]:
     """The 7 designs (rows a2 [rad], L2, R_WS) whose simulations :func:`finite_differences` takes:
-    ``design``, then for a2, L2, R_WS in turn the step up and the step down (``design`` again where
-    the step down would cross ``lower`` (L2, R_WS) [m]: a forward difference); and each scheme."""
+    ``design``, then for a2, L2, R_WS in turn the step up and the step down; ``design`` itself in place
+    of a step that would cross ``lower`` or ``upper`` (L2, R_WS) [m] (a forward or backward difference);
+    and each scheme."""
     h = SENSITIVITY_STEPS
     rows = [design.row()]
     schemes: dict[str, str] = {}
     offsets = {"a2_deg": (0, math.radians(h["a2_deg"])), "l2_m": (1, h["l2_m"]), "rws_m": (2, h["rws_m"])}
     for name, (k, step) in offsets.items():
-        minus = design.row()
+        minus, plus = design.row(), design.row()
         minus[k] -= step
-        central = k == 0 or (minus[k] >= lower[k - 1] and (k == 1 or minus[k] > 0))
-        schemes[name] = "central" if central else "forward"
-        plus = design.row()
         plus[k] += step
-        rows += [plus, minus if central else design.row()]
+        down = k == 0 or (minus[k] >= lower[k - 1] and (k == 1 or minus[k] > 0))
+        up = k == 0 or plus[k] <= upper[k - 1]
+        schemes[name] = "central" if down and up else "forward" if up else "backward"
+        rows += [plus if up else design.row(), minus if down else design.row()]
     return np.array(rows, dtype=float), schemes
 
 
@@ -187,7 +195,7 @@ def finite_differences(schemes: dict[str, str], distance: np.ndarray, fitness: n
     per = {"a2_deg": ("a2", "deg"), "l2_m": ("l2", "m"), "rws_m": ("rws", "m")}  # units of docs/fields.md
     for i, name in enumerate(VARIABLES):
         var, unit = per[name]
-        width = (2.0 if schemes[name] == "central" else 1.0) * h[name]
+        width = (2.0 if schemes[name] == "central" else 1.0) * h[name]  # one-sided: the design is one end
         for what, values in (("distance", distance), ("fitness", fitness)):
             out[f"d{what}_d{var}_m_per_{unit}"] = float((values[1 + 2 * i] - values[2 + 2 * i]) / width)
     return out

@@ -3,7 +3,7 @@
 ``ix_evaluations_job_road_fitness`` (job_id, road_index, status, fitness_m): a road's best fitness
 is one index seek and its near-optimal set (fitness at least the best less a tolerance) one range
 of the index. ``ix_evaluations_job_road_a2`` (job_id, road_index, status, a2_deg, l2_m, rws_m,
-fitness_m, distance_m): the explored range of a2 is found by two seeks a 0.1 deg bucket, and the
+fitness_m, distance_m): the explored range of a2 is found by two seeks a 1 deg bucket, and the
 other ranges by scans of the index alone (never of the table).
 
 Revision ID: v0.3.0.b

@@ -88,6 +88,9 @@ async def _on_store_unavailable(request: Request, exc: Exception) -> JSONRespons
 
 
 async def _on_limit_reached(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, LimitReached)
+    if exc.lasting:
+        return problem_response(request, 507, str(exc), slug="limit-reached")
     return problem_response(request, 429, str(exc), slug="limit-reached", headers={"Retry-After": "30"})
 
 
@@ -144,8 +147,9 @@ def documented(*statuses: int) -> dict[int | str, dict[str, Any]]:
         415: "the body's Content-Type is not one this operation takes",
         422: "invalid request; `errors` names each field and the reason",
         429: "too many at once: event streams open (FINALDRIVE_MAX_STREAMS_PER_CLIENT, FINALDRIVE_MAX_STREAMS), "
-             "jobs unfinished (FINALDRIVE_MAX_ACTIVE_JOBS), recordings pending (FINALDRIVE_MAX_PENDING_RECORDINGS) "
-             "or road profiles stored (FINALDRIVE_MAX_PROFILES); retry after Retry-After seconds",
+             "jobs unfinished (FINALDRIVE_MAX_ACTIVE_JOBS) or recordings pending (FINALDRIVE_MAX_PENDING_RECORDINGS); "
+             "retry after Retry-After seconds",
+        507: "the store keeps as many road profiles as FINALDRIVE_MAX_PROFILES allows",
         503: "the results store is unavailable (locked, full or unreachable), or the server is busy rendering "
              "(plots, points); retry after Retry-After seconds",
     }

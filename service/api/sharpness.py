@@ -19,14 +19,22 @@ import numpy as np
 from sqlalchemy import select, update
 from sqlalchemy.orm import Session
 
-from finaldrive.engine import Design, finite_differences, sensitivity_stencil, spread
+from finaldrive.engine import (
+    Design,
+    default_vehicle,
+    finite_differences,
+    load_vehicle_dict,
+    sensitivity_stencil,
+    spread,
+    upper_limits,
+)
 from finaldrive.service.api.problems import ApiProblem, validation_problem
 from finaldrive.service.db.models import TERMINAL_STATES, Evaluation, Generation, Job, JobRoad, JobState
 from finaldrive.service.db.repository import job_by_idempotency_key, roads_of
 from finaldrive.service.db.results import last_generations
 from finaldrive.service.db.summaries import aggregate_sharpness, road_sharpness
 from finaldrive.service.jobs.plan import PlanError
-from finaldrive.service.jobs.submit import IdempotencyKeyReused, submit_job
+from finaldrive.service.jobs.submit import IdempotencyKeyReused, request_hash, submit_job
 from finaldrive.service.schemas import JobSpec, PopulationOut, SharpnessOut
 from finaldrive.service.services import Services
 
@@ -100,30 +108,30 @@ def sensitivity_key(job_id: int) -> str:
 
 
 def sensitivity_job(services: Services, job: Job) -> Job:
-    """The job's sensitivity job, queued now unless one exists that has not failed or been cancelled
-    (such a one gives its key up: this request queues it again). 409 while ``job`` has not finished:
-    its best may still change."""
+    """The job's sensitivity job, queued now unless it exists (409 while ``job`` has not finished: its
+    best may still change). One that was cancelled, or that is not this job's stencil (a client may
+    have used its key), gives its key up and the stencil is queued anew; a failed one is answered."""
     if job.state not in {s.value for s in TERMINAL_STATES}:
         raise ApiProblem(409, f"job {job.id} is {job.state}: ask for its sensitivity once it has finished",
                          slug="not-finished")
-    with services.db.read() as session:
-        existing = job_by_idempotency_key(session, sensitivity_key(job.id))
-    if existing is not None and existing.state not in (JobState.failed.value, JobState.cancelled.value):
-        return existing
-    if existing is not None:
-        with services.db.write() as session:
-            session.execute(update(Job).where(Job.id == existing.id).values(idempotency_key=None))
     with services.db.read() as session:
         bests = session.execute(
             select(JobRoad.spec, Evaluation.a2_deg, Evaluation.l2_m, Evaluation.rws_m)
             .join(Evaluation, Evaluation.id == JobRoad.best_evaluation_id)
             .where(JobRoad.job_id == job.id).order_by(JobRoad.road_index)).all()
+        existing = job_by_idempotency_key(session, sensitivity_key(job.id))
     if not bests:
         raise ApiProblem(409, f"job {job.id} has no successful evaluation to differentiate at", slug="no-result")
     source = JobSpec.model_validate(job.spec)
+    upper = _upper(job)
+    rows = [stencil(b.a2_deg, b.l2_m, b.rws_m, upper)[0] for b in bests]
     spec = JobSpec(kind="designs", roads=[b.spec for b in bests], settings=source.settings, vehicle=source.vehicle,
-                   designs=[[(math.degrees(a2), l2, rws) for a2, l2, rws in stencil(b.a2_deg, b.l2_m, b.rws_m)[0]]
-                            for b in bests])
+                   designs=[[(math.degrees(a2), l2, rws) for a2, l2, rws in r] for r in rows])
+    if existing is not None:
+        if existing.request_hash == request_hash(spec.normalised()) and existing.state != JobState.cancelled.value:
+            return existing
+        with services.db.write() as session:
+            session.execute(update(Job).where(Job.id == existing.id).values(idempotency_key=None))
     settings = services.settings
     try:
         created, _ = submit_job(services.db, spec, idempotency_key=sensitivity_key(job.id),
@@ -138,9 +146,16 @@ def sensitivity_job(services: Services, job: Job) -> Job:
     return created
 
 
-def stencil(a2_deg: float, l2_m: float, rws_m: float) -> tuple[np.ndarray, dict[str, str]]:
+def _upper(job: Job) -> tuple[float, float]:
+    """The largest L2 and R_WS [m] the job's vehicle allows (the stencil steps back from them)."""
+    vehicle = job.spec.get("vehicle")
+    return upper_limits(default_vehicle() if vehicle is None else load_vehicle_dict(vehicle))
+
+
+def stencil(a2_deg: float, l2_m: float, rws_m: float, upper: tuple[float, float]
+            ) -> tuple[np.ndarray, dict[str, str]]:
     """The finite-difference designs (rows a2 [rad], L2, R_WS) at a best design, and each variable's scheme."""
-    return sensitivity_stencil(Design(math.radians(a2_deg), l2_m, rws_m))
+    return sensitivity_stencil(Design(math.radians(a2_deg), l2_m, rws_m), upper=upper)
 
 
 def stored_sensitivities(session: Session, source: Job, designs_job: Job) -> dict[int, dict[str, Any]]:
@@ -155,12 +170,13 @@ def stored_sensitivities(session: Session, source: Job, designs_job: Job) -> dic
         if r.status == "ok" and r.distance_m is not None and r.fitness_m is not None:
             values.setdefault(r.road_index, {})[r.candidate] = (r.distance_m, r.fitness_m)
     out: dict[int, dict[str, Any]] = {}
+    upper = _upper(source)
     for road, _ in roads_of(session, [designs_job.id])[designs_job.id]:
         found = values.get(road.road_index, {})
         index, best = bests.get(road.spec, (None, None))
         if index is None or best is None or len(found) != len(designs_job.spec["designs"][road.road_index]):
             continue
-        _, schemes = stencil(best.a2_deg, best.l2_m, best.rws_m)
+        _, schemes = stencil(best.a2_deg, best.l2_m, best.rws_m, upper)
         d, f = zip(*(found[c] for c in sorted(found)), strict=True)
         out[index] = finite_differences(schemes, np.array(d), np.array(f))
     return out

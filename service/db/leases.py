@@ -59,7 +59,7 @@ def register_scheduler(session: Session, scheduler_id: str, *, host: str, pid: i
     else:
         row.host, row.pid, row.executor, row.capacity = host, pid, executor, capacity
         row.started_at = row.heartbeat_at = now
-        row.stopped_at = None
+        row.stopped_at = row.store_error = None  # its writer says again if results still cannot be stored
     return scheduler_id
 
 

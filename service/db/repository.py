@@ -6,11 +6,12 @@ in :mod:`finaldrive.service.db.leases` and :mod:`finaldrive.service.db.results`.
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Sequence
 from datetime import UTC, datetime, timedelta
 from typing import Any
 
-from sqlalchemy import Row, func, or_, select, update
+from sqlalchemy import Row, func, or_, select, text, update
 from sqlalchemy.orm import Session, undefer
 
 from finaldrive.engine import Road
@@ -91,14 +92,25 @@ def cancel_job(session: Session, job_id: int) -> bool:
 
 
 class LimitReached(Exception):
-    """The store holds as many of something as the service allows (answered 429 with the setting)."""
+    """The store holds as many of something as the service allows: 429 with the setting when room is
+    made by time (jobs, recordings finish), else 507 (``lasting``: road profiles are kept)."""
+
+    def __init__(self, detail: str, *, lasting: bool = False) -> None:
+        super().__init__(detail)
+        self.lasting = lasting
 
 
-def check_room(session: Session, what: str, count_query: Any, limit: int, setting: str) -> None:
-    """Raise :class:`LimitReached` if ``count_query`` (a count in this transaction) is at ``limit``."""
+def check_room(session: Session, what: str, count_query: Any, limit: int, setting: str, *,
+               lasting: bool = False) -> None:
+    """Raise :class:`LimitReached` if ``count_query`` (a count in this transaction) is at ``limit``. On
+    PostgreSQL the transaction first takes an advisory lock of its own for ``setting``, so concurrent
+    requests count one after another (SQLite's write transactions are serial already)."""
+    if session.get_bind().dialect.name == "postgresql":
+        session.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": zlib.crc32(setting.encode())})
     count = int(session.scalar(count_query) or 0)
     if count >= limit:
-        raise LimitReached(f"{count} {what} already, the limit is {limit} ({setting}); retry once some have finished")
+        then = "raise the setting" if lasting else "retry once some have finished"
+        raise LimitReached(f"{count} {what} already, the limit is {limit} ({setting}); {then}", lasting=lasting)
 
 
 def active_jobs_count() -> Any:

@@ -92,7 +92,10 @@ _IDLE_WAIT_S, _IDLE_POLL_S = 0.02, 0.2
 #: Between heartbeats, a scheduler with room for a job looks this often for a newly queued one (a
 #: read) and claims it at once rather than at the next heartbeat [s].
 _LOOK_S = 0.2
-#: Times a job found with a hole in the store is given back to resume before it is failed.
+#: The heartbeat thread renews the leases while the loop is busy in one turn, for at most this long [s]
+#: (a cold compile of the engine took 281 s on a loaded machine); beyond it the loop is taken as stuck.
+_STUCK_S = 600.0
+#: Times a job found with a hole in the store is given back to resume, by one scheduler, before it is failed.
 _MAX_REOPEN = 2
 
 
@@ -168,6 +171,7 @@ class Scheduler:
         self._next_flush = 0.0
         self._reopened: dict[int, int] = {}   # job -> times re-opened for a hole in the store
         self._beaten = 0.0                    # when the last heartbeat was stored (monotonic)
+        self._turned = time.monotonic()       # when the loop last began a turn
 
     # ------------------------------------------------------------------ the loop
     def run(self, stop: threading.Event) -> None:
@@ -199,14 +203,17 @@ class Scheduler:
         not cost the scheduler its jobs. A thread of its own, with a store guard of its own."""
         guard = Guard(self.db, f"scheduler {self.id} (heartbeat)")
         while not done.wait(self.config.heartbeat_s / 2):
-            late = self._registered and time.monotonic() > self._beaten + 1.5 * self.config.heartbeat_s
+            now = time.monotonic()
+            if now - self._turned > _STUCK_S:  # a loop silent this long is stuck: its leases lapse, others resume
+                continue
+            late = self._registered and now > self._beaten + 1.5 * self.config.heartbeat_s
             if late and guard(lambda s: beat(s, self.id, lease_s=self.config.lease_s,
                                              capacity=self.executor.capacity), "heartbeat") is not None:
                 self._beaten = time.monotonic()
 
     def turn(self, timeout: float) -> int:
         """One turn of the loop (tests drive it step by step); returns how many tasks finished."""
-        now = time.monotonic()
+        now = self._turned = time.monotonic()
         if now < self._next_beat and now >= self._next_look and len(self.jobs) < self.config.max_jobs:
             self._next_look = now + _LOOK_S
             if self._new_job_queued():

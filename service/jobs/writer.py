@@ -140,7 +140,8 @@ class Writer:
         self._waiting: dict[int, Writes] = {}       # job -> its writes not yet taken by the thread
         self._busy: dict[int, int] = {}             # job -> rows+generations being written now
         self._lost: list[int] = []
-        self._reported: str | None = None          # the failure recorded in the scheduler's row
+        self._reported: str | None = "unknown"     # the failure recorded in the scheduler's row (unknown: cleared
+                                                    # by the first store that passes)
         self._stop = False
         self._thread = threading.Thread(target=self._run, name="finaldrive-writer", daemon=True)
         self._thread.start()

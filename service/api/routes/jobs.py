@@ -29,6 +29,8 @@ from finaldrive.service.services import Services
 from finaldrive.service.status_cache import Snapshot
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
+#: Idempotency-Keys the service keeps for itself (finaldrive.service.api.sharpness.sensitivity_key).
+RESERVED_KEY_PREFIX = "sensitivity:"
 
 
 @router.post(
@@ -47,6 +49,9 @@ def submit(
     spec: JobSpec, services: ServicesDep, response: Response,
     idempotency_key: Annotated[str | None, Header(max_length=255)] = None,
 ) -> JobOut:
+    if idempotency_key is not None and idempotency_key.startswith(RESERVED_KEY_PREFIX):
+        raise validation_problem(("header", "idempotency-key"), f"keys starting with {RESERVED_KEY_PREFIX!r} are the "
+                                 "service's own (a job's sensitivity job)")
     try:
         job, created = submit_job(
             services.db, spec, idempotency_key=idempotency_key,

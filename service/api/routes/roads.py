@@ -41,7 +41,7 @@ def roads() -> list[RoadOut]:
 @router.post(
     "", status_code=201, response_model=RoadProfileOut,
     responses={200: {"model": RoadProfileOut, "description": "a profile with the same points exists: it is returned"},
-               **documented(400, 401, 413, 415, 422, 429)},
+               **documented(400, 401, 413, 415, 422, 507)},
     openapi_extra={"requestBody": {"required": True, "content": {
         "application/json": {"schema": RoadProfileIn.model_json_schema()},
         "text/csv": {"schema": {"type": "string", "description": "lines x,y [m]; an optional header line, # comments"}},
@@ -103,7 +103,7 @@ def _store(services: Services, road: Road) -> tuple[RoadProfileOut, bool]:
     try:
         with services.db.write() as session:
             check_room(session, "road profiles stored", profiles_count(), services.settings.max_profiles,
-                       "FINALDRIVE_MAX_PROFILES")
+                       "FINALDRIVE_MAX_PROFILES", lasting=True)
             return _out(create_profile(session, road, name=road.name, digest=digest)), True
     except IntegrityError:  # the same points uploaded concurrently
         with services.db.read() as session:

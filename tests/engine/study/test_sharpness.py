@@ -8,7 +8,20 @@ import math
 import numpy as np
 import pytest
 
-from finaldrive.engine import Design, Road, SimSettings, angle_arc, near_optimal, sensitivities, simulate
+from finaldrive.engine import (
+    SENSITIVITY_STEPS,
+    Design,
+    Road,
+    SimSettings,
+    angle_arc,
+    default_vehicle,
+    finite_differences,
+    near_optimal,
+    sensitivities,
+    sensitivity_stencil,
+    simulate,
+    upper_limits,
+)
 
 SHORT = SimSettings(duration=0.5)
 
@@ -57,3 +70,15 @@ def test_sensitivity_is_the_slope_of_the_simulated_distance(vehicle):
     slope_per_mm = np.polyfit(1000 * steps, d, 1)[0]
     assert s["ddistance_dl2_m_per_m"] == pytest.approx(1000 * slope_per_mm, rel=0.05, abs=1e-3)
     assert math.isfinite(s["dfitness_drws_m_per_m"])
+
+
+def test_the_stencil_steps_back_from_the_design_limits() -> None:
+    """A best at the largest L2 and R_WS the vehicle allows: backward differences, no design beyond."""
+    vehicle = default_vehicle()
+    upper = upper_limits(vehicle)
+    rows, schemes = sensitivity_stencil(Design(1.0, upper[0], upper[1]), upper=upper)
+    assert schemes == {"a2_deg": "central", "l2_m": "backward", "rws_m": "backward"}
+    assert (rows[:, 1] <= upper[0]).all() and (rows[:, 2] <= upper[1]).all()
+    assert rows[3, 1] == upper[0] and rows[4, 1] == upper[0] - SENSITIVITY_STEPS["l2_m"]
+    distance = fitness = rows[:, 1] * 3.0  # a linear function of L2: its slope, whatever the scheme
+    assert finite_differences(schemes, distance, fitness)["ddistance_dl2_m_per_m"] == pytest.approx(3.0)

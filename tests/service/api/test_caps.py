@@ -1,5 +1,5 @@
-"""What one client may make the service keep: unfinished jobs, pending recordings and stored road
-profiles are capped (429 naming the setting); an Idempotency-Key replays its job only for a while;
+"""What one client may make the service keep: unfinished jobs and pending recordings are capped (429
+naming the setting), stored road profiles too (507); an Idempotency-Key replays its job only for a while;
 /v1/health says at once when a scheduler's results cannot be stored."""
 
 from __future__ import annotations
@@ -50,8 +50,9 @@ def test_pending_recordings_and_stored_profiles_are_capped(capped: TestClient) -
     first = {"name": "one", "points": [[0, 0], [1, 0.01], [2, 0]]}
     assert capped.post("/v1/roads", json=first).status_code == 201
     assert capped.post("/v1/roads", json=first).status_code == 200  # the same points: no new profile
-    _limited(capped.post("/v1/roads", json={"name": "two", "points": [[0, 0], [1, 0.02], [2, 0]]}),
-             "FINALDRIVE_MAX_PROFILES")
+    full = capped.post("/v1/roads", json={"name": "two", "points": [[0, 0], [1, 0.02], [2, 0]]})
+    assert full.status_code == 507 and "Retry-After" not in full.headers  # profiles are kept: no waiting helps
+    assert "FINALDRIVE_MAX_PROFILES" in full.json()["detail"]
 
 
 def test_an_idempotency_key_expires(capped: TestClient) -> None:
@@ -74,8 +75,8 @@ def test_health_is_503_at_once_when_a_live_schedulers_results_cannot_be_stored(t
             with db.write() as session:
                 report_store_error(session, "s1", "database or disk is full")
             sick = client.get("/v1/health")
-            with db.write() as session:
-                report_store_error(session, "s1", None)
+            with db.write() as session:  # the same scheduler restarted: its writer has yet to say
+                register_scheduler(session, "s1", host="h", pid=2, executor="serial", capacity=1)
             assert client.get("/v1/health").status_code == 200
         finally:
             db.dispose()

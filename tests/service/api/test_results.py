@@ -10,7 +10,7 @@ import time
 import pytest
 from fastapi.testclient import TestClient
 
-from finaldrive.engine import finite_differences, resolve_roads
+from finaldrive.engine import default_vehicle, finite_differences, resolve_roads, upper_limits
 from finaldrive.service.api.routes import results
 from finaldrive.service.api.sharpness import stencil
 from finaldrive.service.db import columns
@@ -73,7 +73,7 @@ def test_best_sensitivity_is_simulated_by_the_scheduler(client: TestClient, fake
     assert done.status_code == 200 and done.json()["sensitivity_state"] == "succeeded"
     s = done.json()["sharpness"][0]["sensitivity"]
     best = job["roads"][0]["best"]
-    rows, schemes = stencil(best["a2_deg"], best["l2_m"], best["rws_m"])
+    rows, schemes = stencil(best["a2_deg"], best["l2_m"], best["rws_m"], upper_limits(default_vehicle()))
     toy = toy_batch(rows, resolve_roads("flat")[0].road)
     expected = finite_differences(schemes, toy.distance_m, toy.fitness_m)
     assert s["simulations"] == 7 and s["schemes"] == schemes
@@ -130,3 +130,9 @@ def test_a_designs_job_evaluates_each_roads_own_designs(client: TestClient) -> N
     for bad, field in wrong:
         r = client.post("/v1/jobs", json=bad)
         assert r.status_code == 422 and field in r.text, bad
+
+
+def test_a_client_cannot_take_a_sensitivity_key(client: TestClient) -> None:
+    job = wait_done(client, client.post("/v1/jobs", json=SWEEP | {"roads": ["flat"]}).json()["id"])
+    r = client.post("/v1/jobs", json=SWEEP, headers={"Idempotency-Key": f"sensitivity:{job['id']}"})
+    assert r.status_code == 422 and "idempotency-key" in r.json()["detail"]
