@@ -11,9 +11,21 @@ evaluations, submitted through the service's own submission path into a fresh st
 unless ``--db``). Before timing, every Ray worker is started (one sleeping task a CPU), so the
 figure is the scheduler's, not Ray's start-up.
 
-Printed (JSON with ``--json``): ``ideal_s`` (total sleep / CPUs), ``wall_s`` (submission to the job's
-end), ``efficiency`` (ideal_s / wall_s), ``peak_in_flight`` (most tasks in flight at once),
-``evaluations_per_s`` (stored), with the machine and the settings.
+The plan ``big`` is two jobs submitted together: a dense sweep of 1,018,080 evaluations over 4 roads
+(a2 every 2 deg, L2 every 2 mm, 14 R_WS) and the paper's 23 DEs (Table 10 on the 23 roads).
+
+``--executor virtual`` charges Ray's own costs, measured with the real RayExecutor (``--measure-ray``
+prints them): the driver's CPU a task (a busy loop in the submitting thread, so it takes the GIL from
+the scheduler as Ray's does), each worker's idle gap between tasks, and ``ray.wait``'s cost as a
+function of the tasks in flight (a busy loop; ``RayExecutor.poll`` calls it twice when results are
+ready). ``--executor virtual-free`` is the cost-free clock; ``--compare`` runs both and prints the
+ratio. ``--eval-dist engine`` draws each design's time (seeded, from the design) out of the wall
+times of ``--eval-designs`` random designs simulated by the engine at start-up (sine:0.04:3, the
+Table 8 box, compilation excluded); ``--eval-ms`` is then ignored.
+
+Printed (JSON with ``--json``): ``ideal_s`` (total evaluation time / CPUs), ``wall_s`` (submission to
+the jobs' end), ``efficiency`` (ideal_s / wall_s), ``peak_in_flight`` (most tasks in flight at once),
+``evaluations_per_s`` (stored), with the machine and the settings (``ray_costs``, ``eval_dist``).
 """
 
 from __future__ import annotations
@@ -21,17 +33,19 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import heapq
+import itertools
 import json
 import os
 import sys
 import tempfile
 import time
+import zlib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from finaldrive.engine import DIAGNOSTICS, BatchResult, Road, SimSettings, Vehicle
+from finaldrive.engine import DIAGNOSTICS, BatchResult, Bounds, Design, Road, SimSettings, Vehicle, simulate
 from finaldrive.service.config import Settings
 from finaldrive.service.db.models import Job
 from finaldrive.service.jobs.scheduler import Scheduler, SchedulerConfig
@@ -43,20 +57,99 @@ from finaldrive.workers import make_executor
 from finaldrive.workers.base import Done, ExecutorMixin, Shared
 from finaldrive.workers.evaluate import by_road
 
-PLANS = {"paper": {"kind": "paper-study", "roads": ["paper"]}}
+#: The jobs of each plan, submitted together.
+PLANS: dict[str, list[dict[str, Any]]] = {
+    "paper": [{"kind": "paper-study", "roads": ["paper"]}],
+    "big": [{"kind": "sweep", "roads": ["sine:0.04:3", "sine:0.04:2", "bump:0.04:0.2", "flat"],
+             "grid": "a2_deg=0:358:2,l2_m=0:0.2:0.002,rws_m=0.08:0.106:0.002"},
+            {"kind": "de", "roads": ["paper"]}],
+}
+
+# Ray's per-task costs: medians of 3 runs of ``--measure-ray`` (RayExecutor, make_executor("ray",
+# num_workers=2), Ray 2.60.0, Python 3.11.7) on the 2-core "AMD EPYC" (lscpu) of this project's
+# sessions, Linux 6.18, 2026-12-04, load average under 1 (runs: 771-981 us, 1.25-1.81 ms, 2048: 0.51-0.82 ms).
+# Issue 27 measured more on the same kind of machine (1.6-1.9 ms, 8-10 ms, 4:0.09,256:0.25,2048:4.5):
+# pass those as options to bracket the result.
+#: The driver's CPU a task, submission to result (the process's CPU time / tasks, 4 in flight) [us].
+RAY_TASK_US = 890.0
+#: A worker's idle time between the end of one task and the start of the next, 4 in flight [ms].
+RAY_GAP_MS = 1.58
+#: One ``ray.wait`` call's cost by the references in flight: "n:ms,..." (interpolated, extrapolated linearly).
+RAY_WAIT = "4:0.082,256:0.129,2048:0.584"
+
+
+def _spin(seconds: float) -> None:
+    """Hold this thread (and the GIL) for ``seconds`` of wall time, as Ray's Python-side work does."""
+    end = time.perf_counter() + seconds
+    while time.perf_counter() < end:
+        pass
+
+
+@dataclasses.dataclass(frozen=True)
+class RayCosts:
+    """Ray's per-task costs: driver CPU a task [s], worker gap [s], ``ray.wait`` [s] by in-flight count."""
+
+    task_s: float
+    gap_s: float
+    wait_points: tuple[tuple[int, float], ...]
+
+    @classmethod
+    def parse(cls, task_us: float, gap_ms: float, wait: str) -> RayCosts:
+        try:
+            points = sorted((int(n), float(ms) * 1e-3) for n, ms in (item.split(":") for item in wait.split(",")))
+        except ValueError:
+            raise SystemExit(f"--ray-wait: expected n:ms,n:ms,... not {wait!r}") from None
+        if not points or task_us < 0 or gap_ms < 0 or any(n < 0 or t < 0 for n, t in points):
+            raise SystemExit("--ray-task-us, --ray-gap-ms, --ray-wait: expected values >= 0")
+        return cls(task_us * 1e-6, gap_ms * 1e-3, tuple(points))
+
+    def wait_s(self, in_flight: int) -> float:
+        """One ``ray.wait``: interpolated between the measured points, linear beyond the last two."""
+        ns, ts = [n for n, _ in self.wait_points], [t for _, t in self.wait_points]
+        if in_flight > ns[-1] and len(ns) > 1:
+            return ts[-1] + (ts[-1] - ts[-2]) / (ns[-1] - ns[-2]) * (in_flight - ns[-1])
+        return float(np.interp(in_flight, ns, ts))
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"task_us": round(self.task_s * 1e6, 1), "gap_ms": round(self.gap_s * 1e3, 3),
+                "wait_ms": {n: round(t * 1e3, 3) for n, t in self.wait_points}}
+
+
+def engine_times(n: int, seed: int = 1, road: str = "sine:0.04:3") -> np.ndarray:
+    """The engine's wall time [s] of ``n`` random designs in the Table 8 box on ``road`` (fast method,
+    one design simulated first so that compilation is not counted)."""
+    box, rng, r, settings = Bounds(), np.random.default_rng(seed), Road.parse(road), SimSettings()
+    designs = [Design.from_deg(rng.uniform(*box.a2_deg), rng.uniform(*box.l2_m), rng.uniform(*box.rws_m))
+               for _ in range(n)]
+    simulate(designs[0], r, settings)
+    return np.array([simulate(d, r, settings).wall_s for d in designs])
+
+
+def describe_times(times: np.ndarray) -> dict[str, float]:
+    return {"n": len(times), "median_ms": round(float(np.median(times)) * 1e3, 3),
+            "p90_ms": round(float(np.percentile(times, 90)) * 1e3, 3),
+            "max_ms": round(float(times.max()) * 1e3, 3), "mean_ms": round(float(times.mean()) * 1e3, 3)}
 
 
 class SleepTask:
-    """The stand-in evaluation: ``ms`` of sleep a design, a smooth deterministic fitness, no CPU."""
+    """The stand-in evaluation: ``ms`` of sleep a design (or, with ``times``, a time drawn for each design
+    from them, seeded by the design's bytes), a smooth deterministic fitness, no CPU. Each design's
+    time is its ``wall_s``."""
 
-    def __init__(self, ms: float, *, sleep: bool = True) -> None:
-        self.ms, self.sleep = ms, sleep
+    def __init__(self, ms: float, *, sleep: bool = True, times: np.ndarray | None = None, seed: int = 0) -> None:
+        self.ms, self.sleep, self.times, self.seed = ms, sleep, times, seed
 
     def __call__(self, rows: np.ndarray, roads: tuple[Road, ...], settings: SimSettings,
                  vehicle: Vehicle | None) -> list[tuple[int, BatchResult]]:
+        out = [(road, self._results(x)) for road, x in by_road(rows)]
         if self.sleep:
-            time.sleep(self.ms * 1e-3 * len(rows))
-        return [(road, self._results(x)) for road, x in by_road(rows)]
+            time.sleep(sum(float(result.wall_s.sum()) for _, result in out))
+        return out
+
+    def _wall_s(self, x: np.ndarray) -> np.ndarray:
+        if self.times is None:
+            return np.full(len(x), self.ms * 1e-3)
+        return np.array([self.times[zlib.crc32(row.tobytes(), self.seed) % len(self.times)] for row in x])
 
     def _results(self, x: np.ndarray) -> BatchResult:
         n = len(x)
@@ -64,21 +157,24 @@ class SleepTask:
         ones, nan = np.ones(n), np.full(n, np.nan)
         return BatchResult(
             designs=x, distance_m=fitness, squat_ratio=ones, slack_m=0.0 * ones, fitness_m=fitness,
-            chain_length_m=ones, wall_s=np.full(n, self.ms * 1e-3), status=("ok",) * n, reason=("",) * n,
+            chain_length_m=ones, wall_s=self._wall_s(x), status=("ok",) * n, reason=("",) * n,
             **dict.fromkeys(DIAGNOSTICS, nan))
 
 
 class VirtualCluster(ExecutorMixin):
-    """``cpus`` CPUs on a clock, no processes: a task holds a CPU for ``ms`` a design (queued
-    first-in first-out while none is free) and is reported when that time has passed on the wall
-    clock. Its result is computed at submission (the stand-in told not to sleep), with the
-    in-worker times it would have had. The scheduler and the store
-    get the whole machine, so the figure is theirs alone, free of Ray's per-worker cost.
+    """``cpus`` CPUs on a clock, no processes: a task holds a CPU for its designs' times (their
+    ``wall_s``; queued first-in first-out while no CPU is free) and is reported when that time has
+    passed on the wall clock. Its result is computed at submission (the stand-in told not to sleep),
+    with the in-worker times it would have had. With ``costs`` the driver pays Ray's: ``task_s`` of
+    busy loop at each submit, ``wait_s(in flight)`` at each poll (twice when results are ready), and
+    a CPU is idle ``gap_s`` after each task (reported to the scheduler as the task's ``idle_s``).
+    Without, the scheduler and the store get the whole machine, so the figure is theirs alone.
     """
 
-    def __init__(self, cpus: int, ms: float) -> None:
+    def __init__(self, cpus: int, costs: RayCosts | None = None) -> None:
         super().__init__()
-        self.num_workers, self.capacity, self.ms = cpus, 2 * cpus, ms
+        self.num_workers, self.capacity, self.costs = cpus, 2 * cpus, costs
+        self.held_s = 0.0                                 # the designs' time of every task submitted
         self._ids = 0
         self._free_at = [0.0] * cpus                      # heap: when each CPU becomes free
         self._pending: list[tuple[float, int, Any]] = []  # heap: (finish time, task, result)
@@ -91,11 +187,20 @@ class VirtualCluster(ExecutorMixin):
 
     def submit(self, fn: Any, batch: Any, *shared: Shared) -> int:
         values = [handle.ref for handle in shared]
-        held = self.ms * 1e-3 * len(batch)
-        result = dataclasses.replace(fn(batch, *values), busy_s=held, compute_s=held)  # as if it had slept
-        start = max(time.perf_counter(), heapq.heappop(self._free_at))
+        timed = fn(batch, *values)
+        held = sum(float(result.wall_s.sum()) for _, result in timed.result)
+        self.held_s += held
+        if self.costs is None:
+            result = dataclasses.replace(timed, busy_s=held, compute_s=held)  # as if it had slept
+            start = max(time.perf_counter(), heapq.heappop(self._free_at))
+        else:
+            _spin(self.costs.task_s)
+            free = heapq.heappop(self._free_at)            # the previous task's end + the gap
+            start = max(time.perf_counter(), free)
+            result = dataclasses.replace(timed, busy_s=held, compute_s=held,
+                                         idle_s=start - free + self.costs.gap_s)
         end = start + held
-        heapq.heappush(self._free_at, end)
+        heapq.heappush(self._free_at, end + (self.costs.gap_s if self.costs else 0.0))
         self._ids += 1
         heapq.heappush(self._pending, (end, self._ids, result))
         return self._ids
@@ -107,9 +212,13 @@ class VirtualCluster(ExecutorMixin):
         if wait > 0:
             time.sleep(wait)
         now, out = time.perf_counter(), []
+        if self.costs is not None:
+            _spin(self.costs.wait_s(len(self._pending)))
         while self._pending and self._pending[0][0] <= now:
             _, task, result = heapq.heappop(self._pending)
             out.append(Done(task, result=result))
+        if self.costs is not None and out and self._pending:   # poll's second ray.wait, on the rest
+            _spin(self.costs.wait_s(len(self._pending)))
         return out
 
     def cancel(self, tasks: Any) -> None:
@@ -146,29 +255,82 @@ def _count_submissions(executor: Any) -> list[int]:
     return count
 
 
-def run(cpus: int, eval_ms: float, plan: str, db_url: str | None, executor_kind: str) -> dict[str, Any]:
+def _stamp(seconds: float) -> tuple[int, float, float]:
+    """A measuring task: (process id, start, end) on the wall clock around ``seconds`` of sleep."""
+    start = time.time()
+    time.sleep(seconds)
+    return os.getpid(), start, time.time()
+
+
+def measure_ray(tasks: int = 400, in_flight: tuple[int, ...] = (4, 256, 2048), calls: int = 30) -> dict[str, Any]:
+    """Ray's per-task costs with the real RayExecutor on 2 local CPUs (medians): the driver's CPU a
+    task and each worker's gap between tasks, ``tasks`` tasks of 1 ms kept 4 in flight as the
+    scheduler does; then ``calls`` timed ``ray.wait(refs, num_returns=1, timeout=0)`` (``wait_ms``) and
+    with ``num_returns=len(refs)`` (``wait_all_ms``, poll's second call) with each count of long tasks
+    in flight, which are then cancelled."""
+    import ray
+
+    executor: Any = make_executor("ray", num_workers=2)
+    try:
+        _warm(executor, 2)
+        stamps: list[tuple[int, float, float]] = []
+        submitted, cpu0, wall0 = 0, time.process_time(), time.perf_counter()
+        while len(stamps) < tasks:
+            while submitted < tasks and executor.in_flight() < 4:
+                executor.submit(_stamp, 0.001)
+                submitted += 1
+            stamps += [done.result for done in executor.poll(5.0)]
+        cpu_s, wall_s = time.process_time() - cpu0, time.perf_counter() - wall0
+        gaps = [b[1] - a[2] for pid in {s[0] for s in stamps}
+                for a, b in itertools.pairwise(sorted(s for s in stamps if s[0] == pid))]
+        waits: dict[int, float] = {}
+        waits_all: dict[int, float] = {}
+        for n in in_flight:
+            ids = [executor.submit(time.sleep, 60.0) for _ in range(n)]
+            refs = list(executor._refs)
+            for out, returns in ((waits, 1), (waits_all, n)):
+                walls = []
+                for _ in range(calls):
+                    t0 = time.perf_counter()
+                    ray.wait(refs, num_returns=returns, timeout=0)
+                    walls.append(time.perf_counter() - t0)
+                out[n] = round(float(np.median(walls)) * 1e3, 3)
+            executor.cancel(ids)
+            executor.poll(0.0)
+    finally:
+        executor.close()
+    return {"ray": ray.__version__, "tasks": tasks, "task_us": round(cpu_s / tasks * 1e6, 1),
+            "tasks_per_s": round(tasks / wall_s, 1), "gap_ms": round(float(np.median(gaps)) * 1e3, 3),
+            "gap_p90_ms": round(float(np.percentile(gaps, 90)) * 1e3, 3), "wait_ms": waits,
+            "wait_all_ms": waits_all,
+            "ray_wait": ",".join(f"{n}:{ms}" for n, ms in waits.items()), "machine": describe()}
+
+
+def run(cpus: int, plan: str, db_url: str | None, executor_kind: str, times: np.ndarray | None, eval_ms: float,
+        costs: RayCosts | None) -> dict[str, Any]:
     tmp = tempfile.TemporaryDirectory(prefix="finaldrive-bench-")
     url = db_url or f"sqlite:///{Path(tmp.name) / 'bench.db'}"
     settings = Settings(db_url=url, executor="ray", num_workers=cpus)
     db = open_database(settings)  # as finaldrive.service.jobs.scheduler.run_scheduler
-    executor: Any = (VirtualCluster(cpus, eval_ms) if executor_kind == "virtual"
-                     else make_executor("ray", num_workers=cpus))
+    virtual = executor_kind != "ray"
+    cluster = VirtualCluster(cpus, costs if executor_kind == "virtual" else None) if virtual else None
+    executor: Any = cluster or make_executor("ray", num_workers=cpus)
     try:
-        if executor_kind == "ray":
+        if not virtual:
             _warm(executor, cpus)
-        task = SleepTask(eval_ms, sleep=executor_kind == "ray")
+        task = SleepTask(eval_ms, sleep=not virtual, times=times)
         tasks = _count_submissions(executor)
-        scheduler = Scheduler(db, executor, task=task, warmup=None, executor_kind=executor_kind,
+        scheduler = Scheduler(db, executor, task=task, warmup=None, executor_kind="virtual" if virtual else "ray",
                               config=SchedulerConfig(recordings=False))
         start = time.perf_counter()
-        job, _ = submit_job(db, JobSpec.model_validate(PLANS[plan]), idempotency_key=None,
-                            max_evaluations=10**9, max_cpu_hours=1e9)
+        jobs = [submit_job(db, JobSpec.model_validate(spec), idempotency_key=None,
+                           max_evaluations=10**9, max_cpu_hours=1e9)[0].id for spec in PLANS[plan]]
         peak = 0
 
         def done() -> bool:
             with db.read() as session:
-                state = session.get(Job, job.id).state  # type: ignore[union-attr]
-            return state in ("succeeded", "failed", "cancelled")
+                states = [session.get(Job, job).state for job in jobs]  # type: ignore[union-attr]
+            return all(state in ("succeeded", "failed", "cancelled") for state in states)
 
         while True:
             scheduler.turn(0.02)
@@ -178,15 +340,21 @@ def run(cpus: int, eval_ms: float, plan: str, db_url: str | None, executor_kind:
         wall = time.perf_counter() - start
         scheduler.shutdown()
         with db.read() as session:
-            row = session.get(Job, job.id)
-            assert row is not None
-            stored, state = row.n_done + row.n_failed, row.state
+            rows = [session.get(Job, job) for job in jobs]
+            stored = sum(row.n_done + row.n_failed for row in rows if row is not None)
+            state = ",".join(row.state for row in rows if row is not None)
     finally:
         executor.close()
         db.dispose()
         tmp.cleanup()
-    ideal = stored * eval_ms * 1e-3 / cpus
-    return {"plan": plan, "executor": executor_kind, "cpus": cpus, "eval_ms": eval_ms,
+    if cluster is not None:
+        busy = cluster.held_s
+    else:  # the same draw as the stand-in's, over as many designs: its mean
+        busy = stored * (float(times.mean()) if times is not None else eval_ms * 1e-3)
+    ideal = busy / cpus
+    return {"plan": plan, "executor": executor_kind, "cpus": cpus, "eval_ms": eval_ms if times is None else None,
+            "eval_dist": describe_times(times) if times is not None else None,
+            "ray_costs": costs.as_dict() if executor_kind == "virtual" and costs else None,
             "store": url.split(":", 1)[0], "state": state,
             "evaluations": stored, "ideal_s": round(ideal, 3), "wall_s": round(wall, 3),
             "efficiency": round(ideal / wall, 4) if wall else None, "peak_in_flight": peak,
@@ -196,21 +364,58 @@ def run(cpus: int, eval_ms: float, plan: str, db_url: str | None, executor_kind:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--cpus", type=int, required=True, help="logical CPUs of the local Ray")
-    parser.add_argument("--eval-ms", type=float, required=True, help="stand-in evaluation time a design [ms]")
+    parser.add_argument("--cpus", type=int, help="logical CPUs of the local Ray or the virtual cluster")
+    parser.add_argument("--eval-ms", type=float, help="stand-in evaluation time a design [ms]")
+    parser.add_argument("--eval-dist", choices=("engine",),
+                        help="engine: each design's time drawn from the engine's measured times (not --eval-ms)")
+    parser.add_argument("--eval-designs", type=int, default=100, help="random designs timed for --eval-dist")
     parser.add_argument("--plan", choices=sorted(PLANS), default="paper", help="what to run")
     parser.add_argument("--db", help="SQLAlchemy URL of an empty database (default: a fresh SQLite file)")
-    parser.add_argument("--executor", choices=("ray", "virtual"), default="ray",
-                        help="ray: a local Ray with --cpus CPUs; virtual: CPUs on a clock in this process "
-                             "(the scheduler and store alone, without Ray's per-worker cost)")
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--executor", choices=("ray", "virtual", "virtual-free"), default="ray",
+                        help="ray: a local Ray with --cpus CPUs; virtual: CPUs on a clock in this process, "
+                             "charging Ray's per-task costs; virtual-free: the same without Ray's costs "
+                             "(the scheduler and store alone)")
+    parser.add_argument("--compare", action="store_true",
+                        help="run virtual and virtual-free, --repeat times each, interleaved; print medians and "
+                             "their efficiency ratio")
+    parser.add_argument("--repeat", type=int, default=1, help="runs of each executor (--compare: the median)")
+    parser.add_argument("--ray-task-us", type=float, default=RAY_TASK_US, help="driver CPU a Ray task [us]")
+    parser.add_argument("--ray-gap-ms", type=float, default=RAY_GAP_MS, help="a worker's gap between tasks [ms]")
+    parser.add_argument("--ray-wait", default=RAY_WAIT, help="ray.wait cost by tasks in flight, n:ms,...")
+    parser.add_argument("--measure-ray", action="store_true",
+                        help="measure Ray's per-task costs with the real RayExecutor (2 CPUs) and print them")
+    parser.add_argument("--json", action="store_true", help="print JSON")
     args = parser.parse_args()
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
-    out = run(args.cpus, args.eval_ms, args.plan, args.db, args.executor)
-    if args.json:
-        print(json.dumps(out))
+    if args.measure_ray:
+        print(json.dumps(measure_ray()))
+        return 0
+    if args.cpus is None or args.cpus < 1 or (args.eval_dist is None and (args.eval_ms is None or args.eval_ms < 0)):
+        parser.error("--cpus (>= 1) and --eval-ms (>= 0) or --eval-dist are required")
+    if args.repeat < 1 or args.eval_designs < 1:
+        parser.error("--repeat and --eval-designs must be >= 1")
+    costs = RayCosts.parse(args.ray_task_us, args.ray_gap_ms, args.ray_wait)
+    times = engine_times(args.eval_designs) if args.eval_dist == "engine" else None
+    eval_ms = args.eval_ms if times is None else float(times.mean()) * 1e3
+    kinds = ("virtual", "virtual-free") if args.compare else (args.executor,)
+    runs: dict[str, list[dict[str, Any]]] = {kind: [] for kind in kinds}
+    for _ in range(args.repeat):
+        for kind in kinds:
+            runs[kind].append(run(args.cpus, args.plan, args.db, kind, times, eval_ms, costs))
+            if not args.json:
+                print(json.dumps(runs[kind][-1]), flush=True)
+    medians = {kind: sorted(out, key=lambda o: o["efficiency"] or 0.0)[len(out) // 2] for kind, out in runs.items()}
+    if args.compare:
+        result: dict[str, Any] = {
+            "median": medians, "runs": runs,
+            "efficiency_ratio": round(medians["virtual"]["efficiency"] / medians["virtual-free"]["efficiency"], 4)}
     else:
-        for key, value in out.items():
+        result = medians[args.executor] if args.repeat == 1 else {"median": medians[args.executor], "runs": runs}
+    if args.json:
+        print(json.dumps(result))
+    else:
+        shown = result.get("median", result)
+        for key, value in (shown if not args.compare else {"efficiency_ratio": result["efficiency_ratio"]}).items():
             print(f"{key:>18}: {value}")
     return 0
 
