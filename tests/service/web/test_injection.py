@@ -16,6 +16,7 @@ from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from finaldrive.service.api.access import COOKIE
 from tests.service.processes import Server
+from tests.service.svc_helpers import wait_done
 from tests.service.web.browser import TOKEN, Page
 
 pytestmark = pytest.mark.slow
@@ -120,12 +121,14 @@ def test_jobs_and_job_pages_show_uploaded_road_names_as_text(tab: Page, server: 
                                                "grid": "a2_deg=0:270:90,l2_m=0.04:0.08:0.04,rws_m=0.093"})
     assert job.status_code == 201, job.text
     job_id = job.json()["id"]
+    # finished first: this test is of the names, not of live updates (test_dashboard has those)
+    assert wait_done(server.client, job_id, timeout=300, poll=0.2)["state"] == "succeeded"
     dialogs = watched(tab)
     tab.goto("/")
     tab.ready()
     profiles = tab.page.inner_text("#profiles")
     assert all(name in profiles for name in NAMES), profiles
-    tab.page.wait_for_selector(f'tr[data-job="{job_id}"] .state.succeeded', timeout=120_000)
+    tab.page.wait_for_selector(f'tr[data-job="{job_id}"] .state.succeeded', timeout=30_000)
     assert_nothing_ran(tab, dialogs)
 
     tab.goto(f"/jobs/{job_id}?" + urlencode({"name": NAMES[0]}) + "#" + NAMES[1])
