@@ -13,10 +13,11 @@ import math
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from datetime import timedelta
 from typing import Any
 
 import numpy as np
-from sqlalchemy import select, update
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from finaldrive.engine import (
@@ -30,7 +31,7 @@ from finaldrive.engine import (
 )
 from finaldrive.service.api.problems import ApiProblem, validation_problem
 from finaldrive.service.db.models import TERMINAL_STATES, Evaluation, Generation, Job, JobRoad, JobState
-from finaldrive.service.db.repository import job_by_idempotency_key, roads_of
+from finaldrive.service.db.repository import expire_idempotency_key, job_by_idempotency_key, roads_of
 from finaldrive.service.db.results import last_generations
 from finaldrive.service.db.summaries import aggregate_sharpness, road_sharpness
 from finaldrive.service.jobs.plan import PlanError
@@ -131,7 +132,7 @@ def sensitivity_job(services: Services, job: Job) -> Job:
         if existing.request_hash == request_hash(spec.normalised()) and existing.state != JobState.cancelled.value:
             return existing
         with services.db.write() as session:
-            session.execute(update(Job).where(Job.id == existing.id).values(idempotency_key=None))
+            expire_idempotency_key(session, sensitivity_key(job.id), older_than=timedelta(0))
     settings = services.settings
     try:
         created, _ = submit_job(services.db, spec, idempotency_key=sensitivity_key(job.id),
