@@ -173,6 +173,11 @@ class Scheduler:
         self._beaten = 0.0                    # when the last heartbeat was stored (monotonic)
         self._turned = time.monotonic()       # when the loop last began a turn
 
+    @property
+    def registered(self) -> bool:
+        """Whether this scheduler's row is in the store (the API's health then counts it)."""
+        return self._registered
+
     # ------------------------------------------------------------------ the loop
     def run(self, stop: threading.Event) -> None:
         """Serve until ``stop`` is set; then give the jobs back and release the workers."""

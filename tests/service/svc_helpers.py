@@ -74,6 +74,9 @@ def running_scheduler(settings: Settings, task: Any, *, executor: Executor | Non
     stop = threading.Event()
     thread = threading.Thread(target=scheduler.run, args=(stop,), name="test-scheduler", daemon=True)
     thread.start()
+    deadline = time.monotonic() + 30.0
+    while not scheduler.registered and thread.is_alive() and time.monotonic() < deadline:
+        time.sleep(0.005)  # a test starts with the scheduler registered (health counts it), not racing it
     try:
         yield scheduler
     finally:
