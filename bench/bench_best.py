@@ -25,7 +25,9 @@ import psutil
 from fastapi.testclient import TestClient
 
 from finaldrive.service.config import Settings
+from finaldrive.service.db.engine import Database
 from finaldrive.service.db.migrate import upgrade
+from finaldrive.service.db.summaries import recount_explored
 from finaldrive.service.main import create_app
 
 TARGET_MB = 50.0
@@ -57,6 +59,10 @@ def build_job(path: Path, evaluations: int, roads: int) -> int:
         db.execute("UPDATE job_roads SET best_evaluation_id = (SELECT id FROM evaluations e WHERE e.job_id = "
                    "job_roads.job_id AND e.road_index = job_roads.road_index ORDER BY fitness_m DESC LIMIT 1) "
                    "WHERE job_id = ?", (job,))
+    store = Database(f"sqlite:///{path}")
+    with store.write() as session:
+        recount_explored(session, int(job))  # as the writer keeps them
+    store.dispose()
     return int(job)
 
 

@@ -47,6 +47,7 @@ import numpy as np
 
 from finaldrive.engine import DIAGNOSTICS, BatchResult, Bounds, Design, Road, SimSettings, Vehicle, simulate
 from finaldrive.service.config import Settings
+from finaldrive.service.db.engine import Database
 from finaldrive.service.db.models import Job
 from finaldrive.service.jobs.scheduler import Scheduler, SchedulerConfig
 from finaldrive.service.jobs.submit import submit_job
@@ -343,6 +344,7 @@ def run(cpus: int, plan: str, db_url: str | None, executor_kind: str, times: np.
             rows = [session.get(Job, job) for job in jobs]
             stored = sum(row.n_done + row.n_failed for row in rows if row is not None)
             state = ",".join(row.state for row in rows if row is not None)
+        size = store_bytes(db)
     finally:
         executor.close()
         db.dispose()
@@ -359,7 +361,19 @@ def run(cpus: int, plan: str, db_url: str | None, executor_kind: str, times: np.
             "evaluations": stored, "ideal_s": round(ideal, 3), "wall_s": round(wall, 3),
             "efficiency": round(ideal / wall, 4) if wall else None, "peak_in_flight": peak,
             "tasks": tasks[0], "designs_per_task": round(stored / max(1, tasks[0]), 2),
-            "evaluations_per_s": round(stored / wall, 1), "machine": describe()}
+            "evaluations_per_s": round(stored / wall, 1), "store_bytes": size,
+            "bytes_per_evaluation": round(size / max(1, stored), 1), "machine": describe()}
+
+
+def store_bytes(db: Database) -> int:
+    """What the store holds on disk: the whole SQLite file (its WAL checkpointed into it first), or on
+    PostgreSQL the evaluations table with its indexes and TOAST."""
+    with db.engine.connect() as connection:
+        if db.engine.dialect.name == "postgresql":
+            return int(connection.exec_driver_sql("SELECT pg_total_relation_size('evaluations')").scalar() or 0)
+        connection.exec_driver_sql("PRAGMA wal_checkpoint(TRUNCATE)")
+        pages = connection.exec_driver_sql("PRAGMA page_count").scalar() or 0
+        return int(pages) * int(connection.exec_driver_sql("PRAGMA page_size").scalar() or 0)
 
 
 def main() -> int:

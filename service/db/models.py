@@ -99,6 +99,28 @@ class JobRoad(Base):
     best_evaluation_id: Mapped[int | None] = mapped_column(Integer)
 
 
+class RoadExplored(Base):
+    """What a job has explored on a road, kept by the writer with each store: its successful
+    evaluations grouped by a2 in 1 deg buckets of the circle (``bucket`` -1: the designs on the
+    pivot), each group's count and ranges (a2 as an angle in [0, 360) deg). /best reads the explored
+    ranges here, not from the evaluations (finaldrive.service.db.summaries)."""
+
+    __tablename__ = "road_explored"
+
+    job_id: Mapped[int] = mapped_column(ForeignKey("jobs.id", ondelete="CASCADE"), primary_key=True)
+    road_index: Mapped[int] = mapped_column(Integer, primary_key=True)
+    bucket: Mapped[int] = mapped_column(Integer, primary_key=True)
+    n: Mapped[int] = mapped_column(Integer)
+    a2_lo_deg: Mapped[float] = mapped_column(Float)
+    a2_hi_deg: Mapped[float] = mapped_column(Float)
+    l2_lo_m: Mapped[float] = mapped_column(Float)
+    l2_hi_m: Mapped[float] = mapped_column(Float)
+    rws_lo_m: Mapped[float] = mapped_column(Float)
+    rws_hi_m: Mapped[float] = mapped_column(Float)
+    fitness_lo_m: Mapped[float] = mapped_column(Float)
+    fitness_hi_m: Mapped[float] = mapped_column(Float)
+
+
 class Evaluation(Base):
     """One simulation result of a job: a design on a road (names with units,
     docs/fields.md), with the run's
@@ -139,8 +161,6 @@ class Evaluation(Base):
         Index("ix_evaluations_job_id", "job_id", "id"),
         Index("ix_evaluations_job_road_id", "job_id", "road_index", "id"),
         Index("ix_evaluations_job_road_fitness", "job_id", "road_index", "status", "fitness_m"),  # /best
-        Index("ix_evaluations_job_road_a2", "job_id", "road_index", "status", "a2_deg", "l2_m", "rws_m", "fitness_m",
-              "distance_m"),
         Index("ix_evaluations_cache_hash", "cache_hash"),
     )
 

@@ -19,6 +19,7 @@ from sqlalchemy.orm import Session
 from finaldrive.engine import DIAGNOSTICS
 from finaldrive.service.db.leases import db_now, finish_job, owns, release_jobs
 from finaldrive.service.db.models import EvalStatus, Evaluation, Generation, Job, JobState
+from finaldrive.service.db.summaries import add_explored, recount_explored
 
 #: Rows per ``IN (...)`` query, well under SQLite's variable limit.
 _IN_CHUNK = 500
@@ -34,8 +35,9 @@ ROW_COLUMNS: tuple[str, ...] = (
     "road_index", "step", "candidate", "a2_deg", "l2_m", "rws_m", "distance_m", "squat_ratio", "slack_m", "fitness_m",
     "chain_length_m", "status", "reason", "wall_s", "cached", "cache_key", "cache_hash", "transient",
     *DIAGNOSTICS)
-ROAD, STEP, CANDIDATE, FITNESS, STATUS, CACHED = (ROW_COLUMNS.index(c) for c in (
-    "road_index", "step", "candidate", "fitness_m", "status", "cached"))
+ROAD, STEP, CANDIDATE, A2, L2, RWS, FITNESS, STATUS, CACHED = (ROW_COLUMNS.index(c) for c in (
+    "road_index", "step", "candidate", "a2_deg", "l2_m", "rws_m", "fitness_m", "status", "cached"))
+_OK = EvalStatus.ok.value
 
 #: hex digits of a cache key that make its indexed hash (60 bits: a positive BIGINT on every backend)
 HASH_DIGITS = 15
@@ -128,8 +130,8 @@ def generation_records(session: Session, job_id: int, run: int | None = None) ->
 
 def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequence[Row],
                   generations: Sequence[dict[str, Any]]) -> int:
-    """Insert evaluations (then told DE generations), bump the job's counters and each road's best;
-    returns how many evaluations were new.
+    """Insert evaluations (then told DE generations), bump the job's counters, each road's best and
+    its explored ranges (summaries.add_explored); returns how many evaluations were new.
 
     Fenced: the counters' update matches only while the scheduler owns the running job, so nothing
     is written otherwise (:class:`LeaseLost`). Rows go to the driver's ``executemany`` as they are
@@ -145,8 +147,12 @@ def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequen
     now = _bound_now(session, Evaluation)
     inserted = _insert_many(session, "evaluations", ("job_id", "created_at", *ROW_COLUMNS),
                             [(job_id, now, *row) for row in rows], ("job_id", "road_index", "step", "candidate"))
-    if inserted != len(rows):  # some slots were stored already: count the job's rows afresh
+    if inserted != len(rows):  # some slots were stored already: count the job's rows and ranges afresh
         _recount(session, job_id)
+        recount_explored(session, job_id)
+    else:
+        add_explored(session, job_id, ((row[ROAD], row[A2], row[L2], row[RWS], row[FITNESS]) for row in rows
+                                       if row[STATUS] == _OK and row[FITNESS] is not None))
     _update_best(session, job_id, rows)
     if generations:
         now = _bound_now(session, Generation)
@@ -190,16 +196,46 @@ def _bound_now(session: Session, model: Any) -> Any:
     return processor(now) if processor else now
 
 
+#: Rows from which PostgreSQL gets them by ``COPY`` into a staging table rather than ``executemany``.
+COPY_ROWS = 100
+
+
 def _insert_many(session: Session, table: str, columns: Sequence[str], values: list[Row],
                  unique: Sequence[str]) -> int:
-    """``INSERT ... ON CONFLICT (unique) DO NOTHING`` of ``values`` through the driver's executemany;
-    returns how many rows were inserted."""
+    """``INSERT ... ON CONFLICT (unique) DO NOTHING`` of ``values``; returns how many rows were inserted.
+
+    Through the driver's executemany; on PostgreSQL, from :data:`COPY_ROWS` rows, ``COPY`` into a
+    temporary table of the transaction, then one ``INSERT ... SELECT`` (COPY itself cannot skip a
+    slot stored already)."""
     if not values:
         return 0
+    if session.get_bind().dialect.name == "postgresql" and len(values) >= COPY_ROWS:
+        return _copy_many(session, table, columns, values, unique)
     marker = "?" if session.get_bind().dialect.paramstyle == "qmark" else "%s"
     sql = (f"INSERT INTO {table} ({', '.join(columns)}) VALUES ({', '.join([marker] * len(columns))}) "
            f"ON CONFLICT ({', '.join(unique)}) DO NOTHING")
     return int(session.connection().exec_driver_sql(sql, values).rowcount)
+
+
+def _copy_many(session: Session, table: str, columns: Sequence[str], values: list[Row],
+               unique: Sequence[str]) -> int:
+    """PostgreSQL: ``values`` through ``COPY`` into ``_staging_<table>`` (temporary, emptied at commit)."""
+    names = ", ".join(columns)
+    staging = f"_staging_{table}"
+    connection = session.connection()
+    connection.exec_driver_sql(f"CREATE TEMPORARY TABLE IF NOT EXISTS {staging} ON COMMIT DELETE ROWS AS "
+                               f"SELECT {names} FROM {table} WITH NO DATA")
+    raw = connection.connection.driver_connection
+    assert raw is not None
+    with raw.cursor() as cursor:
+        with cursor.copy(f"COPY {staging} ({names}) FROM STDIN") as copy:
+            for row in values:
+                copy.write_row(row)
+        cursor.execute(f"INSERT INTO {table} ({names}) SELECT {names} FROM {staging} "
+                       f"ON CONFLICT ({', '.join(unique)}) DO NOTHING")
+        inserted = cursor.rowcount
+        cursor.execute(f"TRUNCATE {staging}")  # a second insert in the same transaction starts empty
+    return int(inserted)
 
 
 def _recount(session: Session, job_id: int) -> None:

@@ -9,18 +9,18 @@ a2's shortest arc (engine :func:`~finaldrive.engine.angle_arc`) whenever its lar
 successive angles is at least a bucket wide, else (angles closer than 1 deg all around the
 circle) it is found within 1 deg.
 
-On a road, the best fitness is a seek of the index on (job, road, status, fitness), the near-optimal
-set (``fitness_m >= best - tolerance``) a range of it (a large one: a scan of the a2 index), the
-explored range of a2 two seeks a non-empty bucket of the index on (job, road, status, a2, ...) (at
-most :data:`MAX_SEEKS`; else one grouped scan of that index), the other explored ranges a scan of
-that index. A robust-de's designs are grouped (``GROUP BY`` the design) once, in the database.
+On a road, the best fitness is a seek of the index on (job, road, status, fitness) and the
+near-optimal set (``fitness_m >= best - tolerance``) a range of it; the explored ranges are read
+from ``road_explored``, the same groups over all the road's successful evaluations, which the writer
+keeps with each store (:func:`add_explored`; an index on a2 for them halved the store's ingest).
+A robust-de's designs are grouped (``GROUP BY`` the design) once, in the database.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 from sqlalchemy import Connection, text
@@ -31,11 +31,6 @@ from finaldrive.engine import CONCENTRIC_L2_M, near_summary
 #: Buckets of a2 over the circle (1 deg each).
 BUCKETS = 360
 _WIDTH_DEG = 360.0 / BUCKETS
-#: Bucket seeks of one road's explored a2 range, beyond which one grouped scan is cheaper.
-MAX_SEEKS = 2000
-#: Near-optimal sets up to this size are read through the fitness index (and the table), larger ones
-#: by a scan of the a2 index alone.
-NEAR_BY_FITNESS = 20_000
 #: Gaps within this of the widest tie (engine angle_arc).
 _TIE = 1e-9
 
@@ -49,58 +44,78 @@ def road_sharpness(session: Session, job_id: int, road_index: int, tolerance_pct
     """The near-optimal set of one road's evaluations (engine :func:`~finaldrive.engine.near_optimal`)."""
     connection = session.connection()
     _need_floor(connection)
-    m = "?" if connection.dialect.paramstyle == "qmark" else "%s"
+    m = _marker(connection)
     road = f"FROM evaluations WHERE job_id = {m} AND road_index = {m} AND status = 'ok' AND fitness_m IS NOT NULL"
     key = (job_id, road_index)
     best = connection.exec_driver_sql(f"SELECT MAX(fitness_m) {road}", key).scalar()
     if best is None:
         return near_summary(tolerance_pct, math.nan, math.nan, {}, {}, 0, 0, 0)
     tol = abs(best) * tolerance_pct / 100.0
-    size = connection.exec_driver_sql(f"SELECT COUNT(*) {road} AND fitness_m >= {m}", (*key, best - tol)).scalar()
-    # a large set: a scan of the covering a2 index beats a lookup in the table for each of its rows
-    fitness = "fitness_m" if int(size or 0) <= NEAR_BY_FITNESS else "fitness_m + 0"
-    near = connection.exec_driver_sql(f"SELECT 1, {_GROUPS} AS b, {_COLUMNS} {road} AND {fitness} >= {m} GROUP BY b",
+    near = connection.exec_driver_sql(f"SELECT 1, {_GROUPS} AS b, {_COLUMNS} {road} AND fitness_m >= {m} GROUP BY b",
                                       (*key, best - tol)).all()
-    n, l2_lo, l2_hi, rws_lo, rws_hi, f_lo = connection.exec_driver_sql(
-        f"SELECT COUNT(*), MIN(l2_m), MAX(l2_m), MIN(rws_m), MAX(rws_m), MIN(fitness_m) {road}", key).one()
-    explored = {"a2_deg": list(_arc(_a2_buckets(connection, road, key, m))), "l2_m": [l2_lo, l2_hi],
-                "rws_m": [rws_lo, rws_hi], "fitness_m": [f_lo, best]}
+    cells = connection.exec_driver_sql(
+        f"SELECT bucket, n, {', '.join(_RANGES)} FROM road_explored WHERE job_id = {m} AND road_index = {m} "
+        "ORDER BY bucket", key).all()
+    explored = {"a2_deg": list(_arc([(c[2], c[3]) for c in cells if c[0] >= 0])),
+                "l2_m": [min(c[4] for c in cells), max(c[5] for c in cells)],
+                "rws_m": [min(c[6] for c in cells), max(c[7] for c in cells)],
+                "fitness_m": [min(c[8] for c in cells), best]}
     return near_summary(tolerance_pct, best, tol, _ranges(sorted(near, key=lambda r: r[1]), distance=True),
-                        {k: [float(v) for v in r] for k, r in explored.items()}, sum(r[2] for r in near), n,
-                        sum(r[2] for r in near if r[1] < 0))
+                        {k: [float(v) for v in r] for k, r in explored.items()}, sum(r[2] for r in near),
+                        sum(c[1] for c in cells), sum(r[2] for r in near if r[1] < 0))
 
 
-def _a2_buckets(connection: Connection, road: str, key: tuple[int, int], m: str) -> list[tuple[float, float]]:
-    """(min, max) of the angles in [0, 360) of each non-empty bucket, in order, of the road's designs
-    with L2 > 0: a loose scan of the a2 index (two seeks a bucket), or one grouped scan."""
-    placed = f"{road} AND l2_m > {CONCENTRIC_L2_M!r}"
-    first = f"SELECT a2_deg {placed} AND a2_deg >= {m} ORDER BY a2_deg LIMIT 1"
-    last = f"SELECT a2_deg {placed} AND a2_deg < {m} ORDER BY a2_deg DESC LIMIT 1"
-    cursor = connection.connection.dbapi_connection.cursor()  # type: ignore[union-attr]  # thousands of tiny seeks
+#: road_explored's ranges, (low, high) pairs in the order of _COLUMNS' after the count
+_RANGES = ("a2_lo_deg", "a2_hi_deg", "l2_lo_m", "l2_hi_m", "rws_lo_m", "rws_hi_m", "fitness_lo_m", "fitness_hi_m")
+#: A point of road_explored: (road index, a2 [deg], L2 [m], R_WS [m], fitness [m]) of a successful evaluation.
+Point = tuple[int, float, float, float, float]
 
-    def seek(sql: str, bound: float) -> float | None:
-        cursor.execute(sql, (*key, bound))
-        row = cursor.fetchone()
-        return None if row is None else float(row[0])
 
-    found: dict[int, tuple[float, float]] = {}
-    low = seek(first, -math.inf)
-    try:
-        for _ in range(MAX_SEEKS // 2):
-            if low is None:
-                return [found[b] for b in sorted(found)]
-            end = (math.floor(low / _WIDTH_DEG) + 1) * _WIDTH_DEG
-            for v in (low, seek(last, end)):
-                assert v is not None
-                x = v - 360.0 * math.floor(v / 360.0)
-                b = math.floor(x / _WIDTH_DEG)
-                old = found.get(b, (x, x))
-                found[b] = (min(old[0], x), max(old[1], x))
-            low = seek(first, end)
-    finally:
-        cursor.close()
-    rows = connection.exec_driver_sql(f"SELECT {_GROUPS} AS b, MIN({_X}), MAX({_X}) {placed} GROUP BY b", key).all()
-    return [(lo, hi) for _, lo, hi in sorted(rows)]
+def add_explored(session: Session, job_id: int, points: Iterable[Point]) -> None:
+    """Merge successful evaluations into the job's ``road_explored`` groups (the writer, with each store)."""
+    cells: dict[tuple[int, int], list[float]] = {}
+    for road, a2, l2, rws, fitness in points:
+        x = a2 - 360.0 * math.floor(a2 / 360.0)  # as _X, operation for operation
+        key = (road, math.floor(x / _WIDTH_DEG) if l2 > CONCENTRIC_L2_M else -1)
+        cell = cells.get(key)
+        if cell is None:
+            cells[key] = [1, x, x, l2, l2, rws, rws, fitness, fitness]
+            continue
+        cell[0] += 1
+        for i, v in ((1, x), (3, l2), (5, rws), (7, fitness)):
+            if v < cell[i]:
+                cell[i] = v
+            if v > cell[i + 1]:
+                cell[i + 1] = v
+    if not cells:
+        return
+    connection = session.connection()
+    m = _marker(connection)
+    low, high = ("LEAST", "GREATEST") if connection.dialect.name == "postgresql" else ("MIN", "MAX")
+    merged = ", ".join(f"{name} = {low if i % 2 == 0 else high}(road_explored.{name}, excluded.{name})"
+                       for i, name in enumerate(_RANGES))
+    connection.exec_driver_sql(
+        f"INSERT INTO road_explored (job_id, road_index, bucket, n, {', '.join(_RANGES)}) "
+        f"VALUES ({', '.join([m] * (4 + len(_RANGES)))}) ON CONFLICT (job_id, road_index, bucket) DO UPDATE SET "
+        f"n = road_explored.n + excluded.n, {merged}",
+        [(job_id, road, bucket, *cell) for (road, bucket), cell in cells.items()])
+
+
+def recount_explored(session: Session, job_id: int) -> None:
+    """The job's ``road_explored`` groups computed afresh from its evaluations."""
+    connection = session.connection()
+    _need_floor(connection)
+    m = _marker(connection)
+    connection.exec_driver_sql(f"DELETE FROM road_explored WHERE job_id = {m}", (job_id,))
+    connection.exec_driver_sql(
+        f"INSERT INTO road_explored (job_id, road_index, bucket, n, {', '.join(_RANGES)}) "
+        f"SELECT job_id, road_index, {_GROUPS} AS b, COUNT(*), MIN({_X}), MAX({_X}), MIN(l2_m), MAX(l2_m), "
+        f"MIN(rws_m), MAX(rws_m), MIN(fitness_m), MAX(fitness_m) FROM evaluations WHERE job_id = {m} "
+        "AND status = 'ok' AND fitness_m IS NOT NULL GROUP BY job_id, road_index, b", (job_id,))
+
+
+def _marker(connection: Connection) -> str:
+    return "?" if connection.dialect.paramstyle == "qmark" else "%s"
 
 
 #: A robust-de's designs evaluated successfully on every one of its roads, with their aggregate score.

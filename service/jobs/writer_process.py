@@ -27,7 +27,7 @@ from collections import deque
 from multiprocessing.connection import Connection
 from typing import Any
 
-from finaldrive.service.db.engine import Database
+from finaldrive.service.db.engine import WRITER_CACHE_KIB, Database
 from finaldrive.service.jobs.writer import Writer, Writes
 
 log = logging.getLogger(__name__)
@@ -211,7 +211,7 @@ def _serve(url: str, lock_timeout_s: float, scheduler_id: str, log_level: int,
     it still drains what it has into this child)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     logging.basicConfig(level=log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    db = Database(url, lock_timeout_s=lock_timeout_s)
+    db = Database(url, lock_timeout_s=lock_timeout_s, cache_kib=WRITER_CACHE_KIB)
     sending = threading.Lock()
 
     def stored(job_id: int, seq: int, lost: bool) -> None:

@@ -13,7 +13,7 @@ from bench.bench_best import app_client, build_job, concurrent, peak_growth, tim
 from finaldrive.engine import aggregate, near_optimal
 from finaldrive.service.db.engine import Database
 from finaldrive.service.db.migrate import upgrade
-from finaldrive.service.db.summaries import aggregate_sharpness, road_sharpness
+from finaldrive.service.db.summaries import add_explored, aggregate_sharpness, recount_explored, road_sharpness
 
 
 def _store(url: str, a2: np.ndarray, l2: np.ndarray, rws: np.ndarray, fitness: list[np.ndarray]) -> Database:
@@ -32,6 +32,8 @@ def _store(url: str, a2: np.ndarray, l2: np.ndarray, rws: np.ndarray, fitness: l
                      [{"road": road, "i": i, "a2": float(a2[i]), "l2": float(l2[i]), "rws": float(rws[i]),
                        "d": float(f[i]) + 1, "f": float(f[i]), "status": "failed" if np.isnan(f[i]) else "ok"}
                       for road, f in enumerate(fitness) for i in range(len(a2))])
+    with Session(db.engine) as session, session.begin():
+        recount_explored(session, 1)  # the writer keeps them with each store (test below)
     return db
 
 
@@ -74,6 +76,28 @@ def test_near_optimal_sets_match_the_engine(store_url: str, angles: str) -> None
                 _same(aggregate_sharpness(session, 1, 2, objective, pct),
                       near_optimal(designs[unique], score, tolerance_pct=pct))
         assert road_sharpness(session, 1, 7, 0.1) == near_optimal(np.zeros((0, 3)), np.zeros(0))
+    db.dispose()
+
+
+def test_explored_ranges_kept_store_by_store_equal_their_recount(store_url: str) -> None:
+    """road_explored merged over several stores (as the writer does) holds exactly what a count of the
+    evaluations gives: counts, and a2 bucket edges to the last bit (the same operations as the SQL)."""
+    rng = np.random.default_rng(5)
+    n = 3000
+    a2 = np.concatenate([rng.uniform(-720, 720, n - 4), [0.0, -1e-13, 359.9999999999, 1e-300]])
+    l2 = np.where(rng.random(n) < 0.1, 0.0, rng.uniform(0, 0.2, n))
+    rws, f = rng.uniform(0.05, 0.2, n), 20 - rng.random(n)
+    db = _store(store_url, a2, l2, rws, [f, f[::-1].copy()])
+    with Session(db.engine) as session:
+        recounted = session.execute(text("SELECT * FROM road_explored ORDER BY road_index, bucket")).all()
+    with Session(db.engine) as session, session.begin():
+        session.execute(text("DELETE FROM road_explored"))
+        for part in np.array_split(np.arange(n), 7):
+            add_explored(session, 1, [(road, float(a2[i]), float(l2[i]), float(rws[i]), float(g[i]))
+                                      for road, g in enumerate([f, f[::-1]]) for i in part])
+    with Session(db.engine) as session:
+        merged = session.execute(text("SELECT * FROM road_explored ORDER BY road_index, bucket")).all()
+    assert len(recounted) > 300 and merged == recounted
     db.dispose()
 
 
