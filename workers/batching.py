@@ -30,6 +30,16 @@ The rule (docs/workers.md, "Batching"):
    designs so that stays under ``DRIVER_SHARE``. On a big cluster with short simulations the
    dispatcher, not the workers, would otherwise set the pace, and no number of waves helps then:
    this rule overrides rule 3's waves, not its longest task.
+5. **Waited-on work.** A request its source waits for before it can ask for more (a DE
+   generation) is latency, not throughput: its ``first`` designs (the waited-on ones queued or
+   running: the round of generations under way) are done soonest in tasks of
+   ``b* = sqrt(first d / c)`` designs, the balance between the driver handing out ``first / b``
+   tasks one after another (``d`` each) and a task's ``b`` designs running in series (``b c``).
+   Such a task holds ``min(size, max(ceil(first / N), b*))`` designs, ``size`` from rules 1-4:
+   on a cluster wide for the work (256 CPUs, 23 generations of 50 designs) rule 4's batches of
+   100+ designs would run a generation in one task; on a small one, one wave of ``first``
+   designs already fits. ``d`` is rule 4's measured driver time a task (the per-task overhead of
+   rule 2 until it is measured).
 """
 
 from __future__ import annotations
@@ -57,12 +67,14 @@ def batch_size(
     overhead_s: float,
     driver_s: float = 0.0,
     first: int | None = None,
+    waited: bool = False,
     target: float = TARGET_OVERHEAD,
     min_waves: int = MIN_WAVES,
 ) -> int:
     """Designs for the next batch (>= 1 while ``remaining`` > 0; 0 when nothing remains);
     ``driver_s``: the dispatching thread's own time a task (rule 4); ``first``: the designs that
-    start before or with this batch's request (rule 3's spread; default ``remaining``)."""
+    start before or with this batch's request (rule 3's spread; default ``remaining``); ``waited``:
+    the request is waited on (rule 5; ``first`` then counts the waited-on designs queued or running)."""
     if remaining <= 0:
         return 0
     workers = max(1, num_workers)
@@ -74,6 +86,10 @@ def batch_size(
     needed = math.ceil(max(0.0, overhead_s) / (target * per_design_s))
     keep_up = math.ceil(workers * max(0.0, driver_s) / (DRIVER_SHARE * per_design_s))
     size = max(1, min(needed, waves, longest, spread), min(keep_up, longest))
+    if waited:
+        per_task = driver_s if driver_s > 0.0 else max(0.0, overhead_s)
+        balance = math.ceil(math.sqrt((remaining if first is None else first) * per_task / per_design_s))
+        size = min(size, max(1, spread, balance))
     return min(size, remaining)
 
 
@@ -104,9 +120,10 @@ class BatchSizer:
             return self.round_trip_s
         return max(self.round_trip_s, float(statistics.median(self.idle_s)))
 
-    def next_size(self, remaining: int, driver_s: float = 0.0, first: int | None = None) -> int:
+    def next_size(self, remaining: int, driver_s: float = 0.0, first: int | None = None,
+                  waited: bool = False) -> int:
         """Designs for the next batch; ``driver_s``: the dispatcher's own time a task; ``first``:
-        the designs that start before or with the batch's request."""
+        the designs that start before or with the batch's request (waited-on ones, ``waited``)."""
         if self.designs_done == 0:
             return min(self.probe_size, max(0, remaining))
         return batch_size(
@@ -116,4 +133,5 @@ class BatchSizer:
             overhead_s=self.overhead_s,
             driver_s=driver_s,
             first=first,
+            waited=waited,
         )

@@ -67,14 +67,20 @@ class Work:
     alone: deque[Request] = field(default_factory=deque)
     #: the source's tasks started and not yet returned (kept by the dispatcher)
     in_flight: int = 0
+    #: designs of waited-on requests in those tasks (batching rule 5 counts them with the queued ones)
+    waited_in_flight: int = 0
 
     def next_request(self) -> tuple[int, int, int]:
         """Position in ``queue`` of the request to start next, the smallest (the first of equals);
-        the designs queued that go before or with it (its requests' sizes and ``alone``); and all
-        designs waiting to be started."""
+        the designs queued that go before or with it (its requests' sizes and ``alone``; for a
+        waited-on request, the waited-on ones: batching rule 5); and all designs waiting to be started."""
         sizes = [len(q) for q in self.queue]
         at = self.smallest()
-        return at, sum(n for n in sizes if n <= sizes[at]) + len(self.alone), sum(sizes) + len(self.alone)
+        if self.queue[at].waited:  # the round: waited-on designs queued or running
+            first = sum(n for n, q in zip(sizes, self.queue, strict=True) if q.waited) + self.waited_in_flight
+        else:
+            first = sum(n for n in sizes if n <= sizes[at]) + len(self.alone)
+        return at, first, sum(sizes) + len(self.alone)
 
     def smallest(self) -> int:
         """Position in ``queue`` of its smallest request (the first of equals)."""
@@ -148,6 +154,7 @@ class Dispatcher:
         for task_id in ids:
             del self._tasks[task_id]
         work.in_flight = 0
+        work.waited_in_flight = 0
         for handle in handles:
             self.executor.release(handle)
         self._turn.remove(key)
@@ -196,6 +203,7 @@ class Dispatcher:
         task_id = self.executor.submit(_apply, rows, self._fn, *handles)
         self._tasks[task_id] = _Task(work, tuple(parts), time.perf_counter())
         work.in_flight += 1
+        work.waited_in_flight += sum(len(part) for part in parts if part.waited)
 
     def _take(self, work: Work) -> list[Request]:
         """A task's requests: the smallest, cut to the batch size; then, while the size leaves room,
@@ -204,7 +212,8 @@ class Dispatcher:
         a big cluster)."""
         at, ahead, queued = work.next_request()
         assert work.sizer is not None
-        room = self._batch_size or work.sizer.next_size(queued, self.driver_s, first=ahead)
+        room = self._batch_size or work.sizer.next_size(queued, self.driver_s, first=ahead,
+                                                        waited=work.queue[at].waited)
         parts: list[Request] = []
         while True:
             request = work.queue[at]
@@ -233,6 +242,7 @@ class Dispatcher:
             if task is None:
                 continue  # its source was removed
             task.work.in_flight -= 1
+            task.work.waited_in_flight -= sum(len(part) for part in task.parts if part.waited)
             if d.cancelled:
                 continue
             work, parts = task.work, task.parts

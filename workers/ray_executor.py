@@ -7,7 +7,8 @@ its own tasks).
 
 The interface (``workers/base.py``): ``share`` is one ``ray.put``; ``submit`` one call of the
 remote function ``_run_task``, with ``max_retries`` for worker loss and ``retry_exceptions=False``;
-``poll`` is ``ray.wait``, then every ready result at once; ``cancel`` is
+``poll`` takes the results that Ray's completion callbacks have queued (``ObjectRef.future()``:
+O(1) a finished task, where ``ray.wait`` cost O(tasks in flight) a call); ``cancel`` is
 ``ray.cancel(force=True)``, which drops a queued task and kills the worker process of a running
 one (Ray starts another when needed); a ``TaskCancelledError`` means cancelled, and Ray's
 worker-loss errors after the retries mean ``lost``. ``capacity`` is 2 x the cluster's CPUs, read
@@ -38,6 +39,7 @@ What ``ray.init`` changes in this process, and what the executor does about it (
 
 from __future__ import annotations
 
+import concurrent.futures
 import contextlib
 import ctypes
 import importlib
@@ -47,7 +49,9 @@ import signal
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterable
+from functools import partial
 from typing import Any
 
 import ray
@@ -64,7 +68,7 @@ from finaldrive.workers.base import IN_FLIGHT_PER_WORKER, Done, ExecutorMixin, S
 
 #: How often ``poll`` reads the cluster's CPUs again (``capacity``) [s].
 CAPACITY_REFRESH_S = 10.0
-#: The longest single ``ray.wait`` in ``poll`` [s]: a cancel from another thread is reported within it.
+#: The longest single wait in ``poll`` [s] (a cancel from another thread also wakes it).
 POLL_SLICE_S = 0.2
 
 #: Environment variables ``ray.init`` reads or sets for token authentication; restored on close.
@@ -181,6 +185,18 @@ def _reload_auth(config: bool = True) -> None:
 _nice_added = 0
 
 
+def _outcome(future: concurrent.futures.Future[Any]) -> dict[str, Any]:
+    """A finished task's outcome (``Done``'s fields): its result, or how it ended."""
+    error = future.exception()
+    if error is None:
+        return {"result": future.result()}
+    if isinstance(error, TaskCancelledError):
+        return {"cancelled": True}
+    if isinstance(error, _WORKER_LOSS):
+        return {"lost": True}
+    return {"error": error}                    # fn raised: a RayTaskError, also an instance of fn's error
+
+
 @ray.remote
 def _run_task(niceness: int, fn: Callable[..., Any], batch: Any, *shared: Any) -> Any:
     """The one remote function: lower this worker's priority to ``niceness`` (once), run ``fn``."""
@@ -247,6 +263,8 @@ class RayExecutor(ExecutorMixin):
         self._refs: dict[ray.ObjectRef[Any], int] = {}     # in flight: result ref -> task id
         self._by_task: dict[int, ray.ObjectRef[Any]] = {}
         self._done: list[Done] = []
+        self._arrived = threading.Condition(threading.Lock())  # guards _ready; Ray's callbacks notify it
+        self._ready: deque[tuple[int, concurrent.futures.Future[Any]]] = deque()  # finished, not yet polled
         self._shared: dict[int, ray.ObjectRef[Any]] = {}   # live handles (the executor holds the only ref)
         self._closed = False
 
@@ -278,11 +296,18 @@ class RayExecutor(ExecutorMixin):
             self._ids += 1
             self._refs[ref] = self._ids
             self._by_task[self._ids] = ref
+            ref.future().add_done_callback(partial(self._arrive, self._ids))
             return self._ids
 
+    def _arrive(self, task: int, future: concurrent.futures.Future[Any]) -> None:
+        """Ray's completion callback (its own thread, or ``submit``'s if already done): queue the task."""
+        with self._arrived:
+            self._ready.append((task, future))
+            self._arrived.notify()
+
     def poll(self, timeout: float) -> list[Done]:
-        """``ray.wait`` in slices of ``POLL_SLICE_S`` (so a ``cancel`` from another thread is reported
-        promptly), then fetch every result that is ready."""
+        """The tasks finished since the last poll (waiting up to ``timeout`` s for one, in slices of
+        ``POLL_SLICE_S``): O(1) a finished task, whatever the number in flight."""
         deadline = time.monotonic() + max(0.0, timeout)
         while True:
             self._refresh_capacity()
@@ -290,42 +315,19 @@ class RayExecutor(ExecutorMixin):
                 if self._done or not self._refs:
                     done, self._done = self._done, []
                     return done
-                refs = list(self._refs)
-            wait_s = min(POLL_SLICE_S, max(0.0, deadline - time.monotonic()))
-            ready, rest = ray.wait(refs, num_returns=1, timeout=wait_s)
-            if ready and rest:
-                more, _ = ray.wait(rest, num_returns=len(rest), timeout=0)
-                ready += more
-            outcomes = self._fetch(ready)
+            with self._arrived:
+                if not self._ready:
+                    self._arrived.wait(min(POLL_SLICE_S, max(0.0, deadline - time.monotonic())))
+                ready, self._ready = self._ready, deque()
             with self._lock:
-                for ref, outcome in zip(ready, outcomes, strict=True):
-                    task = self._refs.pop(ref, None)
-                    if task is not None:          # else: cancelled meanwhile, and reported so
-                        del self._by_task[task]
-                        self._done.append(Done(task, **outcome))
+                for task, future in ready:
+                    ref = self._by_task.pop(task, None)
+                    if ref is not None:               # else: cancelled meanwhile, and reported so
+                        del self._refs[ref]
+                        self._done.append(Done(task, **_outcome(future)))
                 if self._done or not self._refs or time.monotonic() >= deadline:
                     done, self._done = self._done, []
                     return done
-
-    def _fetch(self, ready: list[ray.ObjectRef[Any]]) -> list[dict[str, Any]]:
-        """Each ready task's outcome: its result, or how it ended (``Done``'s fields)."""
-        if not ready:
-            return []
-        try:
-            return [{"result": value} for value in ray.get(ready)]
-        except Exception:
-            pass                                   # one of them failed: take them one by one
-        outcomes: list[dict[str, Any]] = []
-        for ref in ready:
-            try:
-                outcomes.append({"result": ray.get(ref)})
-            except TaskCancelledError:
-                outcomes.append({"cancelled": True})
-            except _WORKER_LOSS:
-                outcomes.append({"lost": True})
-            except Exception as error:             # fn raised: a RayTaskError, also an instance of fn's error
-                outcomes.append({"error": error})
-        return outcomes
 
     def _refresh_capacity(self) -> None:
         if self._closed or time.monotonic() - self._capacity_at < CAPACITY_REFRESH_S:
@@ -346,6 +348,8 @@ class RayExecutor(ExecutorMixin):
                 del self._refs[ref]
                 self._cancel(ref)
                 self._done.append(Done(task, cancelled=True))
+        with self._arrived:
+            self._arrived.notify_all()             # a poll waiting in another thread reports it now
 
     @staticmethod
     def _cancel(ref: ray.ObjectRef[Any]) -> None:

@@ -38,6 +38,8 @@ class Request:
     road: int
     candidates: np.ndarray
     designs: np.ndarray
+    #: the run waits for these results before it can ask for more (a DE generation, not a sweep's road)
+    waited: bool = False
 
     def __len__(self) -> int:
         return len(self.candidates)
@@ -45,12 +47,12 @@ class Request:
     def part(self, rows: np.ndarray) -> Request:
         """The same request restricted to some of its rows (positions 0..n-1)."""
         rows = np.asarray(rows, dtype=int)
-        return Request(self.run, self.step, self.road, self.candidates[rows], self.designs[rows])
+        return Request(self.run, self.step, self.road, self.candidates[rows], self.designs[rows], self.waited)
 
     def split(self, n: int) -> tuple[Request, Request]:
         """The first ``n`` rows and the rest (views, nothing copied)."""
-        return (Request(self.run, self.step, self.road, self.candidates[:n], self.designs[:n]),
-                Request(self.run, self.step, self.road, self.candidates[n:], self.designs[n:]))
+        return (Request(self.run, self.step, self.road, self.candidates[:n], self.designs[:n], self.waited),
+                Request(self.run, self.step, self.road, self.candidates[n:], self.designs[n:], self.waited))
 
 
 class SweepRun:
@@ -124,7 +126,7 @@ class DERun:
         self._table = np.full((len(self.roads), len(x)), np.nan)
         self._missing = self._table.size
         rows = np.arange(len(x))
-        return [Request(self.index, self.generation, road, rows, x) for road in self.roads]
+        return [Request(self.index, self.generation, road, rows, x, waited=True) for road in self.roads]
 
     def tell(self, road: int, step: int, candidates: np.ndarray, fitness: np.ndarray) -> bool:
         """Record results of the current generation; True when that completed it (and it was told)."""

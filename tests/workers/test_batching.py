@@ -110,3 +110,25 @@ def test_keeping_up_never_makes_tasks_longer_than_half_a_second() -> None:
 def test_an_idle_dispatcher_changes_nothing() -> None:
     args = {"remaining": 400, "num_workers": 2, "per_design_s": 0.01, "overhead_s": 0.002}
     assert batch_size(**args, driver_s=3e-4) == batch_size(**args) == math.ceil(0.002 / (TARGET_OVERHEAD * 0.01))
+
+
+def test_waited_on_work_on_a_wide_cluster_balances_hand_out_against_run_time() -> None:
+    # 23 DE generations of 50 designs (1,150) on 256 CPUs, 4 ms a design, 0.65 ms of driver a task:
+    # rule 4 alone would put a whole generation in one task; rule 5 finishes the round soonest
+    first, c, d = 1150, 0.004, 6.5e-4
+    args = {"remaining": 50_000, "num_workers": 256, "per_design_s": c, "overhead_s": 0.001, "driver_s": d}
+    bulk = batch_size(**args, first=first)
+    waited = batch_size(**args, first=first, waited=True)
+
+    def round_s(b: int) -> float:  # the driver hands the round's tasks out one by one; a task runs b designs
+        return math.ceil(first / b) * d + b * c
+
+    assert bulk >= 50 and waited == math.ceil(math.sqrt(first * d / c)) == 14
+    assert round_s(waited) < 0.5 * round_s(bulk)
+    assert all(round_s(waited) <= round_s(b) * 1.05 for b in range(1, 200))  # the best size, within rounding
+
+
+def test_waited_on_work_on_a_small_cluster_keeps_one_wave() -> None:
+    # the same round on 2 workers: rules 1-4 already run it in one wave of large tasks; rule 5 changes nothing
+    args = {"remaining": 50_000, "num_workers": 2, "per_design_s": 0.004, "overhead_s": 0.001, "driver_s": 6.5e-4}
+    assert batch_size(**args, first=1150, waited=True) == batch_size(**args, first=1150)

@@ -20,9 +20,9 @@ def task(rows: np.ndarray, roads: Any, *_: Any) -> list[tuple[int, BatchResult]]
     return [(road, toy_batch(x, roads[road])) for road, x in by_road(rows)]
 
 
-def request(n: int, road: int = 0, run: int = 0, l2: float = 0.1) -> Request:
+def request(n: int, road: int = 0, run: int = 0, l2: float = 0.1, waited: bool = False) -> Request:
     designs = np.column_stack([np.linspace(0, 1, n), np.full(n, l2), np.full(n, 0.09)])
-    return Request(run, 0, road, np.arange(n), designs)
+    return Request(run, 0, road, np.arange(n), designs, waited)
 
 
 class Sink:
@@ -127,6 +127,21 @@ def test_small_requests_share_a_task_up_to_the_batch_size() -> None:
         expected = toy_batch(part.designs, roads[part.road])
         np.testing.assert_array_equal(batch.designs, part.designs)
         np.testing.assert_array_equal(batch.fitness_m, expected.fitness_m)
+
+
+def test_waited_on_designs_count_queued_and_running() -> None:
+    """Batching rule 5's round: the waited-on designs queued or in flight (a sweep's are not)."""
+    sink = Sink()
+    executor = SerialExecutor()
+    dispatcher = Dispatcher(executor, task, batch_size=4)
+    work = sink.work("a", request(6, run=1, waited=True), request(30, road=1), request(5, run=2, waited=True))
+    dispatcher.add(work)
+    assert work.next_request()[1] == 11
+    dispatcher.fill()
+    assert dispatcher.in_flight() > 0 and work.waited_in_flight == 11 - sum(len(q) for q in work.queue if q.waited)
+    assert work.next_request()[1] == 11  # queued + running: the same round
+    drain(dispatcher, work)
+    assert work.waited_in_flight == 0 and sum(len(part) for part, _ in sink.results) == 41
 
 
 def test_about_50_ms_of_work_waits_beyond_one_task_a_worker() -> None:
