@@ -16,7 +16,7 @@ import numpy as np
 import psutil
 import pytest
 
-from finaldrive.engine import evaluate
+from finaldrive.engine import DIAGNOSTICS, evaluate
 from finaldrive.service.jobs.plan import build_plan
 from finaldrive.service.schemas import JobSpec
 from tests.service.processes import Server
@@ -104,10 +104,12 @@ def test_sweep_and_de_over_http_match_in_process(server: Any) -> None:
     items = client.get(f"/v1/jobs/{sweep_job['id']}/evaluations").json()["items"]
     by_candidate = {e["candidate"]: e for e in items}
     assert sorted(by_candidate) == list(range(len(plan.study.designs)))
-    for i, e in by_candidate.items():
-        assert e["status"] == expected.status[i]
-        if e["status"] == "ok":
-            assert e["fitness_m"] == pytest.approx(expected.fitness_m[i], rel=1e-12)
+    for i, e in by_candidate.items():  # one result record: every field as the engine gave it, to the bit
+        assert (e["status"], e["reason"]) == (expected.status[i], expected.reason[i])
+        assert [e["a2_deg"], e["l2_m"], e["rws_m"]] == [math.degrees(expected.designs[i, 0]), *expected.designs[i, 1:]]
+        for name in ("distance_m", "squat_ratio", "slack_m", "fitness_m", "chain_length_m", *DIAGNOSTICS):
+            value = float(getattr(expected, name)[i])
+            assert e[name] == (value if math.isfinite(value) else None), name
     csv = client.get(f"/v1/jobs/{sweep_job['id']}/evaluations", params={"format": "csv"}).text
     assert len(csv.strip().splitlines()) == len(plan.study.designs) + 1
 
