@@ -27,7 +27,7 @@ from sqlalchemy import event
 
 from finaldrive.engine import Request
 from finaldrive.service.config import Settings
-from finaldrive.service.db.engine import Database
+from finaldrive.service.db.engine import WRITER_CACHE_KIB, Database
 from finaldrive.service.db.leases import claim_jobs, register_scheduler
 from finaldrive.service.db.results import store_results
 from finaldrive.service.jobs.rows import rows_from_results
@@ -64,9 +64,9 @@ def _store(db: Database, rows: int, transactions: int, first: int) -> float:
     return rows * transactions / (time.perf_counter() - start)
 
 
-def _database(url: str, durable: bool) -> Database:
-    """The store as finaldrive opens it, or with every commit asynchronous."""
-    db = Database(url)
+def _database(url: str, durable: bool, cache_kib: int | None) -> Database:
+    """The store as finaldrive's writer opens it, or with every commit asynchronous."""
+    db = Database(url, cache_kib=cache_kib)
     if not durable:  # after finaldrive's own set-up of each new connection
         if db.engine.dialect.name == "postgresql":
             event.listen(db.engine, "connect", lambda c, _: c.execute("SET synchronous_commit = off"))
@@ -75,13 +75,14 @@ def _database(url: str, durable: bool) -> Database:
     return db
 
 
-def measure(url: str, rows: int, transactions: int, repeat: int) -> dict[str, object]:
+def measure(url: str, rows: int, transactions: int, repeat: int,
+            cache_kib: int | None = WRITER_CACHE_KIB) -> dict[str, object]:
     open_database(Settings(db_url=url)).dispose()  # the schema
     found: dict[bool, list[float]] = {True: [], False: []}
     store = ""
     for r in range(repeat):
         for durable in (True, False):
-            db = _database(url, durable)
+            db = _database(url, durable, cache_kib)
             store = db.engine.dialect.name
             try:
                 found[durable].append(_store(db, rows, transactions, (2 * r + int(durable)) * rows * transactions))
@@ -99,11 +100,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rows", type=int, nargs="+", default=[100, 1000, 10000], help="rows a transaction")
     parser.add_argument("--evaluations", type=int, default=20000, help="evaluations a measurement")
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--cache-kib", type=int, default=WRITER_CACHE_KIB,
+                        help="SQLite page cache of the storing connection [KiB] (the writer's; 0: SQLite's default)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         urls = args.db or [f"sqlite:///{Path(tmp) / 'commit.db'}"]
-        out = [measure(url, rows, max(1, args.evaluations // rows), args.repeat) for url in urls for rows in args.rows]
+        out = [measure(url, rows, max(1, args.evaluations // rows), args.repeat, args.cache_kib or None)
+               for url in urls for rows in args.rows]
     if args.json:
         print(json.dumps({"machine": describe(), "results": out}, indent=1))
     else:

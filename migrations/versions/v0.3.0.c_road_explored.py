@@ -3,9 +3,9 @@
 ``road_explored``: a job's successful evaluations on a road grouped by a2 in 1 deg buckets (-1: on
 the pivot), with each group's count and ranges, updated by each store of results. /best reads the
 explored ranges there. ``ix_evaluations_job_road_a2`` (eight columns, inserted at a random place for
-every evaluation) halved the store's ingest (issue 27: 38,000 -> 67,000 evaluations/s on SQLite
-with it dropped, bench in docs/performance.md) and served only those ranges. Existing jobs' ranges
-are computed here from their evaluations.
+every evaluation) served only those ranges and cost the store's ingest: ``bench/bench_commit.py``
+stores 1.31x as many evaluations a second without it (docs/performance.md, issue 27). Existing jobs'
+ranges are computed here from their evaluations.
 
 Revision ID: v0.3.0.c
 Revises: v0.3.0.b
