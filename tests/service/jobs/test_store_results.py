@@ -92,3 +92,47 @@ def test_a_job_succeeds_only_over_a_complete_store_and_a_hole_reopens_it(store_u
         db.dispose()
     assert reopened is not None and (reopened.state, reopened.owner) == ("interrupted", None)
     assert done is not None and done.state == "succeeded" and (done.n_done, done.total) == (3, 3)
+
+
+def test_bulk_stores_keep_every_value_and_skip_what_is_stored(store_url: str) -> None:
+    """Hundreds of rows a transaction (PostgreSQL: by COPY): every column read back as given, NULLs,
+    a reason with tabs, newlines and backslashes; a second store overlapping the first, in the same
+    transaction, adds only the new slots; the explored ranges equal their recount."""
+    from sqlalchemy import text
+
+    from finaldrive.service.db.results import COPY_ROWS, ROW_COLUMNS
+    from finaldrive.service.db.summaries import recount_explored
+
+    db = open_database(Settings(db_url=store_url))
+    try:
+        job = _claimed_sweep(db)
+        n = 3 * COPY_ROWS
+        rng = np.random.default_rng(2)
+        designs = np.column_stack([rng.uniform(-3, 3, n), rng.uniform(0, 0.2, n), rng.uniform(0.05, 0.2, n)])
+        road = Road.parse("sine:0.025:3")
+        batch = toy_batch(designs, road, fail_above_l2=0.15)
+        reasons = tuple(r and "bad\tvalue\nline 2 \\N \\ end" for r in batch.reason)
+        batch = BatchResult(**{**{f: getattr(batch, f) for f in batch.__dataclass_fields__}, "reason": reasons})
+        keys = [f"{i:064x}" for i in range(n)]
+        rows = rows_from_results([(Request(0, 0, 0, np.arange(n), designs), batch, batch.fitness_m, keys, False)])
+        half = 2 * COPY_ROWS
+        with db.write() as session:
+            assert store_results(session, "s1", job.id, rows[:half], []) == half
+            assert store_results(session, "s1", job.id, rows[COPY_ROWS:], []) == n - half
+        with db.read() as session:
+            stored = session.execute(text(f"SELECT {', '.join(ROW_COLUMNS)} FROM evaluations WHERE job_id = :j "
+                                          "ORDER BY candidate"), {"j": job.id}).all()
+            explored = session.execute(text("SELECT * FROM road_explored ORDER BY road_index, bucket")).all()
+            counts = session.execute(text("SELECT n_done, n_failed FROM jobs WHERE id = :j"), {"j": job.id}).one()
+        with db.write() as session:
+            recount_explored(session, job.id)
+        with db.read() as session:
+            recounted = session.execute(text("SELECT * FROM road_explored ORDER BY road_index, bucket")).all()
+    finally:
+        db.dispose()
+    assert len(stored) == n and any(r[ROW_COLUMNS.index("fitness_m")] is None for r in stored)
+    for got, given in zip(stored, rows, strict=True):
+        assert tuple(bool(v) if isinstance(w, bool) else v for v, w in zip(got, given, strict=True)) == given
+    assert explored == recounted and sum(c[3] for c in explored) == counts[0]
+    assert counts == (sum(r[ROW_COLUMNS.index("status")] == "ok" for r in rows),
+                      sum(r[ROW_COLUMNS.index("status")] != "ok" for r in rows))
