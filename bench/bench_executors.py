@@ -26,10 +26,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # run as a script from anywhere
 
-from finaldrive.engine.api import BatchResult, SimSettings
-from finaldrive.engine.model.road import Road
+from finaldrive.engine import BatchResult, Request, Road, SimSettings
 from finaldrive.service.machine import describe
-from finaldrive.workers import Executor, evaluate_all, make_executor
+from finaldrive.workers import Executor, make_executor
+from finaldrive.workers.dispatch import Dispatcher, Work
+from finaldrive.workers.evaluate import run_engine_on_roads, warm_up_engine
 
 ROAD = "sine:0.04:3"
 BOUNDS = np.array([[0.0, 2 * np.pi], [0.0, 0.2], [0.05, 0.15]])   # a2 [rad], L2 [m], R_WS [m]
@@ -40,17 +41,33 @@ def sample_designs(n: int, seed: int) -> np.ndarray:
     return BOUNDS[:, 0] + rng.random((n, 3)) * (BOUNDS[:, 1] - BOUNDS[:, 0])
 
 
+def evaluate(executor: Executor, designs: np.ndarray, road: Road, settings: SimSettings) -> tuple[BatchResult, int]:
+    """The designs' results in order, and the tasks they took, by the service's path: the dispatcher
+    (adaptive batches, finaldrive.workers.dispatch) and the workers' task."""
+    parts: dict[int, BatchResult] = {}
+
+    def failed(part: Request, reason: str) -> None:
+        raise RuntimeError(f"{len(part)} designs failed: {reason}")
+
+    work = Work(key="bench", shared=((road,), settings, None),
+                on_result=lambda part, batch: parts.__setitem__(int(part.candidates[0]), batch), on_failure=failed)
+    work.queue.append(Request(0, 0, 0, np.arange(len(designs)), designs))
+    dispatcher = Dispatcher(executor, run_engine_on_roads, warmup=warm_up_engine)
+    dispatcher.add(work)
+    tasks = 0
+    try:
+        while work.queue or work.alone or dispatcher.in_flight():
+            tasks += dispatcher.step(1.0)
+    finally:
+        dispatcher.close()
+    return BatchResult.concat([parts[start] for start in sorted(parts)]), tasks
+
+
 def timed_run(executor: Executor, designs: np.ndarray, road: Road, settings: SimSettings
               ) -> tuple[float, int, BatchResult]:
-    """(seconds, batches, results) of one evaluate_all."""
-    batches = 0
-
-    def count(done: int, total: int) -> None:
-        nonlocal batches
-        batches += 1
-
+    """(seconds, batches, results) of one evaluation of ``designs``."""
     start = time.perf_counter()
-    result = evaluate_all(executor, designs, road, settings, on_progress=count)
+    result, batches = evaluate(executor, designs, road, settings)
     return time.perf_counter() - start, batches, result
 
 
@@ -58,7 +75,7 @@ def start(kind: str, workers: int, designs: np.ndarray, road: Road, settings: Si
     """Start an executor and load the compiled engine in every worker; print the time taken."""
     begin = time.perf_counter()
     executor = make_executor(kind, num_workers=workers)  # type: ignore[arg-type]
-    evaluate_all(executor, designs[: 2 * executor.num_workers], road, settings)
+    evaluate(executor, designs[: 2 * executor.num_workers], road, settings)
     print(f"{kind:8s} workers={executor.num_workers}  start + warm-up {time.perf_counter() - begin:5.1f} s",
           flush=True)
     return executor

@@ -1,9 +1,8 @@
 """Execution backends for tasks (batches of simulations): serial, process pool, Ray.
 
-``service`` and the CLI see only :class:`Executor` and the streaming helpers. Importing this
-package is light: no engine, numba or Ray (worker processes import it first). The engine
-helpers (``evaluate_*``) are loaded on first use, and Ray only when ``make_executor("ray")``
-is called.
+``service`` and the CLI see only :class:`Executor` (fed by :mod:`finaldrive.workers.dispatch`).
+Importing this package is light: no engine, numba or Ray (worker processes import it first);
+Ray is imported only when ``make_executor("ray")`` is called.
 """
 
 from __future__ import annotations
@@ -11,43 +10,26 @@ from __future__ import annotations
 if __name__ != "finaldrive.workers":  # never importable as a top-level `workers` (it would shadow others)
     raise ImportError(f"this is finaldrive.workers; import it by that name, not as {__name__!r}")
 
-import importlib
 import time
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Literal
 
 from finaldrive.workers.base import (
     IN_FLIGHT_PER_WORKER,
     Done,
     Executor,
     Shared,
-    WorkerLostError,
     cancel_unseen,
-    map_batches,
 )
 from finaldrive.workers.process import ProcessExecutor
 from finaldrive.workers.serial import SerialExecutor
 
-if TYPE_CHECKING:
-    from finaldrive.workers.evaluate import evaluate_all, evaluate_roads_stream, evaluate_stream
-
 ExecutorKind = Literal["serial", "process", "ray"]
 
-__all__ = [
-    "Done", "Executor", "ExecutorKind", "Shared", "WorkerLostError", "evaluate_all", "evaluate_roads_stream",
-    "evaluate_stream", "make_executor", "map_batches",
-]
-
-_LAZY = {"evaluate_all", "evaluate_roads_stream", "evaluate_stream"}   # from finaldrive.workers.evaluate
+__all__ = ["Done", "Executor", "ExecutorKind", "Shared", "make_executor"]
 
 #: How long ``make_executor`` waits for the workers' first task (numba's import and runtime, ~0.4 s a
 #: worker), from its start [s]; what is left then is cancelled.
 WARM_UP_WAIT_S = 5.0
-
-
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        return getattr(importlib.import_module("finaldrive.workers.evaluate"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def make_executor(

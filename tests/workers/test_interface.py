@@ -20,6 +20,7 @@ from finaldrive.workers import Done, make_executor
 from finaldrive.workers.process import ProcessExecutor
 from finaldrive.workers.serial import SerialExecutor
 from tests.workers import toyfns
+from tests.workers.streams import results
 
 psutil = pytest.importorskip("psutil")
 
@@ -131,7 +132,7 @@ def test_results_equal_serial(make: Make) -> None:
     got = {ids[done.task]: done.result for done in drain(executor)}
     serial = SerialExecutor()
     expected = {i: toyfns.add([i, i + 1], 100) for i in range(10)}
-    assert got == expected == dict(serial.map_batches(toyfns.add, [[i, i + 1] for i in range(10)], (100,)))
+    assert got == expected == results(serial, toyfns.add, [[i, i + 1] for i in range(10)], (100,))
 
 
 def test_many_tasks_in_flight_each_reported_once(make: Make) -> None:
@@ -327,20 +328,6 @@ def test_close_with_running_tasks(make: Make, kind: str, tmp_path: Path) -> None
     executor.close()                               # idempotent
     with pytest.raises(RuntimeError, match="closed"):
         executor.submit(toyfns.add, [1])
-
-
-def test_closing_map_batches_early_cancels_running_tasks(make: Make, kind: str, tmp_path: Path) -> None:
-    needs_workers(kind, "would run the 60 s batches")
-    executor = make()
-    stream = executor.map_batches(toyfns.first_quick, range(6), (str(tmp_path), 60.0))
-    assert next(stream) == (0, 0)
-    wait_started(tmp_path, executor.num_workers)
-    start = time.monotonic()
-    stream.close()
-    close_s = time.monotonic() - start
-    print(f"\n{kind}: closing a stream of running 60 s batches took {close_s:.3f} s")
-    assert close_s < PROMISED_S and executor.in_flight() == 0
-    assert dict(executor.map_batches(toyfns.add, [[1], [2]])) == {0: [1], 1: [2]}
 
 
 # ---------------------------------------------------------------------------------------------- workers

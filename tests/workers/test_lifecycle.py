@@ -1,4 +1,4 @@
-"""Process-pool lifecycle: orphaned workers exit, one stream at a time, warm-up, multi-road streams."""
+"""Process-pool lifecycle: orphaned workers exit; the workers' task: warm-up, tasks spanning roads."""
 
 from __future__ import annotations
 
@@ -15,9 +15,6 @@ import pytest
 import finaldrive.workers.evaluate as evaluate
 from finaldrive.engine.api import SimSettings
 from finaldrive.engine.model.road import Road
-from finaldrive.workers import evaluate_roads_stream
-from finaldrive.workers.process import ProcessExecutor
-from finaldrive.workers.serial import SerialExecutor
 from tests.workers import toyfns
 
 REPO = Path(__file__).resolve().parents[2]
@@ -27,9 +24,11 @@ import sys, time
 from tests.workers import toyfns
 from finaldrive.workers.process import ProcessExecutor
 executor = ProcessExecutor(num_workers=2)
-stream = executor.map_batches(toyfns.sleep_then_add, [[i] for i in range(4)], shared=(60.0,))
+delay = executor.share(60.0)
+for i in range(4):
+    executor.submit(toyfns.sleep_then_add, [i], delay)
 import threading
-threading.Thread(target=lambda: list(stream), daemon=True).start()
+threading.Thread(target=lambda: executor.poll(300.0), daemon=True).start()
 while len(executor.worker_pids()) < 2:
     time.sleep(0.05)
 time.sleep(1.0)                                   # workers initialised and inside their batches
@@ -64,16 +63,6 @@ def test_workers_exit_when_the_parent_is_killed() -> None:
         parent.kill()
 
 
-def test_one_stream_at_a_time() -> None:
-    with ProcessExecutor(num_workers=1) as executor:
-        first = executor.map_batches(toyfns.add, [[1], [2]])
-        next(first)
-        with pytest.raises(RuntimeError, match="one map_batches stream at a time"):
-            next(executor.map_batches(toyfns.add, [[3]]))
-        first.close()
-        assert dict(executor.map_batches(toyfns.add, [[3]])) == {0: [3]}
-
-
 def test_warm_up_simulates_briefly(monkeypatch: pytest.MonkeyPatch) -> None:
     calls: list[float] = []
     monkeypatch.setattr(evaluate, "run_engine",
@@ -82,17 +71,20 @@ def test_warm_up_simulates_briefly(monkeypatch: pytest.MonkeyPatch) -> None:
     assert calls == [evaluate.WARM_UP_DURATION_S]
 
 
-def test_roads_stream_maps_rows_back_to_each_road(monkeypatch: pytest.MonkeyPatch) -> None:
-    """A batch may span roads; every (road, row) comes back once with its own road's scale."""
+def test_a_task_spanning_roads_runs_each_road_on_its_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The workers' task: rows (road index, design) in runs of one road; each run is simulated on its
+    own road and comes back in order with its road index."""
     scale = {Road(): 1.0, Road.parse("sine:0.04:3"): 2.0, Road.parse("bump:0.04:0.2"): 3.0}
     monkeypatch.setattr(evaluate, "run_engine",
                         lambda d, road, settings, vehicle: toyfns.toy_result(d, scale[road]))
-    monkeypatch.setattr(evaluate, "warm_up_engine", lambda *shared: None)
-    plan = [(road, toyfns.designs(n)) for road, n in zip(scale, (5, 0, 7), strict=True)]
-    seen: dict[int, list[int]] = {0: [], 1: [], 2: []}
-    for r, rows, result in evaluate_roads_stream(SerialExecutor(), plan, SimSettings(), batch_size=4):
-        road, designs = plan[r]
-        np.testing.assert_array_equal(result.designs, designs[rows])
-        np.testing.assert_array_equal(result.distance_m, toyfns.toy_result(designs[rows], scale[road]).distance_m)
-        seen[r].extend(rows.tolist())
-    assert seen == {0: list(range(5)), 1: [], 2: list(range(7))}
+    roads = tuple(scale)
+    designs = toyfns.designs(9)
+    index = np.array([0, 0, 0, 2, 2, 2, 2, 1, 1])
+    out = evaluate.run_engine_on_roads(np.column_stack([index, designs]), roads, SimSettings(), None)
+    assert [(road, len(batch)) for road, batch in out] == [(0, 3), (2, 4), (1, 2)]
+    start = 0
+    for road, batch in out:
+        part = designs[start:start + len(batch)]
+        np.testing.assert_array_equal(batch.designs, part)
+        np.testing.assert_array_equal(batch.distance_m, toyfns.toy_result(part, scale[roads[road]]).distance_m)
+        start += len(batch)

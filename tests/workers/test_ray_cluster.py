@@ -46,11 +46,12 @@ def processes_under(temp_dir: str) -> list[psutil.Process]:
 CLIENT = """
 import json, os, ray
 from tests.workers import toyfns
+from tests.workers.streams import results as run
 from finaldrive.service.machine import free_port
 from finaldrive.workers import make_executor
 with make_executor("ray") as executor:
     gcs = ray.get_runtime_context().gcs_address
-    results = dict(executor.map_batches(toyfns.pid, [[i] for i in range(6)]))
+    results = run(executor, toyfns.pid, [[i] for i in range(6)])
     print(json.dumps({"gcs": gcs, "num_workers": executor.num_workers, "driver": os.getpid(),
                       "results": results}))
 print(json.dumps({"still_initialized": ray.is_initialized()}))

@@ -14,10 +14,11 @@ pytest.importorskip("ray")
 from finaldrive import workers
 from finaldrive.engine.api import BatchResult, SimSettings
 from finaldrive.engine.model.road import Road
-from finaldrive.workers import WorkerLostError, evaluate_all, make_executor
-from finaldrive.workers.evaluate import stream_rows
+from finaldrive.workers import make_executor
+from finaldrive.workers.evaluate import run_engine_on_roads
 from finaldrive.workers.serial import SerialExecutor
 from tests.workers import toyfns
+from tests.workers.streams import results, run_batches
 from tests.workers.test_executors import assert_same
 
 pytestmark = pytest.mark.slow
@@ -40,35 +41,39 @@ def ray_executor() -> Iterator[workers.Executor]:
     assert not ray.is_initialized()
 
 
-def test_map_batches_yields_every_batch_once(ray_executor: workers.Executor) -> None:
+def test_every_batch_comes_back_once(ray_executor: workers.Executor) -> None:
     assert ray_executor.num_workers == 2
     batches = [list(range(i, i + 3)) for i in range(0, 30, 3)]
-    got = dict(ray_executor.map_batches(toyfns.add, batches, shared=(100,)))
-    assert got == {i: [x + 100 for x in b] for i, b in enumerate(batches)}
+    expected = {i: [x + 100 for x in b] for i, b in enumerate(batches)}
+    assert results(ray_executor, toyfns.add, batches, (100,)) == expected
 
 
-def test_results_stream_before_the_last_batch_finishes(ray_executor: workers.Executor) -> None:
+def test_results_come_back_before_the_last_batch_finishes(ray_executor: workers.Executor) -> None:
     start = time.perf_counter()
-    stream = ray_executor.map_batches(toyfns.sleep_then_add, [[i] for i in range(6)], shared=(0.3,))
-    next(stream)
-    first = time.perf_counter() - start
-    list(stream)
-    assert first < time.perf_counter() - start - 0.4
+    delay = ray_executor.share(0.3)
+    left = {ray_executor.submit(toyfns.sleep_then_add, [i], delay) for i in range(6)}
+    first = None
+    while left:
+        for done in ray_executor.poll(5.0):
+            left.discard(done.task)
+            first = first or time.perf_counter() - start
+    ray_executor.release(delay)
+    assert first is not None and first < time.perf_counter() - start - 0.4
 
 
 def test_identical_results_serial_and_ray(ray_executor: workers.Executor) -> None:
     designs = toyfns.designs(30)
 
     def run(executor: workers.Executor) -> BatchResult:
-        parts = sorted(stream_rows(executor, toyfns.toy_result, designs, (3.0,)), key=lambda p: p[0][0])
-        return BatchResult.concat([result for _, result in parts])
+        parts = results(executor, toyfns.toy_result, [designs[i:i + 7] for i in range(0, 30, 7)], (3.0,))
+        return BatchResult.concat(list(parts.values()))
 
     assert_same(run(SerialExecutor()), run(ray_executor))
 
 
 def test_task_error_propagates_unretried(ray_executor: workers.Executor) -> None:
     with pytest.raises(ValueError, match="bug in task"):
-        list(ray_executor.map_batches(toyfns.raise_value_error, [[1]]))
+        results(ray_executor, toyfns.raise_value_error, [[1]])
 
 
 def test_killed_worker_batch_is_evaluated_exactly_once(ray_executor: workers.Executor, tmp_path: Path) -> None:
@@ -77,26 +82,29 @@ def test_killed_worker_batch_is_evaluated_exactly_once(ray_executor: workers.Exe
     marked = designs[9, 0]                         # batch 2 (rows 8-11), third design
     log = tmp_path / "evaluated.log"
     shared = (marked, str(tmp_path / "crashed"), str(log))
-    parts = list(stream_rows(ray_executor, toyfns.crash_once, designs, shared, batch_size=4))
-    assert (tmp_path / "crashed").exists()
-    assert sorted(np.concatenate([rows for rows, _ in parts]).tolist()) == list(range(24))
-    assert_same(BatchResult.concat([r for _, r in sorted(parts, key=lambda p: p[0][0])]),
-                toyfns.toy_result(designs))
+    parts = results(ray_executor, toyfns.crash_once, [designs[i:i + 4] for i in range(0, 24, 4)], shared)
+    assert (tmp_path / "crashed").exists() and sorted(parts) == list(range(6))
+    assert_same(BatchResult.concat(list(parts.values())), toyfns.toy_result(designs))
     evaluated = [float(a2) for a2 in log.read_text().split()]
     assert evaluated.count(designs[8, 0]) == 2      # evaluated before the crash, then again
 
 
 def test_worker_lost_after_max_retries(ray_executor: workers.Executor) -> None:
-    with pytest.raises(WorkerLostError):
-        list(ray_executor.map_batches(toyfns.always_crash, [[1]]))
+    assert run_batches(ray_executor, toyfns.always_crash, [[1]])[0].lost
 
 
 @pytest.mark.skipif(engine_evaluate is None, reason="finaldrive.engine.evaluate is not importable yet")
 def test_real_engine_identical_across_executors(ray_executor: workers.Executor) -> None:
     designs = np.array([[np.pi / 4, 0.10, 0.08], [np.pi, 0.05, 0.10], [1.5 * np.pi, 0.15, 0.12]])
     road, settings = Road.parse("sine:0.04:3"), SimSettings(duration=0.2)
-    serial = evaluate_all(SerialExecutor(), designs, road, settings)
+    rows = [np.column_stack([np.zeros(len(part)), part]) for part in (designs[:2], designs[2:])]  # road 0
+
+    def run(executor: workers.Executor) -> BatchResult:  # the workers' task, two tasks
+        parts = results(executor, run_engine_on_roads, rows, ((road,), settings, None))
+        return BatchResult.concat([batch for i in sorted(parts) for _, batch in parts[i]])
+
+    serial = run(SerialExecutor())
     assert len(serial) == 3
     with make_executor("process", num_workers=2) as pool:
-        assert_same(serial, evaluate_all(pool, designs, road, settings))
-    assert_same(serial, evaluate_all(ray_executor, designs, road, settings))
+        assert_same(serial, run(pool))
+    assert_same(serial, run(ray_executor))

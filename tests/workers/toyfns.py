@@ -173,11 +173,6 @@ def pid_with(batch: object, value: object) -> int:
     return os.getpid()
 
 
-def first_quick(batch: int, directory: str, seconds: float) -> int:
-    """Batch 0 returns at once; the others are ``sleep_marked``."""
-    return 0 if batch == 0 else sleep_marked(batch, directory, seconds)
-
-
 def held_keys(batch: object) -> tuple[int, list[int]]:
     """(pid, keys of the shared values this process-pool worker holds)."""
     from finaldrive.workers.process import held_keys
