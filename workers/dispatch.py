@@ -276,9 +276,10 @@ class Dispatcher:
             self._window_start, self._window_busy_s, self._window_tasks = now, 0.0, 0
 
     def close(self) -> None:
-        """Remove every source (cancelling what runs); the executor stays open."""
+        """Remove every source (cancelling what runs) and release the task function; the executor stays open."""
         for key in list(self._works):
             self.remove(key)
+        self.executor.release(self._fn)
 
 
 def _deliver(work: Work, parts: tuple[Request, ...], results: list[tuple[int, BatchResult]]) -> None:

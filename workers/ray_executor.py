@@ -314,6 +314,9 @@ class RayExecutor(ExecutorMixin):
             with self._lock:
                 if self._done or not self._refs:
                     done, self._done = self._done, []
+                    if not self._refs:
+                        with self._arrived:  # only cancelled tasks' results can wait there: let them go
+                            self._ready.clear()
                     return done
             with self._arrived:
                 if not self._ready:

@@ -234,7 +234,7 @@ def _copy_many(session: Session, table: str, columns: Sequence[str], values: lis
         cursor.execute(f"INSERT INTO {table} ({names}) SELECT {names} FROM {staging} "
                        f"ON CONFLICT ({', '.join(unique)}) DO NOTHING")
         inserted = cursor.rowcount
-        cursor.execute(f"TRUNCATE {staging}")  # a second insert in the same transaction starts empty
+        cursor.execute(f"DELETE FROM {staging}")  # a second insert in the transaction starts empty (no new file)
     return int(inserted)
 
 

@@ -12,7 +12,8 @@ circle) it is found within 1 deg.
 On a road, the best fitness is a seek of the index on (job, road, status, fitness) and the
 near-optimal set (``fitness_m >= best - tolerance``) a range of it; the explored ranges are read
 from ``road_explored``, the same groups over all the road's successful evaluations, which the writer
-keeps with each store (:func:`add_explored`; an index on a2 for them halved the store's ingest).
+keeps with each store (:func:`add_explored`; an index on a2 for them cost the store a quarter of
+its ingest).
 A robust-de's designs are grouped (``GROUP BY`` the design) once, in the database.
 """
 
@@ -56,6 +57,9 @@ def road_sharpness(session: Session, job_id: int, road_index: int, tolerance_pct
     cells = connection.exec_driver_sql(
         f"SELECT bucket, n, {', '.join(_RANGES)} FROM road_explored WHERE job_id = {m} AND road_index = {m} "
         "ORDER BY bucket", key).all()
+    if not cells:  # stored by a writer that does not keep them (an older release's): count them here
+        cells = connection.exec_driver_sql(f"SELECT {_GROUPS} AS b, {_EXPLORED} {road} GROUP BY b ORDER BY b",
+                                           key).all()
     explored = {"a2_deg": list(_arc([(c[2], c[3]) for c in cells if c[0] >= 0])),
                 "l2_m": [min(c[4] for c in cells), max(c[5] for c in cells)],
                 "rws_m": [min(c[6] for c in cells), max(c[7] for c in cells)],
@@ -67,6 +71,9 @@ def road_sharpness(session: Session, job_id: int, road_index: int, tolerance_pct
 
 #: road_explored's ranges, (low, high) pairs in the order of _COLUMNS' after the count
 _RANGES = ("a2_lo_deg", "a2_hi_deg", "l2_lo_m", "l2_hi_m", "rws_lo_m", "rws_hi_m", "fitness_lo_m", "fitness_hi_m")
+#: A group's count and ranges, as road_explored holds them
+_EXPLORED = (f"COUNT(*), MIN({_X}), MAX({_X}), MIN(l2_m), MAX(l2_m), MIN(rws_m), MAX(rws_m), MIN(fitness_m), "
+             "MAX(fitness_m)")
 #: A point of road_explored: (road index, a2 [deg], L2 [m], R_WS [m], fitness [m]) of a successful evaluation.
 Point = tuple[int, float, float, float, float]
 
@@ -75,7 +82,7 @@ def add_explored(session: Session, job_id: int, points: Iterable[Point]) -> None
     """Merge successful evaluations into the job's ``road_explored`` groups (the writer, with each store)."""
     cells: dict[tuple[int, int], list[float]] = {}
     for road, a2, l2, rws, fitness in points:
-        x = a2 - 360.0 * math.floor(a2 / 360.0)  # as _X, operation for operation
+        x = a2 - 360.0 * math.floor(a2 / 360.0) + 0.0  # as _X (whose floor keeps -0.0: SQL gives +0.0 there)
         key = (road, math.floor(x / _WIDTH_DEG) if l2 > CONCENTRIC_L2_M else -1)
         cell = cells.get(key)
         if cell is None:
@@ -109,8 +116,7 @@ def recount_explored(session: Session, job_id: int) -> None:
     connection.exec_driver_sql(f"DELETE FROM road_explored WHERE job_id = {m}", (job_id,))
     connection.exec_driver_sql(
         f"INSERT INTO road_explored (job_id, road_index, bucket, n, {', '.join(_RANGES)}) "
-        f"SELECT job_id, road_index, {_GROUPS} AS b, COUNT(*), MIN({_X}), MAX({_X}), MIN(l2_m), MAX(l2_m), "
-        f"MIN(rws_m), MAX(rws_m), MIN(fitness_m), MAX(fitness_m) FROM evaluations WHERE job_id = {m} "
+        f"SELECT job_id, road_index, {_GROUPS} AS b, {_EXPLORED} FROM evaluations WHERE job_id = {m} "
         "AND status = 'ok' AND fitness_m IS NOT NULL GROUP BY job_id, road_index, b", (job_id,))
 
 

@@ -155,6 +155,34 @@ def test_killed_worker_batch_is_evaluated_exactly_once(tmp_path: Path) -> None:
     assert evaluated.count(designs[8, 0]) == 2      # evaluated before the crash, then again
 
 
+def test_released_values_are_dropped_by_the_workers() -> None:
+    """A released value leaves every worker that held it: idle ones at once, busy ones with their next task."""
+    with ProcessExecutor(num_workers=2) as executor:
+        first, second = executor.share("a" * 100), executor.share(0.3)
+        for i in range(4):                                   # both workers receive both values
+            executor.submit(toyfns.held_keys_after, i, second)
+            executor.submit(toyfns.uses_shared, i, first)
+        held = dict(d.result for d in drain(executor) if isinstance(d.result, tuple))
+        assert len(held) == 2 and all(second.key in keys for keys in held.values())
+        executor.release(first)
+        executor.release(second)
+        keep = executor.share(0.05)
+        for i in range(6):
+            executor.submit(toyfns.held_keys_after, i, keep)
+        after = [d.result for d in drain(executor)]
+        assert {pid for pid, _ in after} == set(held)
+        assert all(keys == [keep.key] for _, keys in after)
+
+
+def drain(executor: workers.Executor) -> list[workers.Done]:
+    done: list[workers.Done] = []
+    deadline = time.monotonic() + 60
+    while executor.in_flight():
+        assert time.monotonic() < deadline
+        done += executor.poll(1.0)
+    return done
+
+
 def test_worker_lost_after_max_retries() -> None:
     with ProcessExecutor(num_workers=1, max_retries=1) as executor:
         assert run_batches(executor, toyfns.always_crash, [[1]])[0].lost   # died 2 times: lost
