@@ -128,7 +128,7 @@ def test_bad_arguments_exit_2_with_one_line(argv: list[str], fragment: str, caps
 @pytest.mark.slow
 def test_ctrl_c_stops_cleanly_without_orphans() -> None:
     """SIGINT to the process group (a terminal's Ctrl-C): exit 130, one message, no worker left."""
-    cmd = [sys.executable, "-m", "finaldrive.service.cli", "sweep", "--road", "flat", "--duration", "0.5",
+    cmd = [sys.executable, "-m", "finaldrive.service.cli", "sweep", "--road", "flat", "--duration", "3.5",
            "--executor", "process", "--workers", "2", "--progress"]
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
