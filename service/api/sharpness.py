@@ -103,9 +103,13 @@ def _population(generation: Generation | None) -> PopulationOut | None:
     return PopulationOut(count=int(ok.sum()), ranges=spread(np.array(generation.population, float)[ok], fitness[ok]))
 
 
+#: The Idempotency-Keys the service keeps for itself: a job's sensitivity job (clients may not use them).
+SENSITIVITY_KEY_PREFIX = "sensitivity:"
+
+
 def sensitivity_key(job_id: int) -> str:
     """The Idempotency-Key of a job's sensitivity job."""
-    return f"sensitivity:{job_id}"
+    return f"{SENSITIVITY_KEY_PREFIX}{job_id}"
 
 
 def sensitivity_job(services: Services, job: Job) -> Job:

@@ -37,8 +37,11 @@ _TIE = 1e-9
 
 _X = "(a2_deg - 360.0 * floor(a2_deg / 360.0))"
 _GROUPS = f"CASE WHEN l2_m > {CONCENTRIC_L2_M!r} THEN CAST(floor({_X} / {_WIDTH_DEG!r}) AS INTEGER) ELSE -1 END"
-_COLUMNS = (f"COUNT(*), MIN({_X}), MAX({_X}), MIN(l2_m), MAX(l2_m), MIN(rws_m), MAX(rws_m), "
-            "MIN(fitness_m), MAX(fitness_m), MIN(distance_m), MAX(distance_m)")
+#: A group's count and ranges, as road_explored holds them
+_EXPLORED = (f"COUNT(*), MIN({_X}), MAX({_X}), MIN(l2_m), MAX(l2_m), MIN(rws_m), MAX(rws_m), MIN(fitness_m), "
+             "MAX(fitness_m)")
+#: ... and the distance's range: a near-optimal set's group
+_COLUMNS = f"{_EXPLORED}, MIN(distance_m), MAX(distance_m)"
 
 
 def road_sharpness(session: Session, job_id: int, road_index: int, tolerance_pct: float) -> dict[str, Any]:
@@ -71,9 +74,6 @@ def road_sharpness(session: Session, job_id: int, road_index: int, tolerance_pct
 
 #: road_explored's ranges, (low, high) pairs in the order of _COLUMNS' after the count
 _RANGES = ("a2_lo_deg", "a2_hi_deg", "l2_lo_m", "l2_hi_m", "rws_lo_m", "rws_hi_m", "fitness_lo_m", "fitness_hi_m")
-#: A group's count and ranges, as road_explored holds them
-_EXPLORED = (f"COUNT(*), MIN({_X}), MAX({_X}), MIN(l2_m), MAX(l2_m), MIN(rws_m), MAX(rws_m), MIN(fitness_m), "
-             "MAX(fitness_m)")
 #: A point of road_explored: (road index, a2 [deg], L2 [m], R_WS [m], fitness [m]) of a successful evaluation.
 Point = tuple[int, float, float, float, float]
 

@@ -11,17 +11,22 @@ from finaldrive.workers import Done, Executor
 
 
 def run_batches(executor: Executor, fn: Callable[..., Any], batches: Iterable[Any], shared: tuple[Any, ...] = (),
-                timeout: float = 120.0) -> dict[int, Done]:
+                timeout: float = 120.0, arrivals: list[float] | None = None) -> dict[int, Done]:
     """Submit ``fn(batch, *shared)`` for every batch (``shared`` shared once, released at the end) and
-    wait for each: batch index -> its ``Done``."""
+    wait for each: batch index -> its ``Done`` (``arrivals``: each one's time since the submission [s])."""
     handles = [executor.share(value) for value in shared]
     try:
+        start = time.perf_counter()
         ids = {executor.submit(fn, batch, *handles): i for i, batch in enumerate(batches)}
         out: dict[int, Done] = {}
         deadline = time.monotonic() + timeout
         while len(out) < len(ids):
             assert time.monotonic() < deadline, f"{len(ids) - len(out)} batches did not come back in {timeout} s"
-            out.update((ids[done.task], done) for done in executor.poll(1.0) if done.task in ids)
+            for done in executor.poll(1.0):
+                if done.task in ids:
+                    out[ids[done.task]] = done
+                    if arrivals is not None:
+                        arrivals.append(time.perf_counter() - start)
         return out
     finally:
         for handle in handles:

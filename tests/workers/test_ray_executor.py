@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -49,16 +48,9 @@ def test_every_batch_comes_back_once(ray_executor: workers.Executor) -> None:
 
 
 def test_results_come_back_before_the_last_batch_finishes(ray_executor: workers.Executor) -> None:
-    start = time.perf_counter()
-    delay = ray_executor.share(0.3)
-    left = {ray_executor.submit(toyfns.sleep_then_add, [i], delay) for i in range(6)}
-    first = None
-    while left:
-        for done in ray_executor.poll(5.0):
-            left.discard(done.task)
-            first = first or time.perf_counter() - start
-    ray_executor.release(delay)
-    assert first is not None and first < time.perf_counter() - start - 0.4
+    arrivals: list[float] = []
+    run_batches(ray_executor, toyfns.sleep_then_add, [[i] for i in range(6)], (0.3,), arrivals=arrivals)
+    assert arrivals[0] < arrivals[-1] - 0.4
 
 
 def test_identical_results_serial_and_ray(ray_executor: workers.Executor) -> None:

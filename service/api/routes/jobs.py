@@ -19,6 +19,7 @@ from finaldrive.service.api.deps import JobId, ServicesDep
 from finaldrive.service.api.event_hub import EventHub, status_snapshots
 from finaldrive.service.api.lookups import load_job, parse_cursor
 from finaldrive.service.api.problems import ApiProblem, documented, validation_problem
+from finaldrive.service.api.sharpness import SENSITIVITY_KEY_PREFIX
 from finaldrive.service.api.views import jobs_out
 from finaldrive.service.db.models import Job
 from finaldrive.service.db.repository import cancel_job, list_jobs
@@ -29,8 +30,6 @@ from finaldrive.service.services import Services
 from finaldrive.service.status_cache import Snapshot
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
-#: Idempotency-Keys the service keeps for itself (finaldrive.service.api.sharpness.sensitivity_key).
-RESERVED_KEY_PREFIX = "sensitivity:"
 
 
 @router.post(
@@ -49,9 +48,9 @@ def submit(
     spec: JobSpec, services: ServicesDep, response: Response,
     idempotency_key: Annotated[str | None, Header(max_length=255)] = None,
 ) -> JobOut:
-    if idempotency_key is not None and idempotency_key.startswith(RESERVED_KEY_PREFIX):
-        raise validation_problem(("header", "idempotency-key"), f"keys starting with {RESERVED_KEY_PREFIX!r} are the "
-                                 "service's own (a job's sensitivity job)")
+    if idempotency_key is not None and idempotency_key.startswith(SENSITIVITY_KEY_PREFIX):
+        raise validation_problem(("header", "idempotency-key"), f"keys starting with {SENSITIVITY_KEY_PREFIX!r} are "
+                                 "the service's own (a job's sensitivity job)")
     try:
         job, created = submit_job(
             services.db, spec, idempotency_key=idempotency_key,
