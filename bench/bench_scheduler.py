@@ -63,7 +63,7 @@ PLANS: dict[str, list[dict[str, Any]]] = {
     "paper": [{"kind": "paper-study", "roads": ["paper"]}],
     "big": [{"kind": "sweep", "roads": ["sine:0.04:3", "sine:0.04:2", "bump:0.04:0.2", "flat"],
              "grid": "a2_deg=0:358:2,l2_m=0:0.2:0.002,rws_m=0.08:0.106:0.002"},
-            {"kind": "de", "roads": ["paper"]}],
+            {"kind": "de", "roads": ["paper"], "de": {"preset": "paper"}}],
 }
 
 # Ray's per-task costs: medians of 3 runs of ``--measure-ray`` (RayExecutor, make_executor("ray",

@@ -35,7 +35,7 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("Cost", "estimate_cost"), "finaldrive.engine.cost"),
     **dict.fromkeys(("StaticLoads", "calibration_design", "solve_chassis_cog", "solve_torque", "static_loads"),
                     "finaldrive.engine.calibrate"),
-    "DifferentialEvolution": "finaldrive.engine.optimize",
+    **dict.fromkeys(("CMAES", "DifferentialEvolution", "OPTIMISERS", "Optimiser"), "finaldrive.engine.optimize"),
     **dict.fromkeys(("CONCENTRIC_L2_M", "DEFAULT_TOLERANCE_PCT", "MAX_TOLERANCE_PCT", "SENSITIVITY_STEPS", "angle_arc",
                      "finite_differences", "near_mask", "near_optimal", "near_summary", "sensitivities",
                      "sensitivity_sentences", "sensitivity_stencil", "spread", "upper_limits"),
@@ -44,7 +44,8 @@ _EXPORTS: dict[str, str] = {
                      "resolve_roads"), "finaldrive.engine.study.presets"),
     **dict.fromkeys(("MAX_GRID_DESIGNS", "TABLE9_DEFAULT_RWS_M", "parse_grid", "product_grid", "table9_grid"),
                     "finaldrive.engine.study.sweep"),
-    **dict.fromkeys(("DE_LIMITS", "Bounds", "DESettings", "SpaceError"), "finaldrive.engine.study.space"),
+    **dict.fromkeys(("DE_HELP", "DE_INTEGRAL", "DE_LIMITS", "DE_OPTIONAL", "DE_PRESETS", "Bounds", "DESettings",
+                     "SpaceError"), "finaldrive.engine.study.space"),
     **dict.fromkeys(("OBJECTIVES", "Objective", "Regret", "aggregate", "best_per_road", "fitness_values", "regret",
                      "score"), "finaldrive.engine.study.scoring"),
     **dict.fromkeys(("DERun", "Request", "SweepRun"), "finaldrive.engine.study.runs"),
@@ -109,7 +110,12 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         Road as Road,
         RoadError as RoadError,
     )
-    from finaldrive.engine.optimize import DifferentialEvolution as DifferentialEvolution
+    from finaldrive.engine.optimize import (
+        CMAES as CMAES,
+        OPTIMISERS as OPTIMISERS,
+        DifferentialEvolution as DifferentialEvolution,
+        Optimiser as Optimiser,
+    )
     from finaldrive.engine.precompile import compile_engine as compile_engine, is_compiled as is_compiled
     from finaldrive.engine.simulation import evaluate as evaluate, simulate as simulate
     from finaldrive.engine.study.plan import (
@@ -160,7 +166,11 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         upper_limits as upper_limits,
     )
     from finaldrive.engine.study.space import (
+        DE_HELP as DE_HELP,
+        DE_INTEGRAL as DE_INTEGRAL,
         DE_LIMITS as DE_LIMITS,
+        DE_OPTIONAL as DE_OPTIONAL,
+        DE_PRESETS as DE_PRESETS,
         Bounds as Bounds,
         DESettings as DESettings,
         SpaceError as SpaceError,

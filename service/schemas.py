@@ -5,8 +5,9 @@ Units: SI, angles of designs in radians except where a name ends in ``_deg``.
 
 from __future__ import annotations
 
+import dataclasses
 from datetime import datetime
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import (
     AllowInfNan,
@@ -21,8 +22,12 @@ from pydantic import (
 )
 
 from finaldrive.engine import (
+    DE_HELP,
+    DE_INTEGRAL,
     DE_LIMITS,
+    DE_OPTIONAL,
     DIAGNOSTIC_MEANINGS,
+    OPTIMISERS,
     PROFILE_MAX_POINTS,
     VEHICLE_VALUE_LIMIT,
     Bounds as StudyBounds,
@@ -49,11 +54,6 @@ _DE = DESettings()
 _BOX = StudyBounds()
 
 
-def _de_field(name: str, description: str) -> Any:
-    lo, hi = DE_LIMITS[name]
-    return Field(getattr(_DE, name), ge=lo, le=hi, description=description)
-
-
 class SimulationSpec(BaseModel):
     """How each design is simulated (a subset of the engine's SimSettings, same defaults)."""
 
@@ -65,27 +65,45 @@ class SimulationSpec(BaseModel):
         _SIM.method, description="fast (default, validated against the paper's method) or reference")
 
 
-class DESpec(BaseModel):
-    """Differential evolution parameters (defaults: the paper's Table 10)."""
+class _DESpecBase(BaseModel):
+    """The optimiser's settings (engine.study.space.DESettings): a preset, and the fields to change
+    from it. ``default`` stops a run once it has converged; ``paper`` is Table 10. The settings'
+    fields (below the class) follow DESettings' own: a method's new setting needs no change here."""
 
     model_config = _STRICT
 
-    np: Whole = _de_field("np", "population size NP")
-    f: Num = _de_field("f", "differential weight F")
-    cp: Num = _de_field("cp", "crossover probability CP")
-    mp: Num = _de_field("mp", "mutation probability MP")
-    mr_fraction: Num = _de_field("mr_fraction", "mutation range MR / (upper - lower)")
-    iters: Whole = _de_field("iters", "generations after the initial population")
-    patience: Whole | None = _de_field("patience", "stop after this many generations without improvement")
-    max_evals: Whole | None = _de_field("max_evals", "evaluation budget per DE run (>= np)")
+    preset: Literal["default", "paper"] | None = Field(
+        None, description="where unset fields come from: default (stops once converged) or paper (Table 10); "
+                          "unset: paper for a paper-study, default otherwise")
+    optimiser: Name = Field(_DE.optimiser, description=DE_HELP["optimiser"],
+                            json_schema_extra={"enum": list(OPTIMISERS)})
 
-    @model_validator(mode="after")
-    def _valid(self) -> DESpec:
-        try:
-            DESettings(**self.model_dump())
-        except SpaceError as exc:
-            raise ValueError(str(exc)) from None
-        return self
+    def settings(self, preset: str = "default") -> DESettings:
+        """The settings: this spec's preset (else ``preset``) with the fields the request set;
+        SpaceError naming the field."""
+        given = {name: getattr(self, name) for name in self.model_fields_set - {"preset"}}
+        return DESettings.preset(self.preset or preset, **given)
+
+    def resolved(self, preset: str) -> DESpec:
+        """Every field set to its value (what is stored and hashed)."""
+        return DESpec(preset=self.preset or preset, **dataclasses.asdict(self.settings(preset)))
+
+
+def _setting(name: str) -> tuple[Any, Any]:
+    """A DESettings field as a request field: JSON integer or number, its limits, its help."""
+    lo, hi = DE_LIMITS[name]
+    default = getattr(_DE, name)
+    kind: Any = Whole if name in DE_INTEGRAL else Num
+    return (kind | None if default is None or name in DE_OPTIONAL else kind,
+            Field(default, ge=lo, le=hi, description=DE_HELP[name]))
+
+
+if TYPE_CHECKING:
+    class DESpec(_DESpecBase):  # for type checkers; the fields are made below, for pydantic
+        pass
+else:
+    DESpec = create_model("DESpec", __base__=_DESpecBase, __doc__=_DESpecBase.__doc__,  # type: ignore[call-overload]
+                          **{f.name: _setting(f.name) for f in dataclasses.fields(DESettings) if f.name != "optimiser"})
 
 
 Interval = tuple[Num, Num]
@@ -157,7 +175,8 @@ class JobSpec(BaseModel):
     )
     grid: str | None = Field(None, max_length=500, description='sweep / paper-study: "table9" or a grid spec')
     bounds: Bounds | None = Field(None, description="de / robust-de / paper-study (default: Table 8)")
-    de: DESpec | None = Field(None, description="de / robust-de / paper-study (default: Table 10)")
+    de: DESpec | None = Field(None, description="de / robust-de / paper-study: the optimiser (default: preset "
+                                    "default; paper-study: preset paper, Table 10)")
     aggregate: Literal["mean", "worst"] | None = Field(None, description="robust-de only (default mean)")
     designs: list[Annotated[list[DesignRow], Field(min_length=1, max_length=MAX_ROAD_DESIGNS)]] | None = Field(
         None, max_length=64, description="designs only: for each road (in order) its designs, [a2_deg, l2_m, rws_m]")
@@ -177,7 +196,17 @@ class JobSpec(BaseModel):
             raise ValueError(f"grid: not allowed for {self.kind}")
         if self.kind in ("de", "paper-study") and self.aggregate is not None:
             raise ValueError("aggregate: only for robust-de")
+        if self.de is not None:
+            try:
+                self.de.settings(self.default_preset)
+            except ValueError as exc:
+                raise ValueError(f"de: {exc}") from None
         return self
+
+    @property
+    def default_preset(self) -> str:
+        """The optimiser preset of a spec that names none: Table 10 for the paper study."""
+        return "paper" if self.kind == "paper-study" else "default"
 
     def normalised(self) -> JobSpec:
         """The spec with every default filled in (what is stored and hashed)."""
@@ -186,7 +215,7 @@ class JobSpec(BaseModel):
             fill["grid"] = self.grid or "table9"
         if self.kind not in ("sweep", "designs"):
             fill["bounds"] = self.bounds or Bounds()
-            fill["de"] = self.de or DESpec()
+            fill["de"] = (self.de or DESpec()).resolved(self.default_preset)
             if self.kind == "robust-de":
                 fill["aggregate"] = self.aggregate or "mean"
         return self.model_copy(update=fill)

@@ -127,6 +127,7 @@ class Dispatcher:
         self._task_s = 0.0  # running mean of a task's time in its worker [s]
         # the driving thread's own time a finished task (batching rule 4), from windows of >= 1 s
         self.driver_s = 0.0
+        self._windowed = False  # a whole window of driver time has been measured
         self._window_start = time.perf_counter()
         self._window_busy_s = 0.0
         self._window_tasks = 0
@@ -268,12 +269,18 @@ class Dispatcher:
     def _measure(self, finished: int, now: float) -> None:
         """Batching rule 4's driver time a task: the time spent starting tasks and handling their
         results (not waiting for them, nor the source's own work between steps) over the tasks that
-        finished, once a window of at least a second holds tasks."""
+        finished, once a window of at least a second holds tasks (before the first such window: over
+        the tasks so far)."""
         self._window_tasks += finished
-        if now - self._window_start >= 1.0 and self._window_tasks:
+        if not self._window_tasks:
+            return
+        if now - self._window_start >= 1.0:
             self.driver_s = self._window_busy_s / self._window_tasks
             self.limit = in_flight_limit(self.executor.num_workers, self.executor.capacity, self._task_s)
             self._window_start, self._window_busy_s, self._window_tasks = now, 0.0, 0
+            self._windowed = True
+        elif not self._windowed:  # until a whole window has closed: the tasks so far (a DE of a second
+            self.driver_s = self._window_busy_s / self._window_tasks  # would otherwise run on none)
 
     def close(self) -> None:
         """Remove every source (cancelling what runs) and release the task function; the executor stays open."""

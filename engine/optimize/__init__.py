@@ -1,9 +1,15 @@
 """Optimisers: pure numerics over numpy arrays, nothing from the rest of ``engine``.
 
-:class:`DifferentialEvolution` is the paper's DE (section 4, Fig. 7, Table 10) as an
-ask/tell state machine; see docs/optimisation.md.
+Every method follows :class:`Optimiser` (ask/tell of whole batches, a JSON state, per-round
+records) and is registered by name: :class:`DifferentialEvolution` is the paper's DE (section 4,
+Fig. 7, Table 10), :class:`CMAES` is IPOP-CMA-ES; see docs/optimisation.md.
 """
 
+from finaldrive.engine.optimize.cma_es import CMAES
 from finaldrive.engine.optimize.de import DifferentialEvolution
+from finaldrive.engine.optimize.protocol import OPTIMISERS, Optimiser, register, restore
 
-__all__ = ["DifferentialEvolution"]
+register(DifferentialEvolution)
+register(CMAES)
+
+__all__ = ["CMAES", "OPTIMISERS", "DifferentialEvolution", "Optimiser", "register", "restore"]

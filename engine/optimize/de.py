@@ -60,15 +60,24 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any, Literal
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
 
+from finaldrive.engine.optimize.common import (
+    Stall,
+    StopReason,
+    check_float,
+    check_int,
+    decode,
+    encode,
+    jsonable,
+    rank_key,
+    stop_rule,
+)
+
 STATE_VERSION = 1
-
-StopReason = Literal["max_iter", "max_evals", "patience"]
-
 
 class DifferentialEvolution:
     """Ask/tell differential evolution of the paper (section 4, Fig. 7, Table 10); maximises.
@@ -96,10 +105,15 @@ class DifferentialEvolution:
     max_evals : int, optional
         Evaluation budget, initial population included (>= pop_size).
     patience : int, optional
-        Stop after this many generations without an improvement of ``best_f``.
+        Stop after this many generations without an improvement of ``best_f`` by more than ``tol``.
+    tol : float
+        The smallest improvement of ``best_f`` that counts for ``patience`` (the objective's noise:
+        gains below it are not progress). 0 counts any improvement.
     seed : int, np.random.Generator or None
         The only source of randomness. A Generator is used (and advanced) as given.
     """
+
+    method: ClassVar[str] = "de"
 
     def __init__(
         self,
@@ -115,6 +129,7 @@ class DifferentialEvolution:
         max_iter: int = 50,
         max_evals: int | None = None,
         patience: int | None = None,
+        tol: float = 0.0,
         seed: int | np.random.Generator | None = 0,
     ) -> None:
         self._lower = np.array(lower, dtype=float).ravel()
@@ -134,14 +149,15 @@ class DifferentialEvolution:
                 raise ValueError(f"periodic must have {d} entries, got {self._periodic.size}")
         if np.any(self._periodic & (self._upper <= self._lower)):
             raise ValueError("a periodic dimension needs upper > lower")
-        self.pop_size = _check_int("pop_size", pop_size, 2)
-        self.f = _check_float("f", f, 0.0, math.inf)
-        self.cp = _check_float("cp", cp, 0.0, 1.0)
-        self.mp = _check_float("mp", mp, 0.0, 1.0)
-        self.mr_fraction = _check_float("mr_fraction", mr_fraction, 0.0, math.inf)
-        self.max_iter = _check_int("max_iter", max_iter, 0)
-        self.max_evals = None if max_evals is None else _check_int("max_evals", max_evals, self.pop_size)
-        self.patience = None if patience is None else _check_int("patience", patience, 1)
+        self.pop_size = check_int("pop_size", pop_size, 2)
+        self.f = check_float("f", f, 0.0, math.inf)
+        self.cp = check_float("cp", cp, 0.0, 1.0)
+        self.mp = check_float("mp", mp, 0.0, 1.0)
+        self.mr_fraction = check_float("mr_fraction", mr_fraction, 0.0, math.inf)
+        self.max_iter = check_int("max_iter", max_iter, 0)
+        self.max_evals = None if max_evals is None else check_int("max_evals", max_evals, self.pop_size)
+        self.patience = None if patience is None else check_int("patience", patience, 1)
+        self.tol = check_float("tol", tol, 0.0, math.inf)
         self._rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
 
         self._width = self._upper - self._lower
@@ -152,7 +168,7 @@ class DifferentialEvolution:
         self.stop_reason: StopReason | None = None
         self._population = np.empty((0, d))
         self._fitness = np.empty(0)
-        self._stall = 0               # generations since best_f last improved
+        self._stall = Stall(self.tol)  # generations since best_f last gained more than tol
         # Step 1 (Fig. 7): a uniformly random initial population, asked first.
         self._pending: np.ndarray | None = self._rng.uniform(self._lower, self._upper, (self.pop_size, d))
         self._pending = self._bound(self._pending)
@@ -180,13 +196,13 @@ class DifferentialEvolution:
         rows, self._pending = self._pending, None
         n_failed = int(np.count_nonzero(np.isnan(values)))
         self.n_evals += len(rows)
-        previous_best = self.best_f
         initial = self._population.shape[0] == 0
         self._select(rows, values)    # step 6 (step 2 for the initial population)
-        if not initial:
+        if initial:
+            self._stall.start(self.best_f)
+        else:
             self.generation += 1
-            improved = _key(self.best_f) > _key(previous_best)
-            self._stall = 0 if improved else self._stall + 1
+            self._stall.update(self.best_f)
         self.history.append(self._record(n_failed))
         self.stop_reason = self._stop_rule()
         if self.stop_reason is None:
@@ -246,6 +262,7 @@ class DifferentialEvolution:
         O(NP) rather than O(generations), and the stored states O(generations) in all.
         """
         out = {
+            "method": self.method,
             "version": STATE_VERSION,
             "config": {
                 "lower": self._lower.tolist(),
@@ -259,18 +276,20 @@ class DifferentialEvolution:
                 "max_iter": self.max_iter,
                 "max_evals": self.max_evals,
                 "patience": self.patience,
+                "tol": self.tol,
             },
             "population": self._population.tolist(),
-            "fitness": [_encode(v) for v in self._fitness],
+            "fitness": [encode(v) for v in self._fitness],
             "generation": self.generation,
             "n_evals": self.n_evals,
-            "stall": self._stall,
+            "stall": self._stall.count,
+            "stall_ref": encode(self._stall.ref),
             "stop_reason": self.stop_reason,
             "pending": None if self._pending is None else self._pending.tolist(),
-            "rng": _jsonable(self._rng.bit_generator.state),
+            "rng": jsonable(self._rng.bit_generator.state),
         }
         if history:
-            out["history"] = [{k: _encode(v) for k, v in h.items()} for h in self.history]
+            out["history"] = [{k: encode(v) for k, v in h.items()} for h in self.history]
         return out
 
     @classmethod
@@ -287,14 +306,15 @@ class DifferentialEvolution:
         bit_generator.state = rng_state
         d = de.dim
         de._population = np.array(state["population"], dtype=float).reshape(-1, d)
-        de._fitness = np.array([_decode(v) for v in state["fitness"]], dtype=float)
+        de._fitness = np.array([decode(v) for v in state["fitness"]], dtype=float)
         de.generation = int(state["generation"])
         de.n_evals = int(state["n_evals"])
-        de._stall = int(state["stall"])
+        de._stall.count = int(state["stall"])
+        de._stall.ref = decode(state["stall_ref"]) if "stall_ref" in state else de.best_f  # tol 0 before
         de.stop_reason = state["stop_reason"]
         pending = state["pending"]
         de._pending = None if pending is None else np.array(pending, dtype=float).reshape(-1, d)
-        de.history = [{k: _decode(v) for k, v in h.items()} for h in state.get("history", [])]
+        de.history = [{k: decode(v) for k, v in h.items()} for h in state.get("history", [])]
         return de
 
     # ------------------------------------------------------------------ algorithm
@@ -325,7 +345,7 @@ class DifferentialEvolution:
         """Step 6: the NP best of offspring and parents; offspring win ties (stable sort)."""
         x = np.concatenate([rows, self._population])
         fx = np.concatenate([values, self._fitness])
-        order = np.argsort(-_key(fx), kind="stable")[: self.pop_size]
+        order = np.argsort(-rank_key(fx), kind="stable")[: self.pop_size]
         self._population, self._fitness = x[order], fx[order]
 
     def _bound(self, x: np.ndarray) -> np.ndarray:
@@ -351,50 +371,5 @@ class DifferentialEvolution:
         }
 
     def _stop_rule(self) -> StopReason | None:
-        if self.generation >= self.max_iter:
-            return "max_iter"
-        if self.max_evals is not None and self.n_evals >= self.max_evals:
-            return "max_evals"
-        if self.patience is not None and self._stall >= self.patience:
-            return "patience"
-        return None
-
-
-# ---------------------------------------------------------------------- helpers
-def _key(values: npt.ArrayLike) -> np.ndarray:
-    """Ranking key: failed (NaN) ranks below every finite value."""
-    return np.asarray(np.nan_to_num(np.asarray(values, dtype=float), nan=-np.inf), dtype=float)
-
-
-def _check_int(name: str, value: Any, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
-
-
-def _check_float(name: str, value: Any, low: float, high: float) -> float:
-    v = float(value)
-    if not (math.isfinite(v) and low <= v <= high):
-        raise ValueError(f"{name} must be in [{low}, {high}], got {value!r}")
-    return v
-
-
-def _encode(v: Any) -> Any:
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    return v
-
-
-def _decode(v: Any) -> Any:
-    return math.nan if v is None else v
-
-
-def _jsonable(obj: Any) -> Any:
-    """numpy arrays and scalars inside a bit-generator state -> lists and Python numbers."""
-    if isinstance(obj, dict):
-        return {k: _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj
+        return stop_rule(self.generation, self.n_evals, self._stall.count, max_iter=self.max_iter,
+                         max_evals=self.max_evals, patience=self.patience)

@@ -17,7 +17,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from finaldrive.engine.optimize import DifferentialEvolution
+from finaldrive.engine.optimize import restore
 from finaldrive.engine.study.presets import NamedRoad, ProfileResolver, resolve_roads
 from finaldrive.engine.study.runs import DERun, SweepRun
 from finaldrive.engine.study.scoring import OBJECTIVES, Objective
@@ -95,7 +95,7 @@ class StudyPlan:
         """The study's runs, fresh, or resumed from what is stored.
 
         ``sweep_done``: (road, candidate) pairs of the sweep already evaluated;
-        ``de_states``: DE run index -> (optimiser state, generations told).
+        ``de_states``: optimiser run index -> (optimiser state, rounds told).
         """
         out: list[Run] = []
         for i, designs in enumerate(self.road_designs or ()):  # a run a road: SWEEP_RUN, SWEEP_RUN - 1, ...
@@ -107,11 +107,11 @@ class StudyPlan:
         for i in range(self.n_de_runs):
             stored = (de_states or {}).get(i)
             if stored is not None:
-                de, generation = DifferentialEvolution.from_state(stored[0]), stored[1]
+                optimiser, generation = restore(stored[0]), stored[1]
             else:
                 assert self.de is not None and self.bounds is not None
-                de, generation = self.de.optimiser(self.bounds, self.seed + i), 0
-            out.append(DERun(i, de, self.de_roads(i), objective=self.objective, generation=generation))
+                optimiser, generation = self.de.build(self.bounds, self.seed + i), 0
+            out.append(DERun(i, optimiser, self.de_roads(i), objective=self.objective, generation=generation))
         return out
 
 
@@ -179,8 +179,9 @@ def plan_study(
                             f"vehicle's limit of {limits[field]:g} m ({_LIMIT_SOURCE[field]})")
     if kind == "sweep":
         return StudyPlan("sweep", tuple(named), designs=designs, seed=seed)
+    settings = de or (DESettings.paper() if kind == "paper-study" else DESettings())
     try:
-        return StudyPlan(kind, tuple(named), designs=designs, bounds=bounds or Bounds(), de=de or DESettings(),  # type: ignore[arg-type]
+        return StudyPlan(kind, tuple(named), designs=designs, bounds=bounds or Bounds(), de=settings,  # type: ignore[arg-type]
                          objective=objective or "mean", seed=seed)  # type: ignore[arg-type]
     except SpaceError as exc:
         raise PlanError((exc.field,), exc.msg) from None

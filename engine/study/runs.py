@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from finaldrive.engine.optimize import DifferentialEvolution
+from finaldrive.engine.optimize import Optimiser
 from finaldrive.engine.study.scoring import Objective, score
 
 
@@ -99,17 +99,17 @@ class SweepRun:
 
 
 class DERun:
-    """One differential evolution: each generation is evaluated on every road of the run and
-    told to the optimiser as one score a design (the fitness on one road, else ``objective``
+    """One optimiser run (any method of engine.optimize): each round is evaluated on every road of
+    the run and told to the optimiser as one score a design (the fitness on one road, else ``objective``
     over the roads, engine.study.scoring)."""
 
-    def __init__(self, index: int, de: DifferentialEvolution, roads: Sequence[int], *,
+    def __init__(self, index: int, optimiser: Optimiser, roads: Sequence[int], *,
                  objective: Objective = "mean", generation: int = 0) -> None:
-        """``generation``: how many generations ``de`` has been told (a resumed run's count)."""
+        """``generation``: how many rounds ``optimiser`` has been told (a resumed run's count)."""
         if not roads:
             raise ValueError("a DE run needs at least one road")
         self.index = index
-        self.de = de
+        self.optimiser = optimiser
         self.roads = tuple(roads)
         self.objective = objective
         self.generation = generation
@@ -119,9 +119,9 @@ class DERun:
 
     def take(self) -> list[Request]:
         """The current generation on every road, once; nothing while it is being evaluated."""
-        if self._issued or self.de.done:
+        if self._issued or self.optimiser.done:
             return []
-        x = self.de.ask()
+        x = self.optimiser.ask()
         self._issued = True
         self._table = np.full((len(self.roads), len(x)), np.nan)
         self._missing = self._table.size
@@ -136,7 +136,7 @@ class DERun:
         self._missing -= len(candidates)
         if self._missing > 0:
             return False
-        self.de.tell(score(self._table, self.objective))
+        self.optimiser.tell(score(self._table, self.objective))
         self.generation += 1
         self._issued = False
         self._table = None
@@ -144,12 +144,12 @@ class DERun:
 
     @property
     def done(self) -> bool:
-        return self.de.done
+        return self.optimiser.done
 
     @property
     def evaluations(self) -> int:
         """The evaluations of the generations told so far (each design once on each road)."""
-        return self.de.n_evals * len(self.roads)
+        return self.optimiser.n_evals * len(self.roads)
 
     @property
     def generations(self) -> int:

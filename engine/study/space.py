@@ -1,4 +1,4 @@
-"""The design space: the DE search box of Table 8 and the DE parameters of Table 10.
+"""The design space: the search box of Table 8, and the optimiser's settings (Table 10 as a preset).
 
 Both are frozen values with the paper's numbers as defaults; they validate themselves and
 raise :class:`SpaceError` naming the field, so the command line and the REST API share one
@@ -9,11 +9,12 @@ Designs are rows (a2 [rad], L2 [m], R_WS [m]); the box is given in a2 [deg], L2 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
+from typing import Any
 
 import numpy as np
 
-from finaldrive.engine.optimize import DifferentialEvolution
+from finaldrive.engine.optimize import OPTIMISERS, Optimiser
 
 Interval = tuple[float, float]
 
@@ -89,45 +90,77 @@ class Bounds:
         return ",".join(f"{f.name}={getattr(self, f.name)[0]:g}:{getattr(self, f.name)[1]:g}" for f in fields(self))
 
 
-#: (lowest, highest) value of each DE parameter anyone may ask for (a request beyond is refused).
+#: (lowest, highest) value of each optimiser parameter anyone may ask for (a request beyond is refused).
 DE_LIMITS: dict[str, tuple[float, float]] = {
     "np": (4, 10_000),           # best/1 needs the best and two others
     "f": (0.0, 2.0),
     "cp": (0.0, 1.0),
     "mp": (0.0, 1.0),
     "mr_fraction": (0.0, 1.0),
+    "sigma": (1e-3, 1.0),
     "iters": (0, 100_000),
     "patience": (1, 100_000),
+    "tol_m": (0.0, 1.0),
     "max_evals": (4, 100_000_000),
 }
+
+#: The settings that are whole numbers, and those that may be None (no limit).
+DE_INTEGRAL = ("np", "iters", "patience", "max_evals")
+DE_OPTIONAL = ("patience", "max_evals")
+
+#: What each setting means (the API's and the command line's help), and which method uses it.
+DE_HELP: dict[str, str] = {
+    "optimiser": "the method: de (the paper's differential evolution) or cmaes (IPOP-CMA-ES)",
+    "np": "population size: de's NP; cmaes's first population (each restart doubles it)",
+    "f": "de: differential weight F",
+    "cp": "de: crossover probability CP",
+    "mp": "de: mutation probability MP",
+    "mr_fraction": "de: mutation range MR, a fraction of each range",
+    "sigma": "cmaes: first step size, a fraction of each range",
+    "iters": "rounds (generations) after the first",
+    "patience": "stop after this many rounds in which the best fitness gained no more than tol_m",
+    "tol_m": "the fitness gain that counts as progress for patience (the objective's noise) [m]",
+    "max_evals": "evaluation budget of one run (>= np)",
+}
+
+#: The named starting points of the settings: ``default`` (stops once converged) and ``paper``
+#: (Table 10: 50 generations of 50, no early stop; reproduces the paper study).
+DE_PRESETS = ("default", "paper")
 
 
 @dataclass(frozen=True)
 class DESettings:
-    """The paper's DE parameters, Table 10 (section 4, Fig. 7).
+    """An optimiser run's settings (docs/optimisation.md); the fields are :data:`DE_HELP`'s.
 
-    np: population size NP; f: differential weight F; cp: crossover probability CP;
-    mp: mutation probability MP; mr_fraction: mutation range MR over (upper - lower);
-    iters: generations after the initial population (IterMax); patience: stop after this
-    many generations without improvement; max_evals: evaluation budget of one DE run.
+    The defaults stop a run once it has converged: DE with NP 16 and F 0.8 (Table 10's CP, MP and
+    MR), at most 100 generations, stopping after 15 generations that gained no more than 0.2 mm
+    (the fitness's noise: a 1e-9 change of a design moves it up to 0.21 mm on sine:0.04:3);
+    measured in docs/optimisation.md (bench/bench_optimisers.py). :meth:`paper` gives Table 10. ``f``, ``cp``,
+    ``mp`` and ``mr_fraction`` are the DE's, ``sigma`` is CMA-ES's.
     """
 
-    np: int = 50
-    f: float = 0.6
+    optimiser: str = "de"
+    np: int = 16
+    f: float = 0.8
     cp: float = 0.6
     mp: float = 0.1
     mr_fraction: float = 0.2
-    iters: int = 50
-    patience: int | None = None
+    sigma: float = 0.3
+    iters: int = 100
+    patience: int | None = 15
+    tol_m: float = 2e-4
     max_evals: int | None = None
 
     def __post_init__(self) -> None:
+        if self.optimiser not in OPTIMISERS:
+            raise SpaceError("optimiser", f"unknown method {_show(self.optimiser)}: expected one of "
+                             f"{', '.join(OPTIMISERS)}")
         for f in fields(self):
             value = getattr(self, f.name)
-            if value is None:
+            if value is None or f.name == "optimiser":
                 continue
             lo, hi = DE_LIMITS[f.name]
-            integral = f.name in ("np", "iters", "patience", "max_evals")
+            integral = f.name in DE_INTEGRAL
             if isinstance(value, bool) or not isinstance(value, (int, float)) or (integral and value != int(value)):
                 raise SpaceError(f.name, f"must be {'an integer' if integral else 'a number'}, got {_show(value)}")
             if not (_finite(value) and lo <= value <= hi):
@@ -135,18 +168,40 @@ class DESettings:
         if self.max_evals is not None and self.max_evals < self.np:
             raise SpaceError("max_evals", f"must be >= np ({self.np}), got {self.max_evals}")
 
+    @classmethod
+    def paper(cls) -> DESettings:
+        """The paper's DE, Table 10: NP 50, F 0.6, CP 0.6, MP 0.1, MR 0.2, 50 generations, no early stop."""
+        return cls(np=50, f=0.6, iters=50, patience=None, tol_m=0.0)
+
+    @classmethod
+    def preset(cls, name: str, **given: Any) -> DESettings:
+        """The preset ``name`` (:data:`DE_PRESETS`) with the ``given`` fields."""
+        if name not in DE_PRESETS:
+            raise SpaceError("preset", f"unknown preset {_show(name)}: expected one of {', '.join(DE_PRESETS)}")
+        base = cls.paper() if name == "paper" else cls()
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(given) - names)
+        if unknown:
+            raise SpaceError(unknown[0], "not a setting of the optimiser")
+        return replace(base, **given)
+
     def evals_per_run(self) -> int:
-        """Evaluations one DE run plans: NP + IterMax NP (Table 10: 2,550), within max_evals."""
+        """Evaluations one run plans at most: np (iters + 1) (Table 10: 2,550), within max_evals.
+        A run that converges stops earlier."""
         planned = self.np * (self.iters + 1)
         return min(planned, self.max_evals) if self.max_evals else planned
 
-    def optimiser(self, bounds: Bounds, seed: int) -> DifferentialEvolution:
-        """A new DE over ``bounds`` (engine units)."""
-        return DifferentialEvolution(
-            bounds.lower, bounds.upper, periodic=bounds.periodic, pop_size=self.np, f=self.f, cp=self.cp,
-            mp=self.mp, mr_fraction=self.mr_fraction, max_iter=self.iters, max_evals=self.max_evals,
-            patience=self.patience, seed=seed,
-        )
+    def build(self, bounds: Bounds, seed: int) -> Optimiser:
+        """A new optimiser of this method over ``bounds`` (engine units)."""
+        common: dict[str, Any] = {"periodic": bounds.periodic, "pop_size": self.np, "max_iter": self.iters,
+                                  "max_evals": self.max_evals, "patience": self.patience, "tol": self.tol_m,
+                                  "seed": seed}
+        own: dict[str, dict[str, Any]] = {
+            "de": {"f": self.f, "cp": self.cp, "mp": self.mp, "mr_fraction": self.mr_fraction},
+            "cmaes": {"sigma": self.sigma},
+        }
+        method: Any = OPTIMISERS[self.optimiser]  # each method's constructor takes its own settings
+        return method(bounds.lower, bounds.upper, **common, **own.get(self.optimiser, {}))  # type: ignore[no-any-return]
 
 
 def _show(v: object) -> str:

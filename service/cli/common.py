@@ -72,22 +72,31 @@ def add_settings_args(p: argparse.ArgumentParser) -> None:
 
 
 def add_de_args(p: argparse.ArgumentParser) -> None:
-    """The DE options; defaults and limits are the study layer's (Table 10)."""
-    from finaldrive.engine import DE_LIMITS, DESettings
+    """The optimiser's options; defaults and limits are the study layer's (a preset, then the options given)."""
+    from finaldrive.engine import DE_HELP, DE_PRESETS, OPTIMISERS
 
-    de = DESettings()
-    p.add_argument("--np", type=int, default=de.np, help=f"population size NP (>= {DE_LIMITS['np'][0]:g})")
-    p.add_argument("--iters", type=int, default=de.iters, help="generations after the initial population")
-    p.add_argument("--seed", type=int, default=0, help="random seed (DE run i uses seed + i)")
-    p.add_argument("--f", type=float, default=de.f, help="differential weight F")
-    p.add_argument("--cp", type=float, default=de.cp, help="crossover probability CP")
-    p.add_argument("--mp", type=float, default=de.mp, help="mutation probability MP")
-    p.add_argument("--mr", type=float, default=de.mr_fraction, help="mutation range MR, a fraction of each range")
-    p.add_argument("--patience", type=int, default=None, help="stop after N generations without improvement")
-    p.add_argument("--max-evals", type=int, default=None, help="evaluation budget of each DE run (>= --np)")
+    p.add_argument("--preset", choices=DE_PRESETS, default=None,
+                   help="where unset options come from: default (stops once converged; docs/optimisation.md) "
+                        "or paper (Table 10: 50 generations of 50); unset: paper for a paper-study, else default")
+    p.add_argument("--optimiser", choices=tuple(OPTIMISERS), default=None, help=DE_HELP["optimiser"])
+    p.add_argument("--seed", type=int, default=0, help="random seed (run i uses seed + i)")
+    for flag, name, kind in _de_options():
+        p.add_argument(flag, type=kind, default=None, help=DE_HELP[name])
     p.add_argument("--bounds", metavar="SPEC", default=None,
                    help="search box a2_deg=LO:HI,l2_m=LO:HI,rws_m=LO:HI (any subset; default Table 8: "
                         "a2_deg=0:360,l2_m=0:0.2,rws_m=0.05:0.15); a2 is periodic only over a full 360 deg")
+
+
+def _de_options() -> list[tuple[str, str, type]]:
+    """(flag, DESettings field, type) of the optimiser's options, one for each field of DESettings (a
+    method's new setting needs no change here); MR keeps the paper's short name."""
+    import dataclasses
+
+    from finaldrive.engine import DE_INTEGRAL, DESettings
+
+    flags = {"mr_fraction": "--mr"}
+    return [(flags.get(f.name, "--" + f.name.replace("_", "-")), f.name, int if f.name in DE_INTEGRAL else float)
+            for f in dataclasses.fields(DESettings) if f.name != "optimiser"]
 
 
 def add_tolerance_arg(p: argparse.ArgumentParser) -> None:
@@ -137,21 +146,30 @@ def settings_from_args(args: argparse.Namespace, **extra: Any) -> SimSettings:
         raise UsageError(str(exc)) from None
 
 
-def de_from_args(args: argparse.Namespace) -> tuple[Any, Any]:
-    """(Bounds, DESettings) from the DE options; UsageError names the option."""
+def de_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The optimiser options given on the command line (--preset included when given)."""
+    given = {name: getattr(args, flag[2:].replace("-", "_")) for flag, name, _ in _de_options()}
+    given["optimiser"] = args.optimiser
+    if args.preset is not None:
+        given["preset"] = args.preset
+    return {k: v for k, v in given.items() if v is not None}
+
+
+def de_from_args(args: argparse.Namespace, preset: str = "default") -> tuple[Any, Any]:
+    """(Bounds, DESettings) from the optimiser's options over ``preset`` (or --preset); UsageError
+    names the option."""
     from finaldrive.engine import Bounds, DESettings, SpaceError
 
-    options = {"np": "--np", "iters": "--iters", "f": "--f", "cp": "--cp", "mp": "--mp", "mr_fraction": "--mr",
-               "patience": "--patience", "max_evals": "--max-evals"}
     try:
         bounds = Bounds.parse(args.bounds)
     except SpaceError as exc:
         raise UsageError(f"--bounds: {exc}") from None
+    given = de_options(args)
     try:
-        de = DESettings(np=args.np, f=args.f, cp=args.cp, mp=args.mp, mr_fraction=args.mr, iters=args.iters,
-                        patience=args.patience, max_evals=args.max_evals)
+        de = DESettings.preset(given.pop("preset", preset), **given)
     except SpaceError as exc:
-        raise UsageError(f"{options[exc.field]}: {exc.msg}") from None
+        options = {name: flag for flag, name, _ in _de_options()}
+        raise UsageError(f"{options.get(exc.field, '--' + exc.field)}: {exc.msg}") from None
     return bounds, de
 
 

@@ -14,6 +14,7 @@ from finaldrive.service.cli.common import (
     add_de_args,
     add_tolerance_arg,
     de_from_args,
+    de_options,
     parser_options,
     print_json,
     writable,
@@ -55,8 +56,9 @@ def job_spec(args: argparse.Namespace) -> dict[str, Any]:
         return spec
     if args.grid is not None:
         raise UsageError(f"--grid is only for sweep, not {args.kind}")
-    bounds, de = de_from_args(args)
-    spec["de"] = {k: v for k, v in vars(de).items() if v is not None}
+    # checked here (an error names the option); the server resolves what was not given
+    bounds, _ = de_from_args(args, "paper" if args.kind == "paper-study" else "default")
+    spec["de"] = de_options(args)
     spec["bounds"] = {k: list(v) for k, v in vars(bounds).items()}
     if args.kind == "robust-de":
         spec["aggregate"] = args.objective

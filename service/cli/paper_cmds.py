@@ -24,7 +24,7 @@ from finaldrive.service.cli.remote import TERMINAL, client_command
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     from finaldrive.engine import DESettings
 
-    table10 = DESettings()
+    table10 = DESettings.paper()
     study = subparsers.add_parser("study", help="run a study", **parser_options())
     paper = study.add_subparsers(dest="study_command", required=True, metavar="STUDY").add_parser(
         "paper", help="the paper's study: Table 9 sweep + Table 10 DE on the 23 roads (one paper-study job)",

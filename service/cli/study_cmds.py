@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import math
 import time
 from contextlib import nullcontext
@@ -106,7 +107,7 @@ def run_optimize(args: argparse.Namespace) -> int:
             for one in plans:
                 runs = one.runs()
                 run_study(runs, one, settings, vehicle, executor, tally)
-                de_runs.append(runs[0].de)  # one DE: on one road, or robust over several
+                de_runs.append(runs[0].optimiser)  # one run: on one road, or robust over several
         finally:
             tally.progress.close()
     best_k = max(range(len(de_runs)), key=lambda k: de_runs[k].best_f if np.isfinite(de_runs[k].best_f) else -math.inf)
@@ -138,8 +139,7 @@ def run_optimize(args: argparse.Namespace) -> int:
         "history": [{k: (clean(v) if isinstance(v, float) else v) for k, v in history_record(h).items()}
                     for h in de_run.history],
         "seed": args.seed + best_k, "repeat": args.repeat,
-        "de": {"np": de.np, "iters": de.iters, "f": de.f, "cp": de.cp, "mp": de.mp,
-               "mr": de.mr_fraction, "patience": de.patience, "max_evals": de.max_evals},
+        "de": {"preset": args.preset or "default", **dataclasses.asdict(de)},
         "bounds": {"a2_deg": list(bounds.a2_deg), "l2_m": list(bounds.l2_m), "rws_m": list(bounds.rws_m)},
         "sharpness": sharp,
         "executor": kind, "workers": n_workers, "duration_s": settings.duration, "wall_s": time.monotonic() - start,

@@ -9,7 +9,6 @@ import numpy as np
 
 from finaldrive.engine import (
     Bounds,
-    DESettings,
     PlanError,
     ProfileResolver,
     SimSettings,
@@ -51,7 +50,7 @@ def build_plan(spec: JobSpec, *, profiles: ProfileResolver | None = None,
             raise PlanError(("vehicle",), str(exc)) from None
     try:
         bounds = None if spec.bounds is None else Bounds(**spec.bounds.model_dump())
-        de = None if spec.de is None else DESettings(**spec.de.model_dump())
+        de = None if spec.de is None else spec.de.settings(spec.default_preset)
     except SpaceError as exc:
         raise PlanError(("bounds" if exc.field in Bounds.__dataclass_fields__ else "de", exc.field), exc.msg) from None
     road_designs = None if spec.designs is None else [

@@ -404,7 +404,8 @@ class Scheduler:
             return
         run = job.runs[part.run]
         if run.tell(part.road, part.step, part.candidates, fitness) and isinstance(run, DERun):
-            de, record = run.de, run.de.history[-1]
+            de = run.optimiser
+            record = de.history[-1]
             de.history.clear()  # the rows hold the history: the optimiser here stays O(NP)
             job.writes.generations.append({  # the state without its history: each row holds its own record
                 "run": run.index, "generation": run.generation, "state": de.state(history=False),

@@ -95,7 +95,8 @@ def _figures(data: StudyData, report: dict[str, Any], series: dict[str, Any], fi
         history = A.de_history(data, i, np_size)
         if history:
             path = fig_dir / f"de-{i:02d}-{stem}.png"
-            de_history_png(path, history, A.de_population(data, i, np_size), title=f"DE (Table 10): {name}")
+            method = data.spec["de"].get("optimiser", "de")
+            de_history_png(path, history, A.de_population(data, i, np_size), title=f"{method}: {name}")
             out[f"de:{i}"] = path
     if len(series) == 2:
         path = fig_dir / "table14-series.png"

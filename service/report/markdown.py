@@ -47,8 +47,7 @@ def render(rep: dict[str, Any], figs: dict[str, str]) -> str:
     out = [
         f"# Paper study (job {job['id']}): Table 9 sweep and Table 10 DE on {len(job['roads'])} roads", "",
         _HOW.format(job=job["id"]), "",
-        f"Spec: grid `{spec['grid']}`; DE NP = {de['np']}, F = {de['f']:g}, CP = {de['cp']:g}, MP = {de['mp']:g}, "
-        f"MR = {de['mr_fraction']:g} of the range, {de['iters']} iterations, seed {spec['seed']} "
+        f"Spec: grid `{spec['grid']}`; {_optimiser(de)}, seed {spec['seed']} "
         f"(road i: seed + i); simulation {s['duration']:g} s, method `{s['method']}`, dt {s['dt']:g} s; "
         f"vehicle: {'the paper' + chr(39) + 's (engine/data/vehicle.json)' if spec['vehicle'] is None else 'custom'}.",
         "",
@@ -305,3 +304,13 @@ def _de_figures(roads: list[dict[str, Any]], figs: dict[str, str]) -> list[str]:
     if not keys:
         return []
     return ["## DE convergence per road", "", *[f"![DE {name}]({path})\n" for name, path in keys]]
+
+
+def _optimiser(de: dict[str, Any]) -> str:
+    """The optimiser's settings as the spec stored them (before methods had names: the DE's)."""
+    stop = "" if de.get("patience") is None else (
+        f", stopping after {de['patience']} generations without a gain of more than {de.get('tol_m', 0) * 1e3:g} mm")
+    if de.get("optimiser", "de") == "de":
+        return (f"DE NP = {de['np']}, F = {de['f']:g}, CP = {de['cp']:g}, MP = {de['mp']:g}, "
+                f"MR = {de['mr_fraction']:g} of the range, {de['iters']} iterations{stop}")
+    return f"{de['optimiser']}: population {de['np']}, sigma {de['sigma']:g}, {de['iters']} rounds{stop}"

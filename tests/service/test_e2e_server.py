@@ -77,7 +77,7 @@ def reference_de(spec: dict[str, Any]) -> Any:
     plan = build_plan(JobSpec.model_validate(spec).normalised())
     study = plan.study
     assert study.de is not None and study.bounds is not None
-    de = study.de.optimiser(study.bounds, study.seed)
+    de = study.de.build(study.bounds, study.seed)
     while not de.done:
         de.tell(evaluate(de.ask(), study.roads[0].road, plan.settings).fitness_m)
     return de

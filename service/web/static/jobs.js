@@ -79,7 +79,7 @@ function live() {
 async function defaults() {
   const schema = await api("/openapi.json");
   const s = schema.components.schemas;
-  const fill = (id, value) => value !== undefined && ($(id).placeholder = value);
+  const fill = (id, value) => value != null && ($(id).placeholder = value);
   const b = s.Bounds.properties;
   ["a2", "l2", "rws"].forEach((k) => {
     const d = b[{ a2: "a2_deg", l2: "l2_m", rws: "rws_m" }[k]].default;
@@ -87,6 +87,8 @@ async function defaults() {
     fill(`${k}-hi`, d?.[1]);
   });
   fill("np", s.DESpec.properties.np.default);
+  for (const name of s.DESpec.properties.optimiser.enum ?? []) $("optimiser").append(el("option", {}, name));
+  for (const name of s.DESpec.properties.preset.anyOf?.[0]?.enum ?? s.DESpec.properties.preset.enum ?? []) $("preset").append(el("option", {}, name));
   fill("iters", s.DESpec.properties.iters.default);
   fill("duration", s.SimulationSpec.properties.duration.default);
   // FastAPI names a model's request schema "JobSpec-Input" where its JSON schema differs from the
@@ -141,6 +143,8 @@ function spec() {
     }
     if (Object.keys(bounds).length) body.bounds = bounds;
     const de = {};
+    if ($("optimiser").value) de.optimiser = $("optimiser").value;
+    if ($("preset").value) de.preset = $("preset").value;
     if (numberOr("np") !== undefined) de.np = numberOr("np");
     if (numberOr("iters") !== undefined) de.iters = numberOr("iters");
     if (Object.keys(de).length) body.de = de;

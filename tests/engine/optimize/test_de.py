@@ -266,4 +266,6 @@ def test_optimiser_imports_numpy_and_stdlib_only() -> None:
              for alias in node.names}
     roots |= {node.module.split(".")[0] for node in ast.walk(tree)
               if isinstance(node, ast.ImportFrom) and node.module}
-    assert roots <= {"__future__", "math", "collections", "typing", "numpy"}
+    assert roots <= {"__future__", "math", "collections", "typing", "numpy", "finaldrive"}
+    assert {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
+            and node.module and node.module.startswith("finaldrive")} <= {"finaldrive.engine.optimize.common"}

@@ -51,12 +51,33 @@ def test_paper_study_plans_the_papers_104190_simulations() -> None:
     assert [r.index for r in runs[1:]] == list(range(23)) and all(isinstance(r, DERun) for r in runs[1:])
 
 
-def test_defaults_are_the_papers_tables() -> None:
+def test_defaults_are_the_papers_tables_and_the_paper_study_runs_table10() -> None:
     plan = plan_study("de", ["flat"])
     assert plan.bounds == Bounds() and plan.de == DESettings()
     assert Bounds().a2_deg == (0.0, 360.0) and Bounds().l2_m == (0.0, 0.2) and Bounds().rws_m == (0.05, 0.15)
-    assert DESettings().evals_per_run() == 2550
-    assert plan_study("robust-de", ["flat,sine:0.04:3"]).de_total() == 2 * 2550
+    table10 = DESettings.paper()
+    assert (table10.np, table10.f, table10.cp, table10.mp, table10.mr_fraction, table10.iters) == (50, 0.6, 0.6, 0.1,
+                                                                                                   0.2, 50)
+    assert table10.patience is None and table10.optimiser == "de" and table10.evals_per_run() == 2550
+    assert plan_study("paper-study", ["flat"]).de == table10
+    assert plan_study("robust-de", ["flat,sine:0.04:3"], de=table10).de_total() == 2 * 2550
+
+
+def test_the_default_stops_once_converged_and_presets_take_given_fields() -> None:
+    """New runs stop early (docs/optimisation.md): DE NP 16, F 0.8, patience 15 rounds of 0.2 mm."""
+    default = DESettings()
+    assert (default.optimiser, default.np, default.f, default.patience, default.tol_m) == ("de", 16, 0.8, 15, 2e-4)
+    assert DESettings.preset("paper", np=20, patience=None) == DESettings(np=20, f=0.6, iters=50, patience=None,
+                                                                          tol_m=0.0)
+    with pytest.raises(SpaceError, match="optimiser: unknown method 'bfgs'"):
+        DESettings(optimiser="bfgs")
+    with pytest.raises(SpaceError, match="preset: unknown preset"):
+        DESettings.preset("fast")
+    with pytest.raises(SpaceError, match="max_evals: must be >= np"):
+        DESettings.preset("paper", max_evals=20)
+    cma = DESettings(optimiser="cmaes", np=8, sigma=0.2, patience=None).build(Bounds(), seed=3)
+    assert cma.method == "cmaes" and len(cma.ask()) == 8
+
 
 
 @pytest.mark.parametrize(("kind", "roads", "parts", "field"), [
@@ -107,7 +128,7 @@ def test_a_de_is_bit_identical_whatever_the_order_and_splitting_of_its_work() ->
         plan = plan_study("de", ["flat,sine:0.04:3"], de=DESettings(np=12, iters=8), seed=5)
         runs = plan.runs()
         drive(runs, **how)
-        return np.stack([r.de.population for r in runs])
+        return np.stack([r.optimiser.population for r in runs])
 
     reference = final()
     np.testing.assert_array_equal(final(shuffle=np.random.default_rng(1), split=5), reference)
@@ -124,11 +145,11 @@ def test_a_resumed_de_continues_exactly() -> None:
         requests = run.take()
         for q in requests:
             run.tell(q.road, q.step, q.candidates, sphere(q.designs, q.road))
-    resumed = plan.runs(de_states={0: (run.de.state(), run.generation)})
+    resumed = plan.runs(de_states={0: (run.optimiser.state(), run.generation)})
     assert resumed[0].generation == 3
     drive(resumed)
-    np.testing.assert_array_equal(resumed[0].de.population, whole[0].de.population)
-    assert resumed[0].de.best_f == whole[0].de.best_f
+    np.testing.assert_array_equal(resumed[0].optimiser.population, whole[0].optimiser.population)
+    assert resumed[0].optimiser.best_f == whole[0].optimiser.best_f
 
 
 def test_a_resumed_sweep_hands_out_only_what_is_missing() -> None:

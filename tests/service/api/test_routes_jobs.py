@@ -154,3 +154,21 @@ def test_best_of_a_de_reports_its_final_population(client: TestClient) -> None:
     assert sharp["final_population"]["count"] == 6 and sharp["evaluated"] == 6 * 5
     lo, hi = sharp["final_population"]["ranges"]["fitness_m"]
     assert hi == pytest.approx(sharp["best_fitness_m"]) and lo <= hi
+
+
+def test_a_cmaes_job_runs_and_optimiser_settings_are_refused_by_name(client: TestClient) -> None:
+    """The method is a setting: a cmaes job succeeds through the protocol; an unknown method, a
+    setting out of range and a budget below the preset's NP are 422s naming the field."""
+    spec = {**DE, "de": {"optimiser": "cmaes", "np": 6, "iters": 3, "sigma": 0.2}}
+    job = wait_done(client, client.post("/v1/jobs", json=spec).json()["id"])
+    assert job["state"] == "succeeded" and job["done"] == 6 * 4
+    assert job["spec"]["de"] == {"preset": "default", "optimiser": "cmaes", "np": 6, "f": 0.8, "cp": 0.6, "mp": 0.1,
+                                 "mr_fraction": 0.2, "sigma": 0.2, "iters": 3, "patience": 15, "tol_m": 2e-4,
+                                 "max_evals": None}
+    history = client.get(f"/v1/jobs/{job['id']}/history").json()["runs"][0]["generations"]
+    assert [g["n_evals"] for g in history] == [6, 12, 18, 24]
+    for de, where in [({"optimiser": "bfgs"}, "optimiser: unknown method 'bfgs'"), ({"sigma": 2.0}, "sigma"),
+                      ({"preset": "paper", "max_evals": 20}, "max_evals: must be >= np (50)"),
+                      ({"preset": "fast"}, "preset")]:
+        response = client.post("/v1/jobs", json={**DE, "de": de})
+        assert response.status_code == 422 and where in response.json()["detail"], (de, response.json())

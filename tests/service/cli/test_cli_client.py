@@ -66,15 +66,17 @@ def test_submit_maps_options_to_the_spec(monkeypatch: pytest.MonkeyPatch, capsys
     use_transport(monkeypatch, handler)
     argv = ["submit", "robust-de", "--roads", "flat,sine:0.02:3", "--road", "bump:0.02:0.5", "--np", "8",
             "--iters", "3", "--seed", "4", "--objective", "worst", "--duration", "1.5", "--idempotency-key", "k1",
-            "--bounds", "a2_deg=90:270,l2_m=0:0.1"]
+            "--bounds", "a2_deg=90:270,l2_m=0:0.1", "--optimiser", "cmaes", "--preset", "paper"]
     assert main(argv) == 0
     assert seen == [{"kind": "robust-de", "roads": ["bump:0.02:0.5", "flat", "sine:0.02:3"], "seed": 4,
                      "settings": {"duration": 1.5, "method": "fast"}, "aggregate": "worst",
-                     "de": {"np": 8, "iters": 3, "f": 0.6, "cp": 0.6, "mp": 0.1, "mr_fraction": 0.2},
+                     "de": {"np": 8, "iters": 3, "optimiser": "cmaes", "preset": "paper"},  # the rest: the server's
                      "bounds": {"a2_deg": [90.0, 270.0], "l2_m": [0.0, 0.1], "rws_m": [0.05, 0.15]}}]
     assert capsys.readouterr().out.startswith("job 7: de on 1 road(s), 12 evaluations, queued")
     assert main(["submit", "de", "--road", "flat", "--grid", "table9"]) == 2
     assert main(["submit", "sweep"]) == 2
+    assert main(["submit", "de", "--road", "flat", "--preset", "paper", "--max-evals", "20"]) == 2  # NP 50
+    assert "--max-evals: must be >= np (50)" in capsys.readouterr().err
 
 
 def test_follow_exit_code_when_the_job_is_cancelled(monkeypatch: pytest.MonkeyPatch,

@@ -92,8 +92,11 @@ def test_a_sweep_resumes_with_only_what_is_missing(settings: Settings) -> None:
     assert len(set(_slots(settings, job_id))) == len(_slots(settings, job_id)) == 24
 
 
-def test_a_de_resumes_and_ends_bit_identical_to_an_uninterrupted_run(settings: Settings, tmp_path: Path) -> None:
-    spec = {**DE, "roads": ["flat,sine:0.02:3"], "de": {"np": 6, "iters": 8}}
+@pytest.mark.parametrize("optimiser", ["de", "cmaes"])
+def test_a_de_resumes_and_ends_bit_identical_to_an_uninterrupted_run(settings: Settings, tmp_path: Path,
+                                                                     optimiser: str) -> None:
+    """Any method through the protocol: its state stored each round resumes it exactly."""
+    spec = {**DE, "roads": ["flat,sine:0.02:3"], "de": {"np": 6, "iters": 8, "optimiser": optimiser}}
     reference = settings.model_copy(update={"db_url": f"sqlite:///{tmp_path / 'ref.db'}"})
     ref_id = _submit(reference, spec)
     with running_scheduler(reference, ToyTask()):
