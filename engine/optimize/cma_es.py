@@ -187,7 +187,7 @@ class CMAES:
             "pending": None if self._pending is None else self._pending.tolist(),
             "rng": jsonable(self._rng.bit_generator.state),
             "cma": {"popsize": cma.population_size, "sigma0": self._sigma0, "sigma": cma._sigma, "g": cma._g,
-                    **{name: jsonable(getattr(cma, name)) for name in _CMA_ARRAYS},
+                    **{name: _array_json(getattr(cma, name)) for name in _CMA_ARRAYS},
                     "eigen": None if cma._B is None else [jsonable(cma._B), jsonable(cma._D)],
                     "random_state": jsonable(cma._rng.get_state(legacy=False))},
         }
@@ -213,9 +213,9 @@ class CMAES:
         out._fitness = np.array([decode(v) for v in state["fitness"]], dtype=float)
         out._pending = None if state["pending"] is None else np.array(state["pending"], dtype=float).reshape(-1, d)
         saved = state["cma"]
-        cma = out._new_cma(np.array(saved["_mean"]), saved["sigma0"], saved["popsize"], seed=0)
+        cma = out._new_cma(_array_from_json(saved["_mean"]), saved["sigma0"], saved["popsize"], seed=0)
         for name in _CMA_ARRAYS:
-            setattr(cma, name, np.array(saved[name], dtype=float))
+            setattr(cma, name, _array_from_json(saved[name]))
         cma._sigma, cma._g = saved["sigma"], saved["g"]
         cma._B, cma._D = (None, None) if saved["eigen"] is None else (np.array(saved["eigen"][0]),
                                                                       np.array(saved["eigen"][1]))
@@ -256,3 +256,13 @@ class CMAES:
     def _stop_rule(self) -> StopReason | None:
         return stop_rule(self.generation, self.n_evals, self._stall.count, max_iter=self.max_iter,
                          max_evals=self.max_evals, patience=self.patience)
+
+
+def _array_json(values: np.ndarray) -> dict[str, Any]:
+    """An array as JSON (non-finite entries as None: ``cmaes`` starts its history of values from
+    ``np.empty``, whose garbage it overwrites before reading it)."""
+    return {"shape": list(values.shape), "values": [encode(v) for v in values.ravel().tolist()]}
+
+
+def _array_from_json(saved: dict[str, Any]) -> np.ndarray:
+    return np.array([decode(v) for v in saved["values"]], dtype=float).reshape(saved["shape"])

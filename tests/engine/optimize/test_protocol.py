@@ -69,7 +69,7 @@ def test_a_json_round_trip_of_the_state_continues_bit_for_bit(method: str) -> No
         np.testing.assert_array_equal(x, resumed.ask())
         whole.tell(f(x))
         resumed.tell(f(x))
-        resumed = restore(json.loads(json.dumps(resumed.state(history=False))))
+        resumed = restore(json.loads(json.dumps(resumed.state(history=False), allow_nan=False)))
     assert resumed.done and resumed.best_f == whole.best_f and resumed.n_evals == whole.n_evals
     if method == "cmaes":
         assert isinstance(whole, CMAES) and whole.restarts >= 1
