@@ -100,14 +100,14 @@ def run_optimize(args: argparse.Namespace) -> int:
     tally = Tally(len(plan.roads), Progress(sum(p.total() for p in plans), enabled=args.progress))
     start = time.monotonic()
     kind = args.executor or default_executor()
-    de_runs = []
     with open_executor(kind, args.workers) as executor:
         n_workers = executor.num_workers
         try:
-            for one in plans:
-                runs = one.runs()
-                run_study(runs, one, settings, vehicle, executor, tally)
-                de_runs.append(runs[0].optimiser)  # one run: on one road, or robust over several
+            runs = [one.runs()[0] for one in plans]  # one run a seed: on one road, or robust over several
+            for k, run in enumerate(runs):
+                run.index = k  # the repeats run at once, each told its own results
+            run_study(runs, plan, settings, vehicle, executor, tally)
+            de_runs = [run.optimiser for run in runs]
         finally:
             tally.progress.close()
     best_k = max(range(len(de_runs)), key=lambda k: de_runs[k].best_f if np.isfinite(de_runs[k].best_f) else -math.inf)

@@ -175,6 +175,9 @@ def test_optimize_repeat_reports_sharpness_population_and_seeds(capsys: pytest.C
     lo, hi = sharp["repeats"]["spread"]["l2_m"]
     assert lo == min(o["l2_m"] for o in optima) and hi == max(o["l2_m"] for o in optima)
     assert max(o["fitness_m"] for o in optima) == pytest.approx(r["best"]["fitness_m"])
+    alone = run_json(["optimize", "--road", "flat", *TOY, "--executor", "serial", "--seed", "1"], capsys)
+    assert [alone["best"][k] for k in ("a2_deg", "l2_m", "rws_m", "fitness_m")] == \
+        [optima[1][k] for k in ("a2_deg", "l2_m", "rws_m", "fitness_m")]  # the repeats run at once, unchanged
 
 
 def test_text_output_says_which_variables_are_decided(capsys: pytest.CaptureFixture[str]) -> None:
