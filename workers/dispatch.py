@@ -127,7 +127,6 @@ class Dispatcher:
         self._task_s = 0.0  # running mean of a task's time in its worker [s]
         # the driving thread's own time a finished task (batching rule 4), from windows of >= 1 s
         self.driver_s = 0.0
-        self._windowed = False  # a whole window of driver time has been measured
         self._window_start = time.perf_counter()
         self._window_busy_s = 0.0
         self._window_tasks = 0
@@ -269,8 +268,9 @@ class Dispatcher:
     def _measure(self, finished: int, now: float) -> None:
         """Batching rule 4's driver time a task: the time spent starting tasks and handling their
         results (not waiting for them, nor the source's own work between steps) over the tasks that
-        finished, once a window of at least a second holds tasks (before the first such window: over
-        the tasks so far)."""
+        finished, once a window of at least a second holds tasks (before the first such window: the
+        first tasks' figure, taken once: a serial executor's tasks run in the driver, and an estimate
+        retaken from ever bigger tasks would grow them without bound)."""
         self._window_tasks += finished
         if not self._window_tasks:
             return
@@ -278,8 +278,7 @@ class Dispatcher:
             self.driver_s = self._window_busy_s / self._window_tasks
             self.limit = in_flight_limit(self.executor.num_workers, self.executor.capacity, self._task_s)
             self._window_start, self._window_busy_s, self._window_tasks = now, 0.0, 0
-            self._windowed = True
-        elif not self._windowed:  # until a whole window has closed: the tasks so far (a DE of a second
+        elif self.driver_s == 0.0:  # until a whole window has closed: the first tasks' (a DE of a second
             self.driver_s = self._window_busy_s / self._window_tasks  # would otherwise run on none)
 
     def close(self) -> None:

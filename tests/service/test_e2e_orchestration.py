@@ -25,8 +25,8 @@ pytestmark = pytest.mark.slow
 
 SIM = {"duration": 0.3}
 DE = {"kind": "de", "roads": ["flat,sine:0.02:3"], "de": {"np": 8, "iters": 5}, "seed": 5, "settings": SIM}
-#: A seeded DE of 1,220 evaluations in 61 generations, long enough for three crashes of its store.
-DURABLE_DE = {"kind": "de", "roads": ["flat,sine:0.02:3"], "de": {"np": 10, "iters": 60}, "seed": 11,
+#: A seeded DE of 1,220 evaluations in 61 generations (no early stop), long enough for three crashes of its store.
+DURABLE_DE = {"kind": "de", "roads": ["flat,sine:0.02:3"], "de": {"preset": "paper", "np": 10, "iters": 60}, "seed": 11,
               "settings": {"duration": 1.0}}
 #: Fast leases, so a killed scheduler's job is taken over in seconds.
 LEASES = {"FINALDRIVE_LEASE_SECONDS": "2", "FINALDRIVE_HEARTBEAT_SECONDS": "0.2"}
