@@ -122,3 +122,19 @@ def test_cmaes_restarts_double_the_population() -> None:
         sizes.append(len(x))
         opt.tell(np.round(neg_sphere(x), 1))
     assert sizes[0] == 6 and 12 in sizes and max(sizes) >= 24
+
+
+def test_a_cmaes_state_with_non_finite_history_is_strict_json_and_resumes() -> None:
+    """cmaes starts its history of values with np.empty (garbage, overwritten before it is read): a
+    NaN there is stored as null (PostgreSQL's JSON refuses NaN) and the run continues exactly."""
+    opt = make("cmaes", seed=9, max_iter=40)
+    opt.tell(neg_sphere(opt.ask()))
+    assert isinstance(opt, CMAES)
+    opt._cma._funhist_values[-2:] = [np.nan, np.inf]
+    resumed = restore(json.loads(json.dumps(opt.state(), allow_nan=False)))
+    while not opt.done:
+        x = opt.ask()
+        np.testing.assert_array_equal(x, resumed.ask())
+        opt.tell(neg_sphere(x))
+        resumed.tell(neg_sphere(x))
+    assert resumed.best_f == opt.best_f

@@ -158,7 +158,8 @@ def test_a_failed_simulation_is_stored_and_the_sweep_succeeds(client: TestClient
 
 def test_two_schedulers_share_a_database_and_store_every_slot_once(store_url: str, tmp_path: Path) -> None:
     settings = Settings(db_url=store_url, executor="serial", status_cache_seconds=0, allowed_hosts=["testserver"])
-    specs = [{**DE, "roads": ["flat,sine:0.02:3"], "de": {"np": 8, "iters": 6}, "seed": s} for s in (1, 2, 3)]
+    specs = [{**DE, "roads": ["flat,sine:0.02:3"], "de": {"np": 8, "iters": 6, "optimiser": method}, "seed": s}
+             for s, method in ((1, "de"), (2, "de"), (3, "cmaes"))]  # every method's state stored on both stores
     alone = Settings(db_url=f"sqlite:///{tmp_path / 'alone.db'}", executor="serial", status_cache_seconds=0,
                      allowed_hosts=["testserver"])
     reference = [_submit(alone, spec) for spec in specs]
