@@ -1,10 +1,10 @@
 """What an optimiser is to the rest of finaldrive: ask/tell of whole batches, maximising.
 
-The study layer, the scheduler, the command line and the report drive every method through
-:class:`Optimiser` and know no method's internals. A method is a class that follows the protocol
-and is registered under its name (:func:`register`); :func:`restore` rebuilds any of them from
-its :meth:`Optimiser.state`. Adding a method is its module and one line in
-``finaldrive.engine.optimize``.
+The study layer, the scheduler and the command line drive every method through :class:`Optimiser`
+and know no method's internals. A method is a class that follows the protocol and is registered
+under its name (:func:`register`); :func:`restore` rebuilds any of them from its
+:meth:`Optimiser.state`. Adding a method is its module, one line in ``finaldrive.engine.optimize``
+and its own settings in ``finaldrive.engine.study.space.DESettings.build``.
 
 Each :meth:`Optimiser.tell` ends a round and appends its record to ``history``: ``generation``
 (rounds told after the first), ``n_evals`` (evaluations told so far), ``best_f``, ``mean_f`` (the
