@@ -94,7 +94,7 @@ def _setting(name: str) -> tuple[Any, Any]:
     lo, hi = DE_LIMITS[name]
     default = getattr(_DE, name)
     kind: Any = Whole if name in DE_INTEGRAL else Num
-    return (kind | None if default is None or name in DE_OPTIONAL else kind,
+    return (kind | None if name in DE_OPTIONAL else kind,
             Field(default, ge=lo, le=hi, description=DE_HELP[name]))
 
 

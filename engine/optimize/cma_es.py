@@ -34,15 +34,16 @@ import numpy as np
 import numpy.typing as npt
 
 from finaldrive.engine.optimize.common import (
+    AskTell,
     Stall,
     StopReason,
     check_float,
     check_int,
     decode,
     encode,
+    generator_for,
     jsonable,
     rank_key,
-    stop_rule,
 )
 
 if TYPE_CHECKING:
@@ -53,7 +54,7 @@ STATE_VERSION = 1
 _CMA_ARRAYS = ("_mean", "_C", "_p_sigma", "_pc", "_funhist_values")
 
 
-class CMAES:
+class CMAES(AskTell):
     """IPOP-CMA-ES over a box (maximises); the protocol of engine.optimize.protocol.
 
     Parameters
@@ -110,13 +111,7 @@ class CMAES:
 
     def tell(self, fitness: npt.ArrayLike) -> None:
         """Fitness of the last ask's rows, in order (non-finite: failed)."""
-        if self._pending is None:
-            raise RuntimeError("tell() without a pending ask()")
-        values = np.array(fitness, dtype=float).ravel()
-        if values.size != len(self._pending):
-            raise ValueError(f"expected {len(self._pending)} fitness values, got {values.size}")
-        values[~np.isfinite(values)] = np.nan
-        z, self._pending = self._pending, None
+        z, values = self._told(fitness)
         rows = self._rows(z)
         first = self.n_evals == 0
         self.n_evals += len(rows)
@@ -146,29 +141,12 @@ class CMAES:
 
     # ------------------------------------------------------------------ read-outs
     @property
-    def done(self) -> bool:
-        return self.stop_reason is not None
-
-    @property
-    def dim(self) -> int:
-        return self._lower.size
-
-    @property
     def best_x(self) -> np.ndarray:
         return self._best_x.copy()
 
     @property
     def best_f(self) -> float:
         return self._best_f
-
-    @property
-    def population(self) -> np.ndarray:
-        """The last round's rows, best first."""
-        return self._population.copy()
-
-    @property
-    def fitness(self) -> np.ndarray:
-        return self._fitness.copy()
 
     # ------------------------------------------------------------------ state
     def state(self, *, history: bool = True) -> dict[str, Any]:
@@ -192,17 +170,16 @@ class CMAES:
                     "random_state": jsonable(cma._rng.get_state(legacy=False))},
         }
         if history:
-            out["history"] = [{k: encode(v) for k, v in h.items()} for h in self.history]
+            out["history"] = self._history_json()
         return out
 
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> CMAES:
         if state.get("version") != STATE_VERSION:
             raise ValueError(f"unsupported CMA-ES state version {state.get('version')!r}")
-        rng_state = state["rng"]
-        bit_generator = getattr(np.random, rng_state["bit_generator"])()
-        out = cls(**state["config"], seed=np.random.Generator(bit_generator))
-        bit_generator.state = rng_state  # __init__ drew a first mean: put the saved state back
+        generator, bit_generator = generator_for(state["rng"])
+        out = cls(**state["config"], seed=generator)
+        bit_generator.state = state["rng"]  # __init__ drew a first mean: put the saved state back
         d = out.dim
         out.generation, out.n_evals, out.restarts = state["generation"], state["n_evals"], state["restarts"]
         out.stop_reason, out._stall.count = state["stop_reason"], state["stall"]
@@ -252,10 +229,6 @@ class CMAES:
         z = np.where(self._periodic, np.mod(z, 1.0), np.clip(z, 0.0, 1.0))
         z = np.where(z >= 1.0, np.where(self._periodic, 0.0, 1.0), z)  # mod can round up to the full range
         return np.asarray(self._lower + z * (self._upper - self._lower), dtype=float)
-
-    def _stop_rule(self) -> StopReason | None:
-        return stop_rule(self.generation, self.n_evals, self._stall.count, max_iter=self.max_iter,
-                         max_evals=self.max_evals, patience=self.patience)
 
 
 def _array_json(values: np.ndarray) -> dict[str, Any]:

@@ -12,6 +12,76 @@ import numpy.typing as npt
 StopReason = Literal["max_iter", "max_evals", "patience"]
 
 
+class AskTell:
+    """What the methods share around their own algorithm: taking a tell's values, the read-outs of
+    the rows kept, the stopping rules, and the history in a state (the attributes below are set by
+    each method's ``__init__``)."""
+
+    _lower: np.ndarray
+    _pending: np.ndarray | None
+    _population: np.ndarray
+    _fitness: np.ndarray
+    _stall: Stall
+    generation: int
+    n_evals: int
+    history: list[dict[str, Any]]
+    stop_reason: StopReason | None
+    max_iter: int
+    max_evals: int | None
+    patience: int | None
+
+    def _told(self, fitness: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """(the pending rows, their values as floats, non-finite -> NaN); nothing is pending after."""
+        if self._pending is None:
+            raise RuntimeError("tell() without a pending ask()")
+        values = np.array(fitness, dtype=float).ravel()
+        if values.size != len(self._pending):
+            raise ValueError(f"expected {len(self._pending)} fitness values, got {values.size}")
+        values[~np.isfinite(values)] = np.nan
+        rows, self._pending = self._pending, None
+        return rows, values
+
+    @property
+    def done(self) -> bool:
+        """True once a stopping rule fired (see ``stop_reason``)."""
+        return self.stop_reason is not None
+
+    @property
+    def dim(self) -> int:
+        """d, the number of variables."""
+        return self._lower.size
+
+    @property
+    def population(self) -> np.ndarray:
+        """The rows the method keeps, best first; empty before the first tell."""
+        return self._population.copy()
+
+    @property
+    def fitness(self) -> np.ndarray:
+        """Fitness of ``population`` (NaN = failed)."""
+        return self._fitness.copy()
+
+    def _stop_rule(self) -> StopReason | None:
+        """The stopping rules, checked after each tell in this order."""
+        if self.generation >= self.max_iter:
+            return "max_iter"
+        if self.max_evals is not None and self.n_evals >= self.max_evals:
+            return "max_evals"
+        if self.patience is not None and self._stall.count >= self.patience:
+            return "patience"
+        return None
+
+    def _history_json(self) -> list[dict[str, Any]]:
+        return [{k: encode(v) for k, v in h.items()} for h in self.history]
+
+
+def generator_for(rng_state: dict[str, Any]) -> tuple[np.random.Generator, Any]:
+    """A generator on a new bit generator of the saved state's kind, and that bit generator (set its
+    ``state`` to ``rng_state`` once the optimiser built on it has drawn its start)."""
+    bit_generator = getattr(np.random, rng_state["bit_generator"])()
+    return np.random.Generator(bit_generator), bit_generator
+
+
 class Stall:
     """Rounds since the best fitness last gained more than ``tol`` (``patience``'s count)."""
 
@@ -30,18 +100,6 @@ class Stall:
             self.count, self.ref = 0, best
         else:
             self.count += 1
-
-
-def stop_rule(generation: int, n_evals: int, stall: int, *, max_iter: int, max_evals: int | None,
-              patience: int | None) -> StopReason | None:
-    """The stopping rules, checked after each tell in this order."""
-    if generation >= max_iter:
-        return "max_iter"
-    if max_evals is not None and n_evals >= max_evals:
-        return "max_evals"
-    if patience is not None and stall >= patience:
-        return "patience"
-    return None
 
 
 def rank_key(values: npt.ArrayLike) -> np.ndarray:

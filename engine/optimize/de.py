@@ -66,20 +66,21 @@ import numpy as np
 import numpy.typing as npt
 
 from finaldrive.engine.optimize.common import (
+    AskTell,
     Stall,
     StopReason,
     check_float,
     check_int,
     decode,
     encode,
+    generator_for,
     jsonable,
     rank_key,
-    stop_rule,
 )
 
 STATE_VERSION = 1
 
-class DifferentialEvolution:
+class DifferentialEvolution(AskTell):
     """Ask/tell differential evolution of the paper (section 4, Fig. 7, Table 10); maximises.
 
     Parameters
@@ -187,13 +188,7 @@ class DifferentialEvolution:
         Non-finite values are failed evaluations. Runs selection (step 6), the stopping
         rules, and prepares the next generation's offspring (steps 3-5).
         """
-        if self._pending is None:
-            raise RuntimeError("tell() without a pending ask()")
-        values = np.array(fitness, dtype=float).ravel()
-        if values.size != len(self._pending):
-            raise ValueError(f"expected {len(self._pending)} fitness values, got {values.size}")
-        values[~np.isfinite(values)] = np.nan
-        rows, self._pending = self._pending, None
+        rows, values = self._told(fitness)
         n_failed = int(np.count_nonzero(np.isnan(values)))
         self.n_evals += len(rows)
         initial = self._population.shape[0] == 0
@@ -210,16 +205,6 @@ class DifferentialEvolution:
 
     # ------------------------------------------------------------------ read-outs
     @property
-    def done(self) -> bool:
-        """True once a stopping rule fired (see ``stop_reason``)."""
-        return self.stop_reason is not None
-
-    @property
-    def dim(self) -> int:
-        """d, the number of variables."""
-        return self._lower.size
-
-    @property
     def lower(self) -> np.ndarray:
         return self._lower.copy()
 
@@ -230,16 +215,6 @@ class DifferentialEvolution:
     @property
     def periodic(self) -> np.ndarray:
         return self._periodic.copy()
-
-    @property
-    def population(self) -> np.ndarray:
-        """Current population (NP, d), best first; empty before the first tell."""
-        return self._population.copy()
-
-    @property
-    def fitness(self) -> np.ndarray:
-        """Fitness of ``population`` (NaN = failed)."""
-        return self._fitness.copy()
 
     @property
     def best_x(self) -> np.ndarray:
@@ -289,7 +264,7 @@ class DifferentialEvolution:
             "rng": jsonable(self._rng.bit_generator.state),
         }
         if history:
-            out["history"] = [{k: encode(v) for k, v in h.items()} for h in self.history]
+            out["history"] = self._history_json()
         return out
 
     @classmethod
@@ -298,12 +273,9 @@ class DifferentialEvolution:
         taken with ``history=False`` its ``history`` starts empty and gains the records to come."""
         if state.get("version") != STATE_VERSION:
             raise ValueError(f"unsupported DE state version {state.get('version')!r}")
-        rng_state = state["rng"]
-        bit_generator = getattr(np.random, rng_state["bit_generator"])()
-        bit_generator.state = rng_state
-        de = cls(**state["config"], seed=np.random.Generator(bit_generator))
-        # __init__ drew an initial population; put the saved RNG state back.
-        bit_generator.state = rng_state
+        generator, bit_generator = generator_for(state["rng"])
+        de = cls(**state["config"], seed=generator)
+        bit_generator.state = state["rng"]  # __init__ drew an initial population: put the saved state back
         d = de.dim
         de._population = np.array(state["population"], dtype=float).reshape(-1, d)
         de._fitness = np.array([decode(v) for v in state["fitness"]], dtype=float)
@@ -369,7 +341,3 @@ class DifferentialEvolution:
             "mean_f": float(finite.mean()) if finite.size else math.nan,
             "n_failed": n_failed,
         }
-
-    def _stop_rule(self) -> StopReason | None:
-        return stop_rule(self.generation, self.n_evals, self._stall.count, max_iter=self.max_iter,
-                         max_evals=self.max_evals, patience=self.patience)
