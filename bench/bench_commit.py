@@ -44,7 +44,7 @@ def _rows(n: int, first: int) -> list[tuple[object, ...]]:
     rng = np.random.default_rng(first)
     designs = np.column_stack([rng.uniform(0, 6.28, n), rng.uniform(0, 0.2, n), rng.uniform(0.05, 0.2, n)])
     part = Request(0, 0, 0, np.arange(first, first + n), designs)
-    batch = SleepTask(0.0, sleep=False)._results(designs)
+    batch = SleepTask(0.0, sleep=False).results(designs)
     keys = [f"{first + i:064x}" for i in range(n)]
     return rows_from_results([(part, batch, batch.fitness_m, keys, False)])
 

@@ -143,7 +143,7 @@ class SleepTask:
 
     def __call__(self, rows: np.ndarray, roads: tuple[Road, ...], settings: SimSettings,
                  vehicle: Vehicle | None) -> list[tuple[int, BatchResult]]:
-        out = [(road, self._results(x)) for road, x in by_road(rows)]
+        out = [(road, self.results(x)) for road, x in by_road(rows)]
         if self.sleep:
             time.sleep(sum(float(result.wall_s.sum()) for _, result in out))
         return out
@@ -153,7 +153,7 @@ class SleepTask:
             return np.full(len(x), self.ms * 1e-3)
         return np.array([self.times[zlib.crc32(row.tobytes(), self.seed) % len(self.times)] for row in x])
 
-    def _results(self, x: np.ndarray) -> BatchResult:
+    def results(self, x: np.ndarray) -> BatchResult:
         n = len(x)
         fitness = 20.0 - np.cos(x[:, 0]) * 0.01 - (x[:, 1] - 0.05) ** 2 - (x[:, 2] - 0.09) ** 2
         ones, nan = np.ones(n), np.full(n, np.nan)
@@ -167,9 +167,10 @@ class VirtualCluster(ExecutorMixin):
     """``cpus`` CPUs on a clock, no processes: a task holds a CPU for its designs' times (their
     ``wall_s``; queued first-in first-out while no CPU is free) and is reported when that time has
     passed on the wall clock. Its result is computed at submission (the stand-in told not to sleep),
-    with the in-worker times it would have had. With ``costs`` the driver pays Ray's: ``task_s`` of
-    busy loop at each submit, ``poll_s(in flight)`` at each poll, and
-    a CPU is idle ``gap_s`` after each task (reported to the scheduler as the task's ``idle_s``).
+    with the in-worker times it would have had. With ``costs`` the driver pays Ray's: ``task_s`` at
+    each submit (the stand-in's own time making the result, then a busy loop for the rest),
+    ``poll_s(in flight)`` at each poll, and a CPU is idle ``gap_s`` after each task (reported to the
+    scheduler as the task's ``idle_s``).
     Without, the scheduler and the store get the whole machine, so the figure is theirs alone.
     """
 
@@ -189,14 +190,15 @@ class VirtualCluster(ExecutorMixin):
 
     def submit(self, fn: Any, batch: Any, *shared: Shared) -> int:
         values = [handle.ref for handle in shared]
+        begun = time.perf_counter()
         timed = fn(batch, *values)
         held = sum(float(result.wall_s.sum()) for _, result in timed.result)
         self.held_s += held
         if self.costs is None:
             result = dataclasses.replace(timed, busy_s=held, compute_s=held)  # as if it had slept
             start = max(time.perf_counter(), heapq.heappop(self._free_at))
-        else:
-            _spin(self.costs.task_s)
+        else:  # the stand-in made its result here, in the driver: that time is part of Ray's, not on top
+            _spin(self.costs.task_s - (time.perf_counter() - begun))
             free = heapq.heappop(self._free_at)            # the previous task's end + the gap
             start = max(time.perf_counter(), free)
             result = dataclasses.replace(timed, busy_s=held, compute_s=held,

@@ -3,7 +3,11 @@
 The rule (docs/workers.md, "Batching"):
 
 1. **Probe.** Until a batch has come back, batches hold ``probe_size`` designs (1), so the
-   first wave gives every worker a small task.
+   first wave gives every worker a small task. A source that starts where others have run
+   (:meth:`BatchSizer.after`) skips the probe: it starts from their per-task overhead and, weighted
+   as :data:`PRIOR_DESIGNS` designs, their per-design time, which its own results soon outweigh
+   (a DE job arriving at a warm 256-CPU cluster would otherwise hand out its first round one
+   design a task: 368 tasks of the driver's ~1 ms for the 23 paper roads, docs/performance.md).
 2. **Measure.** For each finished batch of ``n`` designs: ``compute`` is the time ``fn`` ran
    in the worker, ``busy`` adds the one-off warm-up, ``round_trip`` runs from handing the
    batch to the executor to receiving its result, and ``idle`` is the worker's time from its
@@ -57,6 +61,7 @@ PROBE_SIZE = 1           # designs per batch before any measurement
 MAX_TASK_S = 0.5         # longest task aimed for [s]
 DRIVER_SHARE = 0.5       # largest share of the dispatching thread's time its task traffic may take
 IDLE_SAMPLES = 64        # recent tasks whose workers' idle gaps give the overhead (rule 2)
+PRIOR_DESIGNS = 16       # weight, in designs, of earlier sources' per-design time in a new source's (rule 1)
 
 
 def batch_size(
@@ -103,6 +108,16 @@ class BatchSizer:
     compute_s: float = 0.0
     round_trip_s: float = math.inf  # the smallest round trip - busy seen
     idle_s: deque[float] = field(default_factory=lambda: deque(maxlen=IDLE_SAMPLES))
+
+    @classmethod
+    def after(cls, earlier: BatchSizer) -> BatchSizer:
+        """A new source's sizer on the executor ``earlier`` measured (rule 1): its overhead, and its
+        per-design time weighted as :data:`PRIOR_DESIGNS` designs."""
+        sizer = cls(earlier.num_workers, round_trip_s=earlier.round_trip_s, idle_s=earlier.idle_s.copy())
+        if earlier.designs_done:
+            sizer.designs_done = min(earlier.designs_done, PRIOR_DESIGNS)
+            sizer.compute_s = earlier.compute_s / earlier.designs_done * sizer.designs_done
+        return sizer
 
     def observe(self, n_designs: int, round_trip_s: float, busy_s: float, compute_s: float,
                 idle_s: float | None = None) -> None:

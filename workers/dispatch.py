@@ -125,6 +125,7 @@ class Dispatcher:
         self._turn: deque[Hashable] = deque()
         self.limit = in_flight_limit(executor.num_workers, executor.capacity)
         self._task_s = 0.0  # running mean of a task's time in its worker [s]
+        self._measured: BatchSizer | None = None  # the sizer that measured a task last (a new source starts from it)
         # the driving thread's own time a finished task (batching rule 4), from windows of >= 1 s
         self.driver_s = 0.0
         self._window_start = time.perf_counter()
@@ -135,8 +136,9 @@ class Dispatcher:
     def add(self, work: Work) -> None:
         if work.key in self._works:
             raise ValueError(f"work {work.key!r} is already dispatched")
-        if work.sizer is None:
-            work.sizer = BatchSizer(self.executor.num_workers)
+        if work.sizer is None:  # from what earlier sources measured, if any (batching rule 1)
+            earlier = self._measured
+            work.sizer = BatchSizer.after(earlier) if earlier is not None else BatchSizer(self.executor.num_workers)
         handles = tuple(self.executor.share(value) for value in work.shared)
         self._works[work.key] = (work, handles)
         self._turn.append(work.key)
@@ -258,6 +260,7 @@ class Dispatcher:
                 assert work.sizer is not None
                 work.sizer.observe(designs, time.perf_counter() - task.handed_at, timed.busy_s, timed.compute_s,
                                    timed.idle_s)
+                self._measured = work.sizer
                 self._task_s += 0.02 * (timed.busy_s - self._task_s) if self._task_s else timed.busy_s
                 _deliver(work, parts, timed.result)
         now = time.perf_counter()

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from finaldrive.workers.batching import TARGET_OVERHEAD, BatchSizer, batch_size
+from finaldrive.workers.batching import PRIOR_DESIGNS, TARGET_OVERHEAD, BatchSizer, batch_size
 
 
 def overhead_fraction(b: int, per_design_s: float, overhead_s: float) -> float:
@@ -65,6 +65,21 @@ def test_sizer_probes_then_sizes_from_measurements() -> None:
     sizer.observe(1, round_trip_s=0.902, busy_s=0.9, compute_s=0.9)   # warm: smaller overhead wins
     assert sizer.overhead_s == pytest.approx(0.002)
     assert sizer.next_size(1000) == 1
+
+
+def test_a_source_after_others_starts_from_their_measurements_and_soon_from_its_own() -> None:
+    """Rule 1: no probe where the executor was measured; the earlier per-design time counts as
+    PRIOR_DESIGNS designs, so the new source's own results outweigh it after a task or two."""
+    earlier = BatchSizer(num_workers=256)
+    earlier.observe(1000, round_trip_s=0.3, busy_s=0.2, compute_s=1.0, idle_s=0.001)  # 1 ms a design
+    later = BatchSizer.after(earlier)
+    assert later.next_size(10**5) > BatchSizer(num_workers=256).next_size(10**5) == 1
+    assert later.overhead_s == earlier.overhead_s and later.num_workers == 256
+    assert later.compute_s / later.designs_done == pytest.approx(1e-3) and later.designs_done == PRIOR_DESIGNS
+    later.observe(10 * PRIOR_DESIGNS, round_trip_s=0.1, busy_s=0.05, compute_s=10 * PRIOR_DESIGNS * 5e-3)
+    assert later.compute_s / later.designs_done == pytest.approx((1e-3 + 10 * 5e-3) / 11)  # its own 5 ms dominate
+    earlier.observe(1, round_trip_s=0.3, busy_s=0.2, compute_s=1.0, idle_s=0.5)
+    assert len(later.idle_s) == 1  # a copy, not the earlier source's deque
 
 
 def test_sizer_takes_the_workers_median_idle_gap_when_it_exceeds_the_smallest_round_trip() -> None:

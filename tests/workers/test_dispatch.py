@@ -151,3 +151,20 @@ def test_about_50_ms_of_work_waits_beyond_one_task_a_worker() -> None:
     assert in_flight_limit(256, 512, task_s=0.1) == 256 + 128
     assert in_flight_limit(256, 512, task_s=0.01) == 512  # never beyond the executor's capacity
     assert in_flight_limit(2, 4, task_s=5.0) == 4  # at least two queued
+
+
+def test_a_source_added_after_results_skips_the_probe() -> None:
+    """A job arriving where others have run starts from their measurements (batching rule 1), not
+    with one design a task: the first source probes, the second's first task is bigger."""
+    sink = Sink()
+    dispatcher = Dispatcher(SerialExecutor(), task)
+    first = sink.work("a", request(40))
+    dispatcher.add(first)
+    dispatcher.fill()
+    assert 40 - len(first.queue[0]) == dispatcher.in_flight("a")  # probes: one design a task
+    drain(dispatcher, first)
+    second = sink.work("b", request(40))
+    dispatcher.add(second)
+    assert second.sizer is not None and second.sizer.designs_done > 0
+    dispatcher.fill()
+    assert 40 - sum(len(q) for q in second.queue) > dispatcher.in_flight("b") > 0
