@@ -28,7 +28,7 @@ from finaldrive.engine.fast.equilibrium import EquilibriumError
 from finaldrive.engine.fast.rosenbrock import N_ST as FAST_N_ST, S_MODE, S_ROW, S_T, run_fast
 from finaldrive.engine.fitness import fitness, slack
 from finaldrive.engine.model import diagnostics as D, params as P
-from finaldrive.engine.model.coordinates import N_CONSTRAINTS, N_COORDS, X1, X14, Y14
+from finaldrive.engine.model.coordinates import N_CONSTRAINTS, N_COORDS, X1, X14, X15, Y14
 from finaldrive.engine.model.elements import N_AUX
 from finaldrive.engine.model.kinematics import GeometryError, assemble, pose_from_minimal, squat_ratio_at
 from finaldrive.engine.model.mass import gravity_forces, mass_matrix, potential_energy
@@ -108,6 +108,9 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
     start = time.perf_counter() if start is None else start
     p = setup.p
     chain = float(p[P.L_CHAIN])
+    off_road = road.uncovered(float(setup.q0[X14]), -math.inf)
+    if off_road:
+        return _failed(off_road, setup.squat_ratio, chain, start)
     kind, rp = road.packed()
     ext = np.zeros(D.N_EXT)
     led = np.zeros(D.N_LED)
@@ -175,6 +178,9 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
         kinetic = float(0.5 * qd @ M @ qd)
         q_end = y[:N_COORDS]
         rows = int(st[reference.S_ROW])
+    off_road = road.uncovered(float(setup.q0[X14]), float(q_end[X15]))
+    if off_road:
+        return _failed(off_road, setup.squat_ratio, chain, start)
     distance = x1_end - float(setup.q0[X1])
     slack_m = slack(ext[D.E_TAUT_MIN], ext[D.E_TAUT_MAX])
     fit = fitness(distance, setup.squat_ratio, slack_m, eps1=p[P.EPS1], eps2=p[P.EPS2],

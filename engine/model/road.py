@@ -121,6 +121,21 @@ class Road:
             return self.height * np.exp(-((x - self.mu) ** 2) / (2.0 * self.sigma**2))
         return np.asarray(np.interp(x, self.xs, self.ys), dtype=float)
 
+    def uncovered(self, start_m: float, end_m: float) -> str:
+        """Why a run whose rear tyre starts at ``start_m`` and whose front tyre ends at ``end_m`` is not
+        all on this road ("" if it is): beyond a profile's ends the model holds its end heights
+        (engine.model.road_height), a flat road nobody measured."""
+        if self.kind != "profile":
+            return ""
+        name = self.name or "user"
+        if start_m < self.xs[0]:
+            return (f"road profile {name!r} starts at x = {self.xs[0]:g} m, ahead of the rear tyre's contact point "
+                    f"at x = {start_m:.3f} m: a profile must cover the whole run")
+        if end_m > self.xs[-1]:
+            return (f"the front tyre reached x = {end_m:.3f} m, past the end of road profile {name!r} at "
+                    f"x = {self.xs[-1]:g} m: a profile must cover the whole run")
+        return ""
+
     @classmethod
     def parse(cls, spec: str) -> Road:
         """Parse ``flat``, ``sine:H:LAMBDA`` or ``bump:H:SIGMA[:MU]`` (SI units).

@@ -153,3 +153,19 @@ def test_slip_stiffness_and_peak_force_stay_positive_for_any_load_a_simulation_r
         assert slip_stiffness(fz, p) > 0.0 and mux > 0.0
         assert magic_formula(fz, 0.1, p) > 0.0 > magic_formula(fz, -0.1, p)
         assert magic_formula(fz, 3.0, p) > 0.0 > magic_formula(fz, -3.0, p)   # far past the peak too
+
+
+def test_a_run_that_leaves_a_profile_fails_naming_it() -> None:
+    """Beyond its ends a profile is held level, a road nobody measured: a run that starts before its
+    first point or ends past its last fails with the reason; one on it drives as on the same flat road."""
+    design = Design.from_deg(0.0, 0.0, 0.093)
+    flat = simulate(design, Road(), SimSettings())
+    on = simulate(design, Road.from_points([-1.0, 40.0], [0.0, 0.0], name="level"), SimSettings())
+    assert on.status == "ok" and on.distance_m == pytest.approx(flat.distance_m, abs=1e-3)
+    front_end = flat.distance_m + 1.0  # the front tyre is a wheelbase (> 1 m) ahead of the rear one
+    short = simulate(design, Road.from_points([-1.0, front_end], [0.0, 0.0], name="kerb"), SimSettings())
+    assert short.status == "failed" and "past the end of road profile 'kerb'" in short.reason
+    assert f"at x = {front_end:g} m" in short.reason and math.isnan(short.fitness_m)
+    late = simulate(design, Road.from_points([0.5, 40.0], [0.0, 0.0], name="late"), SimSettings())
+    assert late.status == "failed" and "road profile 'late' starts at x = 0.5 m" in late.reason
+    assert simulate(design, Road.from_points([0.0, 40.0], [0.0, 0.0]), SimSettings()).status == "ok"
