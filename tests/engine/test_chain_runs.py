@@ -225,7 +225,8 @@ def test_ledger_closes_with_the_impacts_booked(two_runs, spec):
     impact = led[D.L_IMPACT]
     print(f"{spec}: drive {r.drive_work_j:.3f} J, impacts {impact:.4f} J, residual {r.ledger_residual_j:.6f} J")
     assert r.ok and r.chain_compression_s > 0.0 and impact > 0.0
-    assert abs(r.ledger_residual_j) < 5e-3 * abs(r.drive_work_j)
+    # 3x the closure measured 2026-12-05 (as tests/engine/test_energy.py's): 1.75e-6 (flat, tight), 5.5e-6 (bump)
+    assert abs(r.ledger_residual_j) < 3 * (1.75e-6 if flat else 5.5e-6) * abs(r.drive_work_j)
     if flat:  # smooth and tight: the residual is the integration error, far below the impacts it would miss
         assert abs(r.ledger_residual_j) < 1e-3 * impact
 

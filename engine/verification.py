@@ -1,0 +1,111 @@
+"""The drop test: how well each method keeps a conservative bike's energy (tests and docs/validation.md).
+
+Drive, dampers (suspension and tyres) and the longitudinal tyre force off, the bike is dropped
+``drop_m`` onto the flat road from its static equilibrium and left for ``duration_s``; without
+dissipation, kinetic + gravity + spring energy is constant, so its largest change over the drop
+energy is the method's energy error. The energies are computed here from the states the solvers
+return (the reference: its mass matrix and coordinates; the fast path: its own M(z), and the
+potential of the pose rebuilt in natural coordinates), independently of the solvers' ledgers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from finaldrive.engine.api import Design, SimSettings
+from finaldrive.engine.fast import bodies, minimal
+from finaldrive.engine.fast.rosenbrock import N_ST as FAST_N_ST, run_fast
+from finaldrive.engine.model import diagnostics as D
+from finaldrive.engine.model.coordinates import FT, N_CONSTRAINTS, N_COORDS, RT, Y1
+from finaldrive.engine.model.elements import N_AUX
+from finaldrive.engine.model.kinematics import pose_from_minimal
+from finaldrive.engine.model.mass import gravity_forces, mass_matrix, potential_energy
+from finaldrive.engine.model.road import Road
+from finaldrive.engine.outcome import N_SERIES, OK
+from finaldrive.engine.setup import MINIMAL_COORDS, prepare
+from finaldrive.engine.vehicle import Vehicle
+
+#: The drop [m] and how long the bike is left [s] (1 s: a few tyre and suspension bounces).
+DROP_M = 0.02
+DROP_S = 1.0
+
+
+@dataclass(frozen=True)
+class Drop:
+    """A drop's energy record: the drop energy [J], the largest |E - E0| and E(end) - E0 as shares of it."""
+
+    drop_energy_j: float
+    drift: float
+    end: float
+    landed: bool
+
+
+def conservative(vehicle: Vehicle) -> Vehicle:
+    """The vehicle without drive and dampers (the longitudinal tyre force is switched off in the run)."""
+    return vehicle.replace(torque=0.0, c_rs=0.0, c_fs=0.0, c_rt=0.0, c_ft=0.0)
+
+
+def _record(energies: np.ndarray, rest_j: float, landed: bool) -> Drop:
+    drop_energy = float(energies[0] - rest_j)
+    return Drop(drop_energy, float(np.max(np.abs(energies - energies[0])) / drop_energy),
+                float((energies[-1] - energies[0]) / drop_energy), landed)
+
+
+def fast_drop(vehicle: Vehicle, design: Design, tolerance: float, max_step: float, ros2: bool,
+              drop_m: float = DROP_M, duration_s: float = DROP_S) -> Drop:
+    """The drop with the fast path at ``tolerance`` and ``max_step`` (ROS2 if ``ros2``, else ROS34PW2)."""
+    road = Road()
+    setup = prepare(design, road, SimSettings(), conservative(vehicle))
+    p = setup.p
+    kind, rp = road.packed()
+    n = round(duration_s / 1e-3)
+    y = np.zeros(minimal.N_STATE)
+    y[:bodies.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
+    y[bodies.ZY1] += drop_m
+    series, states = np.zeros((n + 1, N_SERIES)), np.zeros((n + 1, 2 * bodies.N_DOF))
+    ext = np.zeros(D.N_EXT)
+    code = run_fast(y, p, kind, rp, False, duration_s, 1e-3, tolerance, max_step, ros2, 10.0, True,
+                    np.zeros(FAST_N_ST), ext, np.zeros(D.N_LED), series, states, 10**9)
+    if code != OK or states[0][bodies.ZY1] != setup.q0[Y1] + drop_m:
+        raise RuntimeError(f"the fast drop did not run (code {code})")
+
+    def energy(state: np.ndarray) -> float:
+        full = np.zeros(minimal.N_STATE)
+        full[:2 * bodies.N_DOF] = state
+        return float(minimal.kinetic_energy(full, p, kind, rp) + potential_energy(pose_from_minimal(state, p, road), p))
+
+    return _record(np.array([energy(s) for s in states]), float(potential_energy(setup.q0, p)),
+                   bool(ext[D.E_FZ_REAR_MAX] > 0))
+
+
+def reference_drop(vehicle: Vehicle, design: Design, dt: float = 1e-3, drop_m: float = DROP_M,
+                   duration_s: float = DROP_S) -> Drop:
+    """The drop with the paper's method (eqs. 57-66) at step ``dt``, its other settings the defaults."""
+    from finaldrive.engine.solver import reference  # builds its integrator steps on import
+
+    settings = SimSettings(method="reference", duration=duration_s, dt=dt, tyre_longitudinal=False)
+    road = Road()
+    setup = prepare(design, road, settings, conservative(vehicle))
+    p = setup.p
+    y = np.zeros(reference.N_STATE)
+    y[:N_COORDS] = setup.q0
+    y[1:26:2] += drop_m    # points 1-13 up (the contact points 14 and 15 stay on the road)
+    y[RT] += drop_m
+    y[FT] += drop_m
+    kind, rp = road.packed()
+    M, qg = mass_matrix(p), gravity_forces(p)
+    n, step = settings.steps()
+    series, states = np.zeros((n + 2, N_SERIES)), np.zeros((n + 2, 2 * N_COORDS))
+    ext, led = np.zeros(D.N_EXT), np.zeros(D.N_LED)
+    code = reference.run_reference(
+        y, p, kind, rp, M, qg, False, step, n, settings.trapezoidal_steps, settings.under_relaxation,
+        settings.corrector_tol, settings.corrector_max_iter, settings.lambda_tol, settings.lambda_max_iter,
+        settings.max_constraint_residual, 10**6, 1, True, np.zeros(reference.N_ST), np.zeros((4, reference.N_STATE)),
+        np.zeros(N_CONSTRAINTS), np.zeros(1), np.zeros(N_AUX), ext, led, series, states, 10**9)
+    if code != OK or led[D.L_DAMPERS] != 0.0 or led[D.L_DRIVE] != 0.0:
+        raise RuntimeError(f"the reference drop did not run conservatively (code {code})")
+    energies = np.array([0.5 * s[N_COORDS:] @ M @ s[N_COORDS:] + potential_energy(s[:N_COORDS], p)
+                         for s in states[:n + 1]])
+    return _record(energies, float(potential_energy(setup.q0, p)), bool(ext[D.E_FZ_REAR_MAX] > 0))
