@@ -30,9 +30,11 @@ DIAGNOSTIC_MEANINGS: dict[str, str] = {
                            "lower run pulls (two runs) [N]",
     "chain_compression_s": "time in overrun: the upper run pushing (the paper's chain) or not taut (two runs) [s]",
     "fz_rear_max_n": "largest vertical load of the rear tyre [N]",
-    "fz_rear_min_n": "smallest vertical load of the rear tyre (0 when airborne) [N]",
+    "fz_rear_min_n": ("smallest vertical load of the rear tyre: 0 when airborne, negative while its damper "
+                      "pulls as the tyre springs back (eqs. 36-37 as printed) [N]"),
     "fz_front_max_n": "largest vertical load of the front tyre [N]",
-    "fz_front_min_n": "smallest vertical load of the front tyre (0 when airborne) [N]",
+    "fz_front_min_n": ("smallest vertical load of the front tyre: 0 when airborne, negative while its damper "
+                      "pulls as the tyre springs back (eqs. 36-37 as printed) [N]"),
     "slip_max": "largest |kappa'|, the rear tyre's transient longitudinal slip [-]",
     "airborne_rear_s": "time the rear wheel spends off the road [s]",
     "airborne_front_s": "time the front wheel spends off the road [s]",

@@ -169,3 +169,16 @@ def test_a_run_that_leaves_a_profile_fails_naming_it() -> None:
     late = simulate(design, Road.from_points([0.5, 40.0], [0.0, 0.0], name="late"), SimSettings())
     assert late.status == "failed" and "road profile 'late' starts at x = 0.5 m" in late.reason
     assert simulate(design, Road.from_points([0.0, 40.0], [0.0, 0.0]), SimSettings()).status == "ok"
+
+
+def test_a_tyre_pulls_only_through_its_damper(vehicle) -> None:
+    """Eqs. (36)-(37) as printed: in contact the tyre's force k d - c r' goes negative while it springs
+    back faster than k d / c (the negative minimum loads on rough roads); without the tyre dampers the
+    smallest load is 0 (airborne), never below."""
+    design, road = Design.from_deg(270, 0.15, 0.05), Road.parse("sine:0.04:2")
+    settings = SimSettings(max_airborne_time=3.5)
+    damped = simulate(design, road, settings, vehicle)
+    undamped = simulate(design, road, settings, vehicle.replace(c_rt=0.0, c_ft=0.0))
+    assert damped.ok and undamped.ok
+    assert min(damped.fz_rear_min_n, damped.fz_front_min_n) < -1.0
+    assert undamped.fz_rear_min_n == 0.0 and undamped.fz_front_min_n == 0.0
