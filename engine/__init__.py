@@ -30,8 +30,9 @@ _EXPORTS: dict[str, str] = {
     "start_runtime": "finaldrive.engine.model.jit",
     **dict.fromkeys(("FIELDS", "Field", "base_of", "design_label", "history_record", "human", "unit_of"),
                     "finaldrive.engine.fields"),
-    **dict.fromkeys(("MAX_TRAVEL_POINTS", "TRAVEL_POINTS", "TravelError", "drive_squat", "travel_kinematics"),
+    **dict.fromkeys(("MAX_TRAVEL_POINTS", "TRAVEL_POINTS", "drive_squat", "travel_kinematics"),
                     "finaldrive.engine.travel"),
+    "TravelError": "finaldrive.engine.model.rear_travel",
     **dict.fromkeys(("Cost", "estimate_cost"), "finaldrive.engine.cost"),
     **dict.fromkeys(("StaticLoads", "calibration_design", "solve_chassis_cog", "solve_torque", "static_loads"),
                     "finaldrive.engine.calibrate"),
@@ -105,6 +106,7 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         point_positions as point_positions,
     )
     from finaldrive.engine.model.jit import start_runtime as start_runtime
+    from finaldrive.engine.model.rear_travel import TravelError as TravelError
     from finaldrive.engine.model.road import (
         PROFILE_MAX_POINTS as PROFILE_MAX_POINTS,
         Road as Road,
@@ -185,7 +187,6 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
     from finaldrive.engine.travel import (
         MAX_TRAVEL_POINTS as MAX_TRAVEL_POINTS,
         TRAVEL_POINTS as TRAVEL_POINTS,
-        TravelError as TravelError,
         drive_squat as drive_squat,
         travel_kinematics as travel_kinematics,
     )

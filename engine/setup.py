@@ -15,6 +15,7 @@ from finaldrive.engine.fast.equilibrium import static_equilibrium
 from finaldrive.engine.model import params as P
 from finaldrive.engine.model.coordinates import BETA, FS, PHI, THETA, X1, Y1
 from finaldrive.engine.model.kinematics import chain_length, design_pose, design_squat_ratio, whole_chain_length
+from finaldrive.engine.model.rear_travel import compressed_spring_length
 from finaldrive.engine.model.road import Road
 from finaldrive.engine.solver.equilibrium import reference_equilibrium
 from finaldrive.engine.vehicle import Vehicle
@@ -31,6 +32,8 @@ def pack_parameters(vehicle: Vehicle, design: Design, settings: SimSettings) -> 
     p[P.R_ES] = design.rws / vehicle["sprocket_ratio"]   # section 4: R_WS / R_ES fixed
     p[P.AL_ALPHA], p[P.AL_XI], p[P.AL_OMEGA] = (
         settings.penalty_alpha, settings.baumgarte_xi, settings.baumgarte_omega)
+    if vehicle["suspension_stops"]:
+        p[P.RS_BUMP] = compressed_spring_length(vehicle)
     return p
 
 

@@ -18,6 +18,7 @@ from finaldrive.engine.api import Design, SimSettings
 from finaldrive.engine.model import params as P
 from finaldrive.engine.model.coordinates import PHI, THETA, X1, X6, X10, X11, X14, X15, Y1, Y6, Y10, Y11
 from finaldrive.engine.model.kinematics import design_pose, squat_line, taut_length
+from finaldrive.engine.model.rear_travel import angle_at, extension_angle
 from finaldrive.engine.model.road import Road
 from finaldrive.engine.vehicle import Vehicle
 
@@ -29,31 +30,6 @@ ANTI_SQUAT_DEFINITION = ("anti_squat_pct = 100 tan(tau) / tan(sigma) (textbook; 
                          "tan(tau) the slope of the squat line (rear contact point to X), tan(sigma) = h / p with h "
                          "the centre of mass height (vehicle target_cog_height, Table 3) and p the wheelbase at the "
                          "design pose; squat_ratio = K / tan(tau) is the paper's reading (docs/engine.md)")
-
-
-class TravelError(ValueError):
-    """A vehicle whose rear suspension cannot reach the ends of its travel."""
-
-
-def _extension_angle(v: Vehicle) -> float:
-    """Swingarm angle in the chassis frame [rad] where the rear spring (3-7, eq. 13) has its unloaded
-    length: |r_3->7|^2 = L3^2 + L7^2 - 2 L3 L7 cos(a3 - phi), the root nearest phi0 - theta0."""
-    l3, l7, s = v["L3"], v["L7"], v["s_rs"]
-    c = (l3 * l3 + l7 * l7 - s * s) / (2.0 * l3 * l7)
-    if abs(c) > 1.0:
-        raise TravelError(f"the rear spring (s_rs = {s} m) cannot reach its unloaded length between points 3 and 7")
-    design = v["phi0"] - v["theta0"]
-    roots = (v["a3"] + math.acos(c), v["a3"] - math.acos(c))
-    return min((design + math.remainder(r - design, math.tau) for r in roots), key=lambda r: abs(r - design))
-
-
-def _angle_at(travel: float, extended: float, v: Vehicle) -> float:
-    """Swingarm angle in the chassis frame whose axle is ``travel`` above full extension."""
-    y = v["L_SA"] * math.sin(extended) + travel
-    if abs(y) > v["L_SA"]:
-        raise TravelError(f"a swingarm of {v['L_SA']} m cannot lift its axle {travel} m above full extension")
-    angle = math.pi - math.asin(y / v["L_SA"]) if math.cos(extended) < 0 else math.asin(y / v["L_SA"])
-    return extended + math.remainder(angle - extended, math.tau)
 
 
 def _travel_of(angle: float, extended: float, v: Vehicle) -> float:
@@ -90,9 +66,9 @@ def travel_kinematics(design: Design, vehicle: Vehicle, points: int = TRAVEL_POI
         raise ValueError(f"points must be in [2, {MAX_TRAVEL_POINTS}], got {points}")
     v = vehicle
     p = pack_parameters(v, design, SimSettings())
-    extended = _extension_angle(v)
+    extended = extension_angle(v)
     full = v["rear_wheel_travel"]
-    compressed = _angle_at(full, extended, v)
+    compressed = angle_at(full, extended, v)
     design_q = design_pose(p)
     wheelbase = float(design_q[X15] - design_q[X14])
     tan_sigma = v["target_cog_height"] / wheelbase
@@ -114,7 +90,7 @@ def travel_kinematics(design: Design, vehicle: Vehicle, points: int = TRAVEL_POI
         "extension_angle_deg": math.degrees(extended), "compression_angle_deg": math.degrees(compressed),
         "cog_height_m": v["target_cog_height"], "wheelbase_m": wheelbase,
         "anti_squat_definition": ANTI_SQUAT_DEFINITION,
-        "curve": [point(_angle_at(t, extended, v)) for t in np.linspace(0.0, full, points)],
+        "curve": [point(angle_at(t, extended, v)) for t in np.linspace(0.0, full, points)],
         "design_pose": point(design_angle),
         "static_sag": {**point(sag_angle), "sag_pct": 100.0 * _travel_of(sag_angle, extended, v) / full},
     }
@@ -137,7 +113,7 @@ def drive_squat(design: Design, road: Road, settings: SimSettings, vehicle: Vehi
     if not result.ok or result.series is None:
         return out
     q = result.series["q"]
-    extended = _extension_angle(vehicle)
+    extended = extension_angle(vehicle)
     travel = vehicle["L_SA"] * (np.sin(q[:, PHI] - q[:, THETA]) - math.sin(extended))
     pitch = np.degrees(q[:, THETA] - q[0, THETA])
     out.update({

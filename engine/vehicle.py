@@ -53,7 +53,15 @@ PARAMETERS: tuple[tuple[str, Rule], ...] = (
     ("torque", _ANY), ("sprocket_ratio", _POSITIVE), ("gravity", _POSITIVE), ("eps1", _NON_NEGATIVE),
     ("eps2", _NON_NEGATIVE), ("sr_optimum", _ANY), ("floor", _FRACTION), ("squat_K", _POSITIVE),
     ("chain_runs", (1.0, True, 2.0)), ("chain_free_play", _POSITIVE),
+    ("suspension_stops", (0.0, True, 1.0)), ("k_stop", _NON_NEGATIVE), ("fork_travel", _POSITIVE),
 )
+#: Parameters added after files were written: a file without one takes this (group, value, unit), the
+#: paper's model (no travel stops), and says so in its source.
+ADDED_LATER: dict[str, tuple[str, float, str]] = {
+    "suspension_stops": ("suspension", 0.0, "-"),
+    "k_stop": ("suspension", 2.0e6, "N/m"),
+    "fork_travel": ("suspension", 0.120, "m"),
+}
 _RULES: dict[str, Rule] = dict(PARAMETERS)
 #: Calibration targets: validated and carried, not packed for the model.
 _TARGET_RULES: dict[str, Rule] = {
@@ -198,6 +206,8 @@ def load_vehicle_dict(data: Any) -> Vehicle:
                 raise VehicleError(f"vehicle parameter {key!r}: given twice")
             found[key] = (group, entry["value"], str(entry.get("unit", "")), str(entry.get("source", "")))
     rules = {**_RULES, **_TARGET_RULES, **_LIMIT_RULES, **_KINEMATIC_RULES}
+    for key, (group, value, unit) in ADDED_LATER.items():
+        found.setdefault(key, (group, value, unit, "absent from the file: the paper's model (ADDED_LATER)"))
     for key in rules:
         if key not in found:
             raise VehicleError(f"vehicle parameter {key!r}: missing")
@@ -212,6 +222,10 @@ def load_vehicle_dict(data: Any) -> Vehicle:
         raise VehicleError("vehicle parameter 'Fz_max': the load range Fz_min < Fz0 < Fz_max is required")
     if v["rt_bottoming"] >= v["rt0"]:
         raise VehicleError("vehicle parameter 'rt_bottoming': must be less than the unloaded radius rt0")
+    if v["suspension_stops"] not in (0.0, 1.0):
+        raise VehicleError("vehicle parameter 'suspension_stops': must be 0 (the paper's springs) or 1 (travel stops)")
+    if v["fork_travel"] >= v["s_fs"]:
+        raise VehicleError("vehicle parameter 'fork_travel': must be less than the fork's unloaded length s_fs")
     if v["chain_runs"] not in (1.0, 2.0):
         raise VehicleError("vehicle parameter 'chain_runs': must be 1 (the paper's upper run) or 2 (both runs)")
     if v["rws_tyre_margin"] >= v["rt0"]:

@@ -59,6 +59,7 @@ from finaldrive.engine.model.elements import (
     AUX_TENSION,
     N_AUX,
     drive_torque,
+    fork_bump_length,
     front_tyre,
     rear_tyre,
     spring_damper,
@@ -183,11 +184,12 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
     rs = math.sqrt(ex * ex + ey * ey)                                  # (13)
     drs_th = (-ex * w3y + ey * w3x) / rs
     drs_ph = (ex * p[P.L7] * sp - ey * p[P.L7] * cp) / rs
-    f_rs = spring_damper(rs, drs_th * wt + drs_ph * wp, p[P.K_RS], p[P.C_RS], p[P.S_RS], aux)  # (35)
+    f_rs = spring_damper(rs, drs_th * wt + drs_ph * wp, p[P.K_RS], p[P.C_RS], p[P.S_RS], p[P.RS_BUMP], p,
+                         aux)  # (35)
     q_t += f_rs * drs_th
     q_p += f_rs * drs_ph
     # front suspension (34): fs is a minimal coordinate
-    q_s += spring_damper(fs, fsd, p[P.K_FS], p[P.C_FS], p[P.S_FS], aux)
+    q_s += spring_damper(fs, fsd, p[P.K_FS], p[P.C_FS], p[P.S_FS], fork_bump_length(p), p, aux)  # (34)
     # front tyre (37) at point 13 = r_4 + (fs + L8) u, on the fork axis (eqs. 14-17)
     slide = fs + p[P.L8]
     ox = ct * geo[G_P4_X] - st * geo[G_P4_Y] + slide * ux

@@ -83,11 +83,47 @@ def front_tyre(ft: float, ft_dot: float, p: np.ndarray, aux: np.ndarray) -> floa
 
 
 @jit
-def spring_damper(length: float, rate: float, k: float, c: float, free_length: float, aux: np.ndarray) -> float:
-    """Linear suspension spring-damper, eqs. (34)-(35): the force along its length (positive
-    pushes the ends apart); adds the damper's power c l'^2 to aux[AUX_P_DAMP]."""
+def spring_force(length: float, k: float, free_length: float, bump_length: float, p: np.ndarray) -> float:
+    """A suspension spring's force along its length (positive pushes the ends apart), eqs. (34)-(35):
+    -k (l - s). With the vehicle's travel stops (``suspension_stops``): beyond its unloaded length s the
+    spring is fully extended and pushes no more, a top-out stop -k_stop (l - s) holds it; below
+    ``bump_length`` (full compression) a bump stop k_stop (l_b - l) adds to it."""
+    if p[P.SUSPENSION_STOPS] == 0.0:
+        return -k * (length - free_length)
+    if length > free_length:
+        return -p[P.K_STOP] * (length - free_length)
+    f = -k * (length - free_length)
+    if length < bump_length:
+        f += p[P.K_STOP] * (bump_length - length)
+    return f
+
+
+@jit
+def spring_energy(length: float, k: float, free_length: float, bump_length: float, p: np.ndarray) -> float:
+    """The energy stored in a suspension spring and its stops [J] (the potential of spring_force)."""
+    if p[P.SUSPENSION_STOPS] == 0.0:
+        return 0.5 * k * (length - free_length) ** 2
+    if length > free_length:
+        return 0.5 * p[P.K_STOP] * (length - free_length) ** 2
+    e = 0.5 * k * (length - free_length) ** 2
+    if length < bump_length:
+        e += 0.5 * p[P.K_STOP] * (bump_length - length) ** 2
+    return e
+
+
+@jit
+def spring_damper(length: float, rate: float, k: float, c: float, free_length: float, bump_length: float,
+                  p: np.ndarray, aux: np.ndarray) -> float:
+    """Suspension spring-damper, eqs. (34)-(35) (spring_force, with the vehicle's travel stops if on):
+    the force along its length; adds the damper's power c l'^2 to aux[AUX_P_DAMP]."""
     aux[AUX_P_DAMP] += c * rate * rate
-    return -k * (length - free_length) - c * rate
+    return spring_force(length, k, free_length, bump_length, p) - c * rate
+
+
+@jit
+def fork_bump_length(p: np.ndarray) -> float:
+    """The fork's length at full compression, where its bump stop engages (travel stops) [m]."""
+    return p[P.S_FS] - p[P.FORK_TRAVEL]
 
 
 @jit

@@ -15,6 +15,7 @@ import numpy as np
 
 from finaldrive.engine.model import params as P
 from finaldrive.engine.model.coordinates import FS, FT, N_COORDS, RS, RT, X1, X2, X5, X6, X8, X9, X12, X13, Y13
+from finaldrive.engine.model.elements import spring_energy
 from finaldrive.engine.model.tyre import radial_energy
 
 _ROT = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -99,7 +100,8 @@ def potential_energy(q: np.ndarray, p: np.ndarray, qg: np.ndarray | None = None)
     on their axes)."""
     if qg is None:
         qg = gravity_forces(p)
-    springs = 0.5 * p[P.K_RS] * (q[RS] - p[P.S_RS]) ** 2 + 0.5 * p[P.K_FS] * (q[FS] - p[P.S_FS]) ** 2
+    springs = (spring_energy(q[RS], p[P.K_RS], p[P.S_RS], p[P.RS_BUMP], p)
+               + spring_energy(q[FS], p[P.K_FS], p[P.S_FS], p[P.S_FS] - p[P.FORK_TRAVEL], p))  # fork_bump_length
     springs += radial_energy(q[RT], p[P.RT0], p[P.K_RT], p[P.RT_BOTTOMING], p[P.K_RT_BOTTOMING])
     springs += radial_energy(q[FT], p[P.FT0], p[P.K_FT], math.inf, 0.0)
     return float(-qg @ q + springs)

@@ -77,15 +77,19 @@ FLOOR = 65
 SQUAT_K = 66
 CHAIN_RUNS = 67
 CHAIN_FREE_PLAY = 68
-A2 = 69  # design: angle a2 of r_1->2 in the chassis frame [rad]
-L2 = 70  # design: pivot to engine sprocket axis [m]
-R_WS = 71  # design: wheel sprocket pitch radius [m]
-R_ES = 72  # design: engine sprocket pitch radius R_WS / sprocket_ratio [m]
-L_CHAIN = 73  # chain length L of eq. (69), set at t = 0 [m]
-L_LOOP = 74  # two chain runs: the whole chain's length, both runs and both wraps, set at t = 0 [m]
-AL_ALPHA = 75  # augmented Lagrangian penalty alpha, eqs. (57)-(58)
-AL_XI = 76  # Baumgarte xi, eq. (57)
-AL_OMEGA = 77  # Baumgarte omega, eq. (57)
+SUSPENSION_STOPS = 69
+K_STOP = 70
+FORK_TRAVEL = 71
+A2 = 72  # design: angle a2 of r_1->2 in the chassis frame [rad]
+L2 = 73  # design: pivot to engine sprocket axis [m]
+R_WS = 74  # design: wheel sprocket pitch radius [m]
+R_ES = 75  # design: engine sprocket pitch radius R_WS / sprocket_ratio [m]
+L_CHAIN = 76  # chain length L of eq. (69), set at t = 0 [m]
+L_LOOP = 77  # two chain runs: the whole chain's length, both runs and both wraps, set at t = 0 [m]
+AL_ALPHA = 78  # augmented Lagrangian penalty alpha, eqs. (57)-(58)
+AL_XI = 79  # Baumgarte xi, eq. (57)
+AL_OMEGA = 80  # Baumgarte omega, eq. (57)
+RS_BUMP = 81  # travel stops: the rear spring's length at full compression (rear_wheel_travel) [m]
 
 VEHICLE_KEYS: tuple[str, ...] = (
     'L3',
@@ -157,6 +161,9 @@ VEHICLE_KEYS: tuple[str, ...] = (
     'squat_K',
     'chain_runs',
     'chain_free_play',
+    'suspension_stops',
+    'k_stop',
+    'fork_travel',
 )
-N_VEHICLE = 69
-N_PARAMS = 78
+N_VEHICLE = 72
+N_PARAMS = 82

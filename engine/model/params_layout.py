@@ -24,6 +24,7 @@ DESIGN_SLOTS: tuple[tuple[str, str], ...] = (
     ("AL_ALPHA", "augmented Lagrangian penalty alpha, eqs. (57)-(58)"),
     ("AL_XI", "Baumgarte xi, eq. (57)"),
     ("AL_OMEGA", "Baumgarte omega, eq. (57)"),
+    ("RS_BUMP", "travel stops: the rear spring's length at full compression (rear_wheel_travel) [m]"),
 )
 
 HEADER = '''"""Layout of the packed parameter vector P read by the compiled model.
