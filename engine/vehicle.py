@@ -54,6 +54,7 @@ PARAMETERS: tuple[tuple[str, Rule], ...] = (
     ("eps2", _NON_NEGATIVE), ("sr_optimum", _ANY), ("floor", _FRACTION), ("squat_K", _POSITIVE),
     ("chain_runs", (1.0, True, 2.0)), ("chain_free_play", _POSITIVE),
     ("suspension_stops", (0.0, True, 1.0)), ("k_stop", _NON_NEGATIVE), ("fork_travel", _POSITIVE),
+    ("tyre_airborne_relax", (0.0, True, 1.0)),
 )
 #: Parameters added after files were written: a file without one takes this (group, value, unit), the
 #: paper's model (no travel stops), and says so in its source.
@@ -61,6 +62,7 @@ ADDED_LATER: dict[str, tuple[str, float, str]] = {
     "suspension_stops": ("suspension", 0.0, "-"),
     "k_stop": ("suspension", 2.0e6, "N/m"),
     "fork_travel": ("suspension", 0.120, "m"),
+    "tyre_airborne_relax": ("tyre", 0.0, "-"),
 }
 _RULES: dict[str, Rule] = dict(PARAMETERS)
 #: Calibration targets: validated and carried, not packed for the model.
@@ -224,6 +226,9 @@ def load_vehicle_dict(data: Any) -> Vehicle:
         raise VehicleError("vehicle parameter 'rt_bottoming': must be less than the unloaded radius rt0")
     if v["suspension_stops"] not in (0.0, 1.0):
         raise VehicleError("vehicle parameter 'suspension_stops': must be 0 (the paper's springs) or 1 (travel stops)")
+    if v["tyre_airborne_relax"] not in (0.0, 1.0):
+        raise VehicleError("vehicle parameter 'tyre_airborne_relax': must be 0 (eq. 42 as printed) or 1 (relaxed "
+                           "while airborne)")
     if v["fork_travel"] >= v["s_fs"]:
         raise VehicleError("vehicle parameter 'fork_travel': must be less than the fork's unloaded length s_fs")
     if v["chain_runs"] not in (1.0, 2.0):

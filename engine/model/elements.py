@@ -24,6 +24,7 @@ import numpy as np
 from finaldrive.engine.model import params as P
 from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.tyre import (
+    FZ_CONTACT_MIN,
     deformation_rate,
     effective_radius,
     lever_arm,
@@ -65,7 +66,8 @@ def rear_tyre(rt: float, rt_dot: float, vx: float, omega: float, u: float, sigma
     aux[AUX_RE] = re
     aux[AUX_LEVER] = lever
     aux[AUX_OMEGA] = omega
-    aux[AUX_DUDT] = deformation_rate(u, sigma, vsx, vx)                       # (42)
+    airborne_relax = p[P.TYRE_AIRBORNE_RELAX] != 0.0 and fz <= FZ_CONTACT_MIN  # vehicle choice: no slip off the road
+    aux[AUX_DUDT] = deformation_rate(u, sigma, 0.0 if airborne_relax else vsx, vx)  # (42)
     aux[AUX_SLOPE] = slope
     aux[AUX_RT] = rt
     aux[AUX_P_DAMP] += radial_damping_power(rt, rt_dot, p[P.RT0], p[P.C_RT])

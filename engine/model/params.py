@@ -80,16 +80,17 @@ CHAIN_FREE_PLAY = 68
 SUSPENSION_STOPS = 69
 K_STOP = 70
 FORK_TRAVEL = 71
-A2 = 72  # design: angle a2 of r_1->2 in the chassis frame [rad]
-L2 = 73  # design: pivot to engine sprocket axis [m]
-R_WS = 74  # design: wheel sprocket pitch radius [m]
-R_ES = 75  # design: engine sprocket pitch radius R_WS / sprocket_ratio [m]
-L_CHAIN = 76  # chain length L of eq. (69), set at t = 0 [m]
-L_LOOP = 77  # two chain runs: the whole chain's length, both runs and both wraps, set at t = 0 [m]
-AL_ALPHA = 78  # augmented Lagrangian penalty alpha, eqs. (57)-(58)
-AL_XI = 79  # Baumgarte xi, eq. (57)
-AL_OMEGA = 80  # Baumgarte omega, eq. (57)
-RS_BUMP = 81  # travel stops: the rear spring's length at full compression (rear_wheel_travel) [m]
+TYRE_AIRBORNE_RELAX = 72
+A2 = 73  # design: angle a2 of r_1->2 in the chassis frame [rad]
+L2 = 74  # design: pivot to engine sprocket axis [m]
+R_WS = 75  # design: wheel sprocket pitch radius [m]
+R_ES = 76  # design: engine sprocket pitch radius R_WS / sprocket_ratio [m]
+L_CHAIN = 77  # chain length L of eq. (69), set at t = 0 [m]
+L_LOOP = 78  # two chain runs: the whole chain's length, both runs and both wraps, set at t = 0 [m]
+AL_ALPHA = 79  # augmented Lagrangian penalty alpha, eqs. (57)-(58)
+AL_XI = 80  # Baumgarte xi, eq. (57)
+AL_OMEGA = 81  # Baumgarte omega, eq. (57)
+RS_BUMP = 82  # travel stops: the rear spring's length at full compression (rear_wheel_travel) [m]
 
 VEHICLE_KEYS: tuple[str, ...] = (
     'L3',
@@ -164,6 +165,7 @@ VEHICLE_KEYS: tuple[str, ...] = (
     'suspension_stops',
     'k_stop',
     'fork_travel',
+    'tyre_airborne_relax',
 )
-N_VEHICLE = 72
-N_PARAMS = 82
+N_VEHICLE = 73
+N_PARAMS = 83

@@ -182,3 +182,29 @@ def test_a_tyre_pulls_only_through_its_damper(vehicle) -> None:
     assert damped.ok and undamped.ok
     assert min(damped.fz_rear_min_n, damped.fz_front_min_n) < -1.0
     assert undamped.fz_rear_min_n == 0.0 and undamped.fz_front_min_n == 0.0
+
+
+def test_an_airborne_tyre_relaxes_without_slip_when_the_vehicle_says_so(vehicle) -> None:
+    """tyre_airborne_relax = 1: off the road eq. (42) loses its slip forcing, u' = -|V_x| u / sigma*
+    (on the road it is unchanged). Geometry 2 hopping on sine:0.04:2: the landing slip falls from
+    eq. (42)'s wound-up 8 to below 1, the carcass returns less energy it was never given, and the
+    ledger closes as well (3x its measured 1.6e-4)."""
+    from finaldrive.engine.model.elements import AUX_DUDT, AUX_RE, N_AUX, rear_tyre
+    from finaldrive.engine.simulation import pack_parameters
+
+    relax = vehicle.replace(tyre_airborne_relax=1.0)
+    design = Design.from_deg(270, 0.15, 0.05)
+    vx, omega, u, sigma = 12.0, 60.0, 0.01, 0.3
+    for v in (vehicle, relax):
+        p = pack_parameters(v, design, SimSettings())
+        for airborne, rt in ((True, p[P.RT0] + 0.01), (False, p[P.RT0] - 0.02)):
+            aux = np.zeros(N_AUX)
+            rear_tyre(rt, 0.0, vx, omega, u, sigma, p, True, aux)
+            slip = 0.0 if (airborne and v is relax) else vx - aux[AUX_RE] * omega   # V_sx, eq. (40)
+            assert aux[AUX_DUDT] == pytest.approx(-slip - abs(vx) * u / sigma, rel=1e-12)
+    road, settings = Road.parse("sine:0.04:2"), SimSettings(max_airborne_time=3.5)
+    paper, relaxed = simulate(design, road, settings, vehicle), simulate(design, road, settings, relax)
+    assert relaxed.ok and relaxed.airborne_rear_s > 0.5
+    assert paper.slip_max > 5.0 and relaxed.slip_max < 1.0
+    assert paper.tyre_carcass_energy_j < relaxed.tyre_carcass_energy_j < 0.5 * abs(paper.tyre_carcass_energy_j)
+    assert abs(relaxed.ledger_residual_j) < 3 * 1.6e-4 * relaxed.drive_work_j
