@@ -63,6 +63,8 @@ ADDED_LATER: dict[str, tuple[str, float, str]] = {
     "k_stop": ("suspension", 2.0e6, "N/m"),
     "fork_travel": ("suspension", 0.120, "m"),
     "tyre_airborne_relax": ("tyre", 0.0, "-"),
+    "chain_pitch": ("design_limits", 0.015875, "m"),
+    "min_sprocket_teeth": ("design_limits", 9.0, "-"),
 }
 _RULES: dict[str, Rule] = dict(PARAMETERS)
 #: Calibration targets: validated and carried, not packed for the model.
@@ -78,11 +80,21 @@ _TARGET_RULES: dict[str, Rule] = {
 _LIMIT_RULES: dict[str, Rule] = {
     "l2_max": _POSITIVE,
     "rws_tyre_margin": _NON_NEGATIVE,
+    "chain_pitch": _POSITIVE,
+    "min_sprocket_teeth": (3.0, True, 1000.0),
 }
 #: Kinematic limits: validated and carried, read by engine.travel only (not packed for the model).
 _KINEMATIC_RULES: dict[str, Rule] = {
     "rear_wheel_travel": _POSITIVE,
 }
+
+
+def sprocket_teeth(pitch_radius: float, pitch: float) -> float:
+    """Teeth of a sprocket of ``pitch_radius`` for a chain of ``pitch``: R = p / (2 sin(pi / N)), solved
+    for N (not rounded; 0 when the radius is below half a pitch, where no sprocket exists)."""
+    if pitch_radius <= pitch / 2.0:
+        return 0.0
+    return math.pi / math.asin(pitch / (2.0 * pitch_radius))
 
 
 class VehicleError(ValueError):
@@ -131,12 +143,25 @@ class Vehicle:
         the swingarm pivot), R_WS <= rt0 - rws_tyre_margin (the wheel sprocket inside the rear tyre)."""
         return {"l2_m": self["l2_max"], "rws_m": round(self["rt0"] - self["rws_tyre_margin"], 12)}
 
+    def rws_min(self) -> float:
+        """The smallest R_WS a design may have [m]: its engine sprocket (R_WS / sprocket_ratio) keeps
+        ``min_sprocket_teeth`` teeth of the ``chain_pitch``."""
+        res = self["chain_pitch"] / (2.0 * math.sin(math.pi / self["min_sprocket_teeth"]))
+        return res * self["sprocket_ratio"]
+
     def check_design(self, design: Design) -> None:
         """Raise :class:`DesignError` naming the variable and the limit if ``design`` does not fit."""
         limits = self.design_limits()
         if design.l2 > limits["l2_m"]:
             raise DesignError(f"l2 = {design.l2:g} m: must be <= l2_max = {limits['l2_m']:g} m "
                               "(vehicle file, design_limits)")
+        res = design.rws / self["sprocket_ratio"]
+        teeth = sprocket_teeth(res, self["chain_pitch"])
+        if teeth < self["min_sprocket_teeth"]:
+            fits = f"would have {teeth:.3g} teeth" if teeth else "is below half a pitch: no sprocket"
+            raise DesignError(f"rws = {design.rws:g} m: the engine sprocket (R_ES = R_WS / {self['sprocket_ratio']:g} "
+                              f"= {res:g} m) {fits} of the {self['chain_pitch'] * 1e3:g} mm chain pitch, fewer than "
+                              f"min_sprocket_teeth = {self['min_sprocket_teeth']:g} (vehicle file, design_limits)")
         if design.rws > limits["rws_m"]:
             raise DesignError(f"rws = {design.rws:g} m: must be <= {limits['rws_m']:g} m, the rear tyre's radius "
                               f"rt0 = {self['rt0']:g} m less rws_tyre_margin = {self['rws_tyre_margin']:g} m "

@@ -36,6 +36,7 @@ Run = SweepRun | DERun
 
 #: Where each design limit comes from (vehicle file, group design_limits).
 _LIMIT_SOURCE = {"l2_m": "l2_max", "rws_m": "rt0 - rws_tyre_margin"}
+_RWS_MIN_SOURCE = "an engine sprocket of min_sprocket_teeth teeth of the chain_pitch, times sprocket_ratio"
 
 
 class PlanError(ValueError):
@@ -165,6 +166,7 @@ def plan_study(
         except ValueError as exc:
             raise PlanError(("grid",), str(exc)) from None
     limits = (vehicle or default_vehicle()).design_limits()
+    rws_min = (vehicle or default_vehicle()).rws_min()
     if designs is not None:
         for column, name in ((1, "l2_m"), (2, "rws_m")):
             beyond = np.flatnonzero(designs[:, column] > limits[name])
@@ -172,11 +174,19 @@ def plan_study(
                 i = int(beyond[0])
                 raise PlanError(("grid",), f"design {i} has {name} = {designs[i, column]:g} m, more than the "
                                 f"vehicle's limit of {limits[name]:g} m ({_LIMIT_SOURCE[name]})")
+        below = np.flatnonzero(designs[:, 2] < rws_min)
+        if below.size:
+            i = int(below[0])
+            raise PlanError(("grid",), f"design {i} has rws_m = {designs[i, 2]:g} m, less than the vehicle's "
+                            f"smallest of {rws_min:.4g} m ({_RWS_MIN_SOURCE})")
     box = bounds or Bounds()
     for field in ("l2_m", "rws_m"):
         if kind != "sweep" and getattr(box, field)[1] > limits[field]:
             raise PlanError(("bounds", field), f"upper bound {getattr(box, field)[1]:g} m is more than the "
                             f"vehicle's limit of {limits[field]:g} m ({_LIMIT_SOURCE[field]})")
+    if kind != "sweep" and box.rws_m[0] < rws_min:
+        raise PlanError(("bounds", "rws_m"), f"lower bound {box.rws_m[0]:g} m is less than the vehicle's smallest "
+                        f"R_WS of {rws_min:.4g} m ({_RWS_MIN_SOURCE})")
     if kind == "sweep":
         return StudyPlan("sweep", tuple(named), designs=designs, seed=seed)
     settings = de or (DESettings.paper() if kind == "paper-study" else DESettings())
@@ -199,9 +209,9 @@ def _designs_plan(roads: tuple[NamedRoad, ...], road_designs: Sequence[np.ndarra
         if rows.ndim != 2 or rows.shape[1] != 3 or len(rows) == 0 or not np.all(np.isfinite(rows)):
             raise PlanError(("designs", i), "expected at least one design of three finite numbers")
         for column, name in ((1, "l2_m"), (2, "rws_m")):
-            low = 0.0 if name == "l2_m" else np.nextafter(0.0, 1.0)
+            low = 0.0 if name == "l2_m" else (vehicle or default_vehicle()).rws_min()
             if np.any(rows[:, column] < low) or np.any(rows[:, column] > limits[name]):
-                raise PlanError(("designs", i), f"{name} must be in [{low:g}, {limits[name]:g}] m "
+                raise PlanError(("designs", i), f"{name} must be in [{low:.4g}, {limits[name]:g}] m "
                                 f"({_LIMIT_SOURCE[name]})")
         out.append(rows)
     return StudyPlan("designs", roads, road_designs=tuple(out), seed=seed)

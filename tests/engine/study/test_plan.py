@@ -90,6 +90,8 @@ def test_the_default_stops_once_converged_and_presets_take_given_fields() -> Non
     ("sweep", ["flat"], {"grid": "a2_deg=0,l2_m=0.1|0.25,rws_m=0.09"}, "grid"),      # beyond l2_max
     ("de", ["flat"], {"bounds": Bounds(rws_m=(0.05, 0.21))}, "bounds.rws_m"),    # beyond rt0 - margin
     ("de", ["flat"], {"bounds": Bounds(l2_m=(0.0, 0.3))}, "bounds.l2_m"),
+    ("de", ["flat"], {"bounds": Bounds(rws_m=(0.04, 0.15))}, "bounds.rws_m"),    # a 7.7-tooth engine sprocket
+    ("sweep", ["flat"], {"grid": "a2_deg=0,l2_m=0.1,rws_m=0.04|0.09"}, "grid"),
     ("sweep", ["sine:0.6:3"], {}, "roads.0"),                                  # higher than the limit
 ])
 def test_plan_errors_name_the_field(kind: str, roads: list[str], parts: dict, field: str) -> None:
@@ -103,6 +105,25 @@ def test_the_vehicle_sets_the_design_limits() -> None:
     assert plan_study("de", ["flat"], bounds=Bounds(l2_m=(0.0, 0.3)), vehicle=roomy).bounds == Bounds(l2_m=(0.0, 0.3))
     with pytest.raises(PlanError, match=r"limit of 0\.15 m"):
         plan_study("de", ["flat"], vehicle=default_vehicle().replace(l2_max=0.15))
+
+
+def test_the_smallest_wheel_sprocket_follows_the_chain_and_the_fewest_teeth() -> None:
+    """R = p / (2 sin(pi / N)): Table 8's smallest R_WS (0.05 m) gives a 9.7-tooth engine sprocket of a
+    520 chain, allowed by the default 9 teeth; 13 teeth (a buildable one) move the bound to 0.0663 m."""
+    from finaldrive.engine import Design, DesignError
+    from finaldrive.engine.vehicle import sprocket_teeth
+
+    v = default_vehicle()
+    assert sprocket_teeth(0.025, 0.015875) == pytest.approx(9.7235, abs=1e-4)
+    assert sprocket_teeth(v.rws_min() / v["sprocket_ratio"], v["chain_pitch"]) == pytest.approx(9.0)
+    buildable = v.replace(min_sprocket_teeth=13.0)
+    assert buildable.rws_min() == pytest.approx(0.06633, abs=1e-5)
+    with pytest.raises(PlanError, match=r"smallest R_WS of 0\.0663"):
+        plan_study("de", ["flat"], vehicle=buildable)
+    with pytest.raises(DesignError, match=r"would have 7\.7 teeth"):
+        v.check_design(Design.from_deg(0.0, 0.0, 0.04))
+    with pytest.raises(DesignError, match="below half a pitch"):
+        v.check_design(Design.from_deg(0.0, 0.0, 0.01))
 
 
 @pytest.mark.parametrize(("make", "field"), [
