@@ -57,7 +57,8 @@ PARAMETERS: tuple[tuple[str, Rule], ...] = (
     ("tyre_airborne_relax", (0.0, True, 1.0)),
 )
 #: Parameters added after files were written: a file without one takes this (group, value, unit), the
-#: paper's model (no travel stops), and says so in its source.
+#: model as it was before (the paper's springs and tyre, Table 8's smallest R_WS allowed), and says so
+#: in its source.
 ADDED_LATER: dict[str, tuple[str, float, str]] = {
     "suspension_stops": ("suspension", 0.0, "-"),
     "k_stop": ("suspension", 2.0e6, "N/m"),
