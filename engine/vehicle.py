@@ -159,10 +159,12 @@ class Vehicle:
         res = design.rws / self["sprocket_ratio"]
         teeth = sprocket_teeth(res, self["chain_pitch"])
         if teeth < self["min_sprocket_teeth"]:
-            fits = f"would have {teeth:.3g} teeth" if teeth else "is below half a pitch: no sprocket"
+            pitch = f"{self['chain_pitch'] * 1e3:g} mm chain pitch"
+            fits = (f"would have {teeth:.3g} teeth of the {pitch}, fewer than" if teeth else
+                    f"is less than half the {pitch}: no sprocket fits (at least")
             raise DesignError(f"rws = {design.rws:g} m: the engine sprocket (R_ES = R_WS / {self['sprocket_ratio']:g} "
-                              f"= {res:g} m) {fits} of the {self['chain_pitch'] * 1e3:g} mm chain pitch, fewer than "
-                              f"min_sprocket_teeth = {self['min_sprocket_teeth']:g} (vehicle file, design_limits)")
+                              f"= {res:g} m) {fits} min_sprocket_teeth = {self['min_sprocket_teeth']:g}"
+                              f"{')' if not teeth else ''} (vehicle file, design_limits)")
         if design.rws > limits["rws_m"]:
             raise DesignError(f"rws = {design.rws:g} m: must be <= {limits['rws_m']:g} m, the rear tyre's radius "
                               f"rt0 = {self['rt0']:g} m less rws_tyre_margin = {self['rws_tyre_margin']:g} m "

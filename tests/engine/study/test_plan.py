@@ -122,7 +122,7 @@ def test_the_smallest_wheel_sprocket_follows_the_chain_and_the_fewest_teeth() ->
         plan_study("de", ["flat"], vehicle=buildable)
     with pytest.raises(DesignError, match=r"would have 7\.7 teeth"):
         v.check_design(Design.from_deg(0.0, 0.0, 0.04))
-    with pytest.raises(DesignError, match="below half a pitch"):
+    with pytest.raises(DesignError, match=r"less than half the 15\.875 mm chain pitch: no sprocket fits"):
         v.check_design(Design.from_deg(0.0, 0.0, 0.01))
 
 
