@@ -124,7 +124,7 @@ def _until_done(db: Any, scheduler: Scheduler, spec: dict[str, Any]) -> int:
         with db.read() as session:
             job = session.get(Job, job_id)
             assert job is not None
-            if not scheduler.jobs and job.state in ("succeeded", "failed", "cancelled"):
+            if job.state in ("succeeded", "failed", "cancelled"):
                 return job_id
 
 

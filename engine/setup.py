@@ -34,6 +34,7 @@ def pack_parameters(vehicle: Vehicle, design: Design, settings: SimSettings) -> 
         settings.penalty_alpha, settings.baumgarte_xi, settings.baumgarte_omega)
     if vehicle["suspension_stops"]:
         p[P.RS_BUMP] = compressed_spring_length(vehicle)
+        p[P.FS_BUMP] = vehicle["s_fs"] - vehicle["fork_travel"]
     return p
 
 

@@ -156,9 +156,9 @@ class Vehicle:
         if design.l2 > limits["l2_m"]:
             raise DesignError(f"l2 = {design.l2:g} m: must be <= l2_max = {limits['l2_m']:g} m "
                               "(vehicle file, design_limits)")
-        res = design.rws / self["sprocket_ratio"]
-        teeth = sprocket_teeth(res, self["chain_pitch"])
-        if teeth < self["min_sprocket_teeth"]:
+        if design.rws < self.rws_min():
+            res = design.rws / self["sprocket_ratio"]
+            teeth = sprocket_teeth(res, self["chain_pitch"])
             pitch = f"{self['chain_pitch'] * 1e3:g} mm chain pitch"
             fits = (f"would have {teeth:.3g} teeth of the {pitch}, fewer than" if teeth else
                     f"is less than half the {pitch}: no sprocket fits (at least")
@@ -237,7 +237,7 @@ def load_vehicle_dict(data: Any) -> Vehicle:
             found[key] = (group, entry["value"], str(entry.get("unit", "")), str(entry.get("source", "")))
     rules = {**_RULES, **_TARGET_RULES, **_LIMIT_RULES, **_KINEMATIC_RULES}
     for key, (group, value, unit) in ADDED_LATER.items():
-        found.setdefault(key, (group, value, unit, "absent from the file: the paper's model (ADDED_LATER)"))
+        found.setdefault(key, (group, value, unit, "absent from the file: the model as before (ADDED_LATER)"))
     for key in rules:
         if key not in found:
             raise VehicleError(f"vehicle parameter {key!r}: missing")

@@ -59,7 +59,6 @@ from finaldrive.engine.model.elements import (
     AUX_TENSION,
     N_AUX,
     drive_torque,
-    fork_bump_length,
     front_tyre,
     rear_tyre,
     spring_damper,
@@ -189,7 +188,7 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
     q_t += f_rs * drs_th
     q_p += f_rs * drs_ph
     # front suspension (34): fs is a minimal coordinate
-    q_s += spring_damper(fs, fsd, p[P.K_FS], p[P.C_FS], p[P.S_FS], fork_bump_length(p), p, aux)  # (34)
+    q_s += spring_damper(fs, fsd, p[P.K_FS], p[P.C_FS], p[P.S_FS], p[P.FS_BUMP], p, aux)  # (34)
     # front tyre (37) at point 13 = r_4 + (fs + L8) u, on the fork axis (eqs. 14-17)
     slide = fs + p[P.L8]
     ox = ct * geo[G_P4_X] - st * geo[G_P4_Y] + slide * ux

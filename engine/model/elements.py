@@ -123,12 +123,6 @@ def spring_damper(length: float, rate: float, k: float, c: float, free_length: f
 
 
 @jit
-def fork_bump_length(p: np.ndarray) -> float:
-    """The fork's length at full compression, where its bump stop engages (travel stops) [m]."""
-    return p[P.S_FS] - p[P.FORK_TRAVEL]
-
-
-@jit
 def drive_torque(theta_dot: float, alpha_dot: float, p: np.ndarray, aux: np.ndarray) -> float:
     """The engine's torque T on the sprocket (turning it forward, alpha decreasing), its reaction on
     the chassis; the drive's power T (theta' - alpha') into aux[AUX_P_DRIVE]."""

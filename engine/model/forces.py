@@ -18,7 +18,6 @@ from finaldrive.engine.model.elements import (
     AUX_ALPHA_DOT,
     AUX_P_DAMP,
     drive_torque,
-    fork_bump_length,
     front_tyre,
     rear_tyre,
     spring_damper,
@@ -33,7 +32,7 @@ def applied_forces(q: np.ndarray, qd: np.ndarray, u: float, sigma: float, p: np.
     out[:] = qg
     aux[AUX_P_DAMP] = 0.0
     out[RS] += spring_damper(q[RS], qd[RS], p[P.K_RS], p[P.C_RS], p[P.S_RS], p[P.RS_BUMP], p, aux)      # (35)
-    out[FS] += spring_damper(q[FS], qd[FS], p[P.K_FS], p[P.C_FS], p[P.S_FS], fork_bump_length(p), p, aux)  # (34)
+    out[FS] += spring_damper(q[FS], qd[FS], p[P.K_FS], p[P.C_FS], p[P.S_FS], p[P.FS_BUMP], p, aux)      # (34)
     omega = -qd[BETA]                                                                          # (40)
     fz_rear, fx, lever = rear_tyre(q[RT], qd[RT], qd[X6], omega, u, sigma, p, longitudinal, aux)  # (36), (38)-(52)
     out[RT] += fz_rear

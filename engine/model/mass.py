@@ -101,7 +101,7 @@ def potential_energy(q: np.ndarray, p: np.ndarray, qg: np.ndarray | None = None)
     if qg is None:
         qg = gravity_forces(p)
     springs = (spring_energy(q[RS], p[P.K_RS], p[P.S_RS], p[P.RS_BUMP], p)
-               + spring_energy(q[FS], p[P.K_FS], p[P.S_FS], p[P.S_FS] - p[P.FORK_TRAVEL], p))  # fork_bump_length
+               + spring_energy(q[FS], p[P.K_FS], p[P.S_FS], p[P.FS_BUMP], p))
     springs += radial_energy(q[RT], p[P.RT0], p[P.K_RT], p[P.RT_BOTTOMING], p[P.K_RT_BOTTOMING])
     springs += radial_energy(q[FT], p[P.FT0], p[P.K_FT], math.inf, 0.0)
     return float(-qg @ q + springs)

@@ -91,6 +91,7 @@ AL_ALPHA = 79  # augmented Lagrangian penalty alpha, eqs. (57)-(58)
 AL_XI = 80  # Baumgarte xi, eq. (57)
 AL_OMEGA = 81  # Baumgarte omega, eq. (57)
 RS_BUMP = 82  # travel stops: the rear spring's length at full compression (rear_wheel_travel) [m]
+FS_BUMP = 83  # travel stops: the fork's length at full compression, s_fs - fork_travel [m]
 
 VEHICLE_KEYS: tuple[str, ...] = (
     'L3',
@@ -168,4 +169,4 @@ VEHICLE_KEYS: tuple[str, ...] = (
     'tyre_airborne_relax',
 )
 N_VEHICLE = 73
-N_PARAMS = 83
+N_PARAMS = 84

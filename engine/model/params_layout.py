@@ -25,6 +25,7 @@ DESIGN_SLOTS: tuple[tuple[str, str], ...] = (
     ("AL_XI", "Baumgarte xi, eq. (57)"),
     ("AL_OMEGA", "Baumgarte omega, eq. (57)"),
     ("RS_BUMP", "travel stops: the rear spring's length at full compression (rear_wheel_travel) [m]"),
+    ("FS_BUMP", "travel stops: the fork's length at full compression, s_fs - fork_travel [m]"),
 )
 
 HEADER = '''"""Layout of the packed parameter vector P read by the compiled model.

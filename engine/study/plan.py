@@ -165,8 +165,8 @@ def plan_study(
                     raise ValueError(f"designs must have shape (n >= 1, 3), got {designs.shape}")
         except ValueError as exc:
             raise PlanError(("grid",), str(exc)) from None
-    limits = (vehicle or default_vehicle()).design_limits()
-    rws_min = (vehicle or default_vehicle()).rws_min()
+    v = vehicle or default_vehicle()
+    limits, rws_min = v.design_limits(), v.rws_min()
     if designs is not None:
         for column, name in ((1, "l2_m"), (2, "rws_m")):
             beyond = np.flatnonzero(designs[:, column] > limits[name])
@@ -202,14 +202,15 @@ def _designs_plan(roads: tuple[NamedRoad, ...], road_designs: Sequence[np.ndarra
     """A designs study: one list of designs (rows a2 [rad], L2, R_WS) for each road, in order."""
     if len(road_designs) != len(roads):
         raise PlanError(("designs",), f"{len(road_designs)} lists of designs for {len(roads)} roads")
-    limits = (vehicle or default_vehicle()).design_limits()
+    v = vehicle or default_vehicle()
+    limits = v.design_limits()
     out = []
     for i, designs in enumerate(road_designs):
         rows = np.asarray(designs, dtype=float)
         if rows.ndim != 2 or rows.shape[1] != 3 or len(rows) == 0 or not np.all(np.isfinite(rows)):
             raise PlanError(("designs", i), "expected at least one design of three finite numbers")
         for column, name in ((1, "l2_m"), (2, "rws_m")):
-            low = 0.0 if name == "l2_m" else (vehicle or default_vehicle()).rws_min()
+            low = 0.0 if name == "l2_m" else v.rws_min()
             if np.any(rows[:, column] < low) or np.any(rows[:, column] > limits[name]):
                 raise PlanError(("designs", i), f"{name} must be in [{low:.4g}, {limits[name]:g}] m "
                                 f"({_LIMIT_SOURCE[name]})")

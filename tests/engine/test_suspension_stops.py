@@ -36,8 +36,9 @@ def test_spring_force_is_minus_the_slope_of_its_energy(vehicle, on):
     beyond the unloaded length), for both springs; without the stops, the paper's -k (l - s) exactly."""
     p = pack_parameters(vehicle.replace(suspension_stops=on), TABLE11, SimSettings())
     p[P.RS_BUMP] = compressed_spring_length(vehicle)
+    p[P.FS_BUMP] = vehicle["s_fs"] - vehicle["fork_travel"]
     h = 1e-7
-    for k, s, bump in ((p[P.K_RS], p[P.S_RS], p[P.RS_BUMP]), (p[P.K_FS], p[P.S_FS], p[P.S_FS] - p[P.FORK_TRAVEL])):
+    for k, s, bump in ((p[P.K_RS], p[P.S_RS], p[P.RS_BUMP]), (p[P.K_FS], p[P.S_FS], p[P.FS_BUMP])):
         for length in np.linspace(bump - 0.02, s + 0.02, 41):
             if min(abs(length - s), abs(length - bump)) < 10 * h:
                 continue  # a kink inside the difference
