@@ -14,6 +14,7 @@ transaction holds what arrived in one flush); printed: evaluations stored per se
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import statistics
 import sys
@@ -40,12 +41,14 @@ SPEC = {"kind": "sweep", "roads": ["flat"], "grid": "a2_deg=0:90:30"}
 
 
 def _rows(n: int, first: int) -> list[tuple[object, ...]]:
-    """``n`` evaluations of one road, candidates ``first`` on (the stand-in's results, engine-shaped)."""
+    """``n`` evaluations of one road, candidates ``first`` on (the stand-in's results, engine-shaped:
+    every value finite; cache keys sha256 hashes, as the scheduler's, so their index is filled at
+    random places as in a real job)."""
     rng = np.random.default_rng(first)
     designs = np.column_stack([rng.uniform(0, 6.28, n), rng.uniform(0, 0.2, n), rng.uniform(0.05, 0.2, n)])
     part = Request(0, 0, 0, np.arange(first, first + n), designs)
     batch = SleepTask(0.0, sleep=False).results(designs)
-    keys = [f"{first + i:064x}" for i in range(n)]
+    keys = [hashlib.sha256(str(first + i).encode()).hexdigest() for i in range(n)]  # as design_keys: spread
     return rows_from_results([(part, batch, batch.fitness_m, keys, False)])
 
 

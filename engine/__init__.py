@@ -18,8 +18,9 @@ ENGINE_VERSION = "0.3.0"
 
 #: Public name -> module that defines it.
 _EXPORTS: dict[str, str] = {
-    **dict.fromkeys(("DIAGNOSTIC_MEANINGS", "DIAGNOSTICS", "STATUS_FAILED", "STATUS_OK", "BatchResult", "Design",
-                     "DesignError", "Method", "SimResult", "SimSettings"), "finaldrive.engine.api"),
+    **dict.fromkeys(("STATUS_FAILED", "STATUS_OK", "BatchResult", "Design", "DesignError", "Method", "SimResult",
+                     "SimSettings"), "finaldrive.engine.api"),
+    **dict.fromkeys(("DIAGNOSTICS", "RECORD", "VALUES", "Value"), "finaldrive.engine.record"),
     **dict.fromkeys(("evaluate", "simulate"), "finaldrive.engine.simulation"),
     **dict.fromkeys(("PROFILE_MAX_POINTS", "Road", "RoadError"), "finaldrive.engine.model.road"),
     **dict.fromkeys(("coordinate_index", "point_positions"), "finaldrive.engine.model.coordinates"),
@@ -72,8 +73,6 @@ def __dir__() -> list[str]:
 
 if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
     from finaldrive.engine.api import (
-        DIAGNOSTIC_MEANINGS as DIAGNOSTIC_MEANINGS,
-        DIAGNOSTICS as DIAGNOSTICS,
         STATUS_FAILED as STATUS_FAILED,
         STATUS_OK as STATUS_OK,
         BatchResult as BatchResult,
@@ -119,6 +118,12 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         Optimiser as Optimiser,
     )
     from finaldrive.engine.precompile import compile_engine as compile_engine, is_compiled as is_compiled
+    from finaldrive.engine.record import (
+        DIAGNOSTICS as DIAGNOSTICS,
+        RECORD as RECORD,
+        VALUES as VALUES,
+        Value as Value,
+    )
     from finaldrive.engine.simulation import evaluate as evaluate, simulate as simulate
     from finaldrive.engine.study.plan import (
         PAPER_SWEEP_STEP as PAPER_SWEEP_STEP,

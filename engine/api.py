@@ -7,52 +7,16 @@ Designs are rows (a2 [rad], L2 [m], R_WS [m]); R_ES = R_WS / ratio (Table 8: rat
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
-from typing import Any, Literal
+from dataclasses import dataclass, replace
+from typing import Literal
 
 import numpy as np
 
+from finaldrive.engine import record
+from finaldrive.engine.record import DIAGNOSTICS, VALUES
+
 STATUS_OK = "ok"
 STATUS_FAILED = "failed"
-
-#: What every result reports besides distance, SR, slack and fitness, tracked at every integrator
-#: step (never read off the output series; docs/engine.md#extremes-and-the-energy-ledger), units in
-#: the names: the extremes of the chain tension, of the tyre loads and of the slip |kappa'|, the time
-#: each wheel spends off the road and the upper chain run in compression, the largest tyre
-#: compressions, and the energy ledger [J] (drive work = kinetic + potential energy + damper
-#: dissipation + tyre slip work - lever-arm work + residual; slip work = carcass energy + tyre
-#: dissipation), with the smallest tyre dissipation rate seen [W] (>= 0: the tyre creates no energy).
-#: What a run reports besides its fitness: extremes tracked at every accepted step, and its energy
-#: ledger (docs/engine.md, "Extremes and the energy ledger"); name -> meaning, the unit in the name.
-DIAGNOSTIC_MEANINGS: dict[str, str] = {
-    "chain_tension_max_n": "largest tension of the chain's upper run [N]",
-    "chain_tension_min_n": "smallest chain tension: negative when the upper run pushes (the paper's chain) or the "
-                           "lower run pulls (two runs) [N]",
-    "chain_compression_s": "time in overrun: the upper run pushing (the paper's chain) or not taut (two runs) [s]",
-    "fz_rear_max_n": "largest vertical load of the rear tyre [N]",
-    "fz_rear_min_n": ("smallest vertical load of the rear tyre: 0 when airborne, negative while its damper "
-                      "pulls as the tyre springs back (eqs. 36-37 as printed) [N]"),
-    "fz_front_max_n": "largest vertical load of the front tyre [N]",
-    "fz_front_min_n": ("smallest vertical load of the front tyre: 0 when airborne, negative while its damper "
-                      "pulls as the tyre springs back (eqs. 36-37 as printed) [N]"),
-    "slip_max": "largest |kappa'|, the rear tyre's transient longitudinal slip [-]",
-    "airborne_rear_s": "time the rear wheel spends off the road [s]",
-    "airborne_front_s": "time the front wheel spends off the road [s]",
-    "tyre_compression_rear_max_m": "largest radial compression of the rear tyre [m]",
-    "tyre_compression_front_max_m": "largest radial compression of the front tyre [m]",
-    "drive_work_j": "work of the drive torque [J]",
-    "kinetic_energy_j": "kinetic energy at the end [J]",
-    "potential_energy_j": "change of the potential energy (gravity, springs, bump stop) [J]",
-    "damper_dissipation_j": "energy the suspension and tyre dampers (and the two-run chain's impacts) dissipated [J]",
-    "tyre_slip_work_j": "work the longitudinal tyre force took by slip: carcass energy + dissipation [J]",
-    "tyre_carcass_energy_j": "energy stored in the tyre carcass's deflection at the end [J]",
-    "tyre_dissipation_j": "energy the tyre dissipated by slip (>= 0) [J]",
-    "tyre_lever_work_j": "work the tyre force created through a lever arm other than R_e (0 by default) [J]",
-    "ledger_residual_j": "drive + lever work - (kinetic + potential + dampers + slip): the ledger's error [J]",
-    "tyre_dissipation_min_w": "smallest slip dissipation power at any step (>= 0: no energy created) [W]",
-}
-DIAGNOSTICS: tuple[str, ...] = tuple(DIAGNOSTIC_MEANINGS)
-
 
 Method = Literal["fast", "reference"]
 
@@ -160,42 +124,28 @@ class SimSettings:
         return replace(self, **changes)  # type: ignore[arg-type]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class SimResult:
-    """One simulation's outcome. Lengths in m (slack_m too), SR dimensionless; the diagnostics
-    (:data:`DIAGNOSTICS`) carry their units in their names and are NaN for a failed run."""
+    """One simulation's outcome: ``status``, ``reason`` and one result record (``values``, in
+    :data:`~finaldrive.engine.record.VALUES` order, read by name: ``result.distance_m``); NaN
+    where the run produced no value (a failed run's distance and diagnostics)."""
 
     status: str
     reason: str
-    distance_m: float
-    squat_ratio: float
-    slack_m: float
-    fitness_m: float
-    chain_length_m: float
-    wall_s: float
-    series: dict[str, np.ndarray] | None = field(default=None, compare=False)
-    chain_tension_max_n: float = math.nan
-    chain_tension_min_n: float = math.nan
-    chain_compression_s: float = math.nan
-    fz_rear_max_n: float = math.nan
-    fz_rear_min_n: float = math.nan
-    fz_front_max_n: float = math.nan
-    fz_front_min_n: float = math.nan
-    slip_max: float = math.nan
-    airborne_rear_s: float = math.nan
-    airborne_front_s: float = math.nan
-    tyre_compression_rear_max_m: float = math.nan
-    tyre_compression_front_max_m: float = math.nan
-    drive_work_j: float = math.nan
-    kinetic_energy_j: float = math.nan
-    potential_energy_j: float = math.nan
-    damper_dissipation_j: float = math.nan
-    tyre_slip_work_j: float = math.nan
-    tyre_carcass_energy_j: float = math.nan
-    tyre_dissipation_j: float = math.nan
-    tyre_lever_work_j: float = math.nan
-    ledger_residual_j: float = math.nan
-    tyre_dissipation_min_w: float = math.nan
+    values: np.ndarray
+    series: dict[str, np.ndarray] | None = None
+
+    @classmethod
+    def of(cls, status: str, reason: str, series: dict[str, np.ndarray] | None = None,
+           **values: float) -> SimResult:
+        """A result from its values by name (those left out are NaN)."""
+        return cls(status, reason, record.values_of(**values), series)
+
+    def __getattr__(self, name: str) -> float:
+        column = record.COLUMN.get(name)
+        if column is None:
+            raise AttributeError(name)
+        return float(self.__dict__["values"][column])
 
     def diagnostics(self) -> dict[str, float]:
         """The diagnostics (:data:`DIAGNOSTICS`) by name."""
@@ -206,66 +156,28 @@ class SimResult:
         return self.status == STATUS_OK
 
     def summary(self) -> dict[str, float | str]:
-        """The scalar outputs as a JSON-ready dict (CLI keys)."""
-        return {
-            "status": self.status,
-            "reason": self.reason,
-            "distance_m": self.distance_m,
-            "squat_ratio": self.squat_ratio,
-            "slack_m": self.slack_m,
-            "fitness_m": self.fitness_m,
-            "chain_length_m": self.chain_length_m,
-            "wall_s": self.wall_s,
-            **self.diagnostics(),
-        }
+        """The record as a JSON-ready dict (the outputs' names)."""
+        return {"status": self.status, "reason": self.reason,
+                **{name: float(v) for name, v in zip(VALUES, self.values.tolist(), strict=True)}}
 
 
-def _unset() -> np.ndarray:
-    return np.zeros(0)
-
-
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class BatchResult:
-    """Results of a batch, one entry per input design row, in order. The diagnostics
-    (:data:`DIAGNOSTICS`) are arrays too; left out, they are NaN."""
+    """Results of a batch, one row per input design, in order: the designs, each one's status and
+    reason, and a block of result records (``values``: (n, len(VALUES)) float64, columns in
+    :data:`~finaldrive.engine.record.VALUES` order; a column by name: ``batch.fitness_m``)."""
 
     designs: np.ndarray          # (n, 3): a2 [rad], L2 [m], R_WS [m]
-    distance_m: np.ndarray
-    squat_ratio: np.ndarray
-    slack_m: np.ndarray
-    fitness_m: np.ndarray
-    chain_length_m: np.ndarray
-    wall_s: np.ndarray
+    values: np.ndarray
     status: tuple[str, ...]
     reason: tuple[str, ...]
-    chain_tension_max_n: np.ndarray = field(default_factory=_unset)
-    chain_tension_min_n: np.ndarray = field(default_factory=_unset)
-    chain_compression_s: np.ndarray = field(default_factory=_unset)
-    fz_rear_max_n: np.ndarray = field(default_factory=_unset)
-    fz_rear_min_n: np.ndarray = field(default_factory=_unset)
-    fz_front_max_n: np.ndarray = field(default_factory=_unset)
-    fz_front_min_n: np.ndarray = field(default_factory=_unset)
-    slip_max: np.ndarray = field(default_factory=_unset)
-    airborne_rear_s: np.ndarray = field(default_factory=_unset)
-    airborne_front_s: np.ndarray = field(default_factory=_unset)
-    tyre_compression_rear_max_m: np.ndarray = field(default_factory=_unset)
-    tyre_compression_front_max_m: np.ndarray = field(default_factory=_unset)
-    drive_work_j: np.ndarray = field(default_factory=_unset)
-    kinetic_energy_j: np.ndarray = field(default_factory=_unset)
-    potential_energy_j: np.ndarray = field(default_factory=_unset)
-    damper_dissipation_j: np.ndarray = field(default_factory=_unset)
-    tyre_slip_work_j: np.ndarray = field(default_factory=_unset)
-    tyre_carcass_energy_j: np.ndarray = field(default_factory=_unset)
-    tyre_dissipation_j: np.ndarray = field(default_factory=_unset)
-    tyre_lever_work_j: np.ndarray = field(default_factory=_unset)
-    ledger_residual_j: np.ndarray = field(default_factory=_unset)
-    tyre_dissipation_min_w: np.ndarray = field(default_factory=_unset)
 
-    def __post_init__(self) -> None:
-        n = len(self.status)
-        for name in DIAGNOSTICS:  # results built without diagnostics (older callers): NaN
-            if getattr(self, name).size == 0 and n > 0:
-                object.__setattr__(self, name, np.full(n, math.nan))
+    def __getattr__(self, name: str) -> np.ndarray:
+        column = record.COLUMN.get(name)
+        if column is None:
+            raise AttributeError(name)
+        values: np.ndarray = self.__dict__["values"][:, column]
+        return values
 
     def __len__(self) -> int:
         return len(self.status)
@@ -275,55 +187,40 @@ class BatchResult:
         return np.array([s == STATUS_OK for s in self.status], dtype=bool)
 
     def result(self, i: int) -> SimResult:
-        return SimResult(
-            status=self.status[i], reason=self.reason[i],
-            distance_m=float(self.distance_m[i]), squat_ratio=float(self.squat_ratio[i]),
-            slack_m=float(self.slack_m[i]), fitness_m=float(self.fitness_m[i]),
-            chain_length_m=float(self.chain_length_m[i]), wall_s=float(self.wall_s[i]),
-            **self._diagnostics_of(i),
-        )
+        return SimResult(self.status[i], self.reason[i], self.values[i].copy())
 
-    def _diagnostics_of(self, i: int) -> dict[str, Any]:
-        return {name: float(getattr(self, name)[i]) for name in DIAGNOSTICS}
+    @classmethod
+    def of(cls, designs: np.ndarray, status: tuple[str, ...], reason: tuple[str, ...],
+           **columns: np.ndarray | float) -> BatchResult:
+        """A batch from its value columns by name (those left out are NaN)."""
+        rows = np.asarray(designs, dtype=float).reshape(-1, 3)
+        values = record.empty(len(rows))
+        for name, column in columns.items():
+            values[:, record.COLUMN[name]] = column  # a KeyError names a value the record does not declare
+        return cls(rows, values, status, reason)
 
     @classmethod
     def from_results(cls, designs: np.ndarray, results: list[SimResult]) -> BatchResult:
-        def col(name: str) -> np.ndarray:
-            return np.array([getattr(r, name) for r in results], dtype=float)
-
-        return cls(
-            designs=np.asarray(designs, dtype=float).reshape(-1, 3),
-            distance_m=col("distance_m"), squat_ratio=col("squat_ratio"),
-            slack_m=col("slack_m"), fitness_m=col("fitness_m"),
-            chain_length_m=col("chain_length_m"), wall_s=col("wall_s"),
-            status=tuple(r.status for r in results), reason=tuple(r.reason for r in results),
-            **{name: col(name) for name in DIAGNOSTICS},
-        )
+        values = np.array([r.values for r in results], dtype=record.DTYPE).reshape(-1, len(VALUES))
+        return cls(np.asarray(designs, dtype=float).reshape(-1, 3), values,
+                   tuple(r.status for r in results), tuple(r.reason for r in results))
 
     @classmethod
     def failed(cls, designs: np.ndarray, reason: str) -> BatchResult:
-        """Every design failed, for ``reason`` (e.g. its worker was lost)."""
+        """Every design failed, for ``reason`` (e.g. its worker was lost); 0 s of wall time."""
         rows = np.asarray(designs, dtype=float).reshape(-1, 3)
-        n = len(rows)
-        return cls(designs=rows, distance_m=np.full(n, np.nan), squat_ratio=np.full(n, np.nan),
-                   slack_m=np.full(n, np.nan), fitness_m=np.full(n, np.nan), chain_length_m=np.full(n, np.nan),
-                   wall_s=np.zeros(n), status=(STATUS_FAILED,) * n, reason=(reason,) * n)
+        values = record.empty(len(rows))
+        values[:, record.COLUMN["wall_s"]] = 0.0
+        return cls(rows, values, (STATUS_FAILED,) * len(rows), (reason,) * len(rows))
 
     def rows(self, index: slice) -> BatchResult:
         """The results of a range of rows, in order."""
-        return BatchResult(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+        return BatchResult(self.designs[index], self.values[index], self.status[index], self.reason[index])
 
     @classmethod
     def concat(cls, parts: list[BatchResult]) -> BatchResult:
         """Join batches in the given order."""
         if not parts:
             return cls.from_results(np.zeros((0, 3)), [])
-        arrays = {
-            f.name: np.concatenate([getattr(p, f.name) for p in parts])
-            for f in fields(cls) if f.name not in ("status", "reason")
-        }
-        return cls(
-            **arrays,
-            status=tuple(s for p in parts for s in p.status),
-            reason=tuple(s for p in parts for s in p.reason),
-        )
+        return cls(np.concatenate([p.designs for p in parts]), np.concatenate([p.values for p in parts]),
+                   tuple(s for p in parts for s in p.status), tuple(s for p in parts for s in p.reason))

@@ -14,6 +14,8 @@ import sys
 from dataclasses import dataclass
 from typing import Any
 
+from finaldrive.engine.record import RECORD
+
 #: unit suffix -> unit as printed (longest suffixes first when matching)
 UNITS: dict[str, str] = {
     "_m_per_deg": "m/deg", "_m_per_m": "m/m", "_rad_s": "rad/s", "_bytes": "bytes", "_pct": "%",
@@ -57,19 +59,13 @@ _DESIGN = [
     _f("rws_m", "R_WS: wheel sprocket pitch radius", 4),
     _f("res_m", "R_ES: engine sprocket pitch radius (R_WS over the final-drive ratio)", 4),
 ]
-_RESULT = [
-    _f("distance_m", "distance d travelled by the chassis in the run (the fitness's first factor, eq. 67)", 4),
-    _f("squat_ratio", "squat ratio SR at the design pose (section 5; 1 = neutral squat, as the paper reads it)", 4),
-    _f("slack_m", "chain slack: 2 (max - min) of the taut upper run's length over the run, eq. (68)", 6),
-    _f("fitness_m", "the paper's fitness: the distance scaled down for squat ratio and slack, eq. (67)", 4),
-    _f("chain_length_m", "chain length L of the design, eq. (69)", 4),
-    _f("taut_length_m", "length of the chain's taut upper run (geometry: at the static pose; series: over time)", 4),
-    _f("wall_s", "wall time the simulation took", 3),
+_RECORD = [_f(v.name, v.meaning, v.digits) for v in RECORD]  # one result record (engine.record)
+_STORED = [
     _f("status", "ok, or failed (reason says why)"),
     _f("reason", "why a run failed (empty when ok)"),
     _f("cached", "reused from an earlier identical simulation"),
+    _f("taut_length_m", "length of the chain's taut upper run (geometry: at the static pose; series: over time)", 4),
 ]
-_DIAGNOSTIC_DIGITS = {"_n": 1, "_s": 3, "_m": 5, "_j": 3, "_w": 3}
 _SERIES = [
     _f("t_s", "simulated time", 3),
     _f("pitch_deg", "chassis pitch angle theta (the model's coordinate, docs/engine.md)", 3),
@@ -126,18 +122,8 @@ _STUDY = [
 ]
 
 
-def _diagnostics() -> list[Field]:
-    from finaldrive.engine.api import DIAGNOSTIC_MEANINGS
-
-    out = []
-    for name, meaning in DIAGNOSTIC_MEANINGS.items():
-        digits = next((d for s, d in _DIAGNOSTIC_DIGITS.items() if name.endswith(s)), 4)
-        out.append(_f(name, meaning.rsplit(" [", 1)[0], digits))
-    return out
-
-
 #: every physical output field (the service adds its own records' fields in docs/fields.md)
-FIELDS: dict[str, Field] = {f.name: f for f in [*_DESIGN, *_RESULT, *_diagnostics(), *_SERIES, *_TRAVEL, *_STUDY]}
+FIELDS: dict[str, Field] = {f.name: f for f in [*_DESIGN, *_RECORD, *_STORED, *_SERIES, *_TRAVEL, *_STUDY]}
 
 
 def human(name: str, value: object) -> str:

@@ -8,13 +8,11 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
 from finaldrive.engine import outcome
 from finaldrive.engine.api import (
-    DIAGNOSTICS,
     STATUS_FAILED,
     STATUS_OK,
     BatchResult,
@@ -33,6 +31,7 @@ from finaldrive.engine.model.elements import N_AUX
 from finaldrive.engine.model.kinematics import GeometryError, assemble, pose_from_minimal, squat_ratio_at
 from finaldrive.engine.model.mass import gravity_forces, mass_matrix, potential_energy
 from finaldrive.engine.model.road import Road
+from finaldrive.engine.record import DIAGNOSTICS
 from finaldrive.engine.setup import MINIMAL_COORDS, Setup, pack_parameters, prepare
 from finaldrive.engine.solver.equilibrium import ReferenceEquilibriumError
 from finaldrive.engine.vehicle import Vehicle, default_vehicle
@@ -55,8 +54,8 @@ REASON_CANCELLED = "cancelled"
 
 
 def _failed(reason: str, sr: float, chain: float, start: float) -> SimResult:
-    return SimResult(STATUS_FAILED, reason, math.nan, sr, math.nan, math.nan, chain,
-                     time.perf_counter() - start)
+    return SimResult.of(STATUS_FAILED, reason, squat_ratio=sr, chain_length_m=chain,
+                        wall_s=time.perf_counter() - start)
 
 
 def _run_chunks(chunk: Callable[[], int], settings: SimSettings,
@@ -185,7 +184,8 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
     slack_m = slack(ext[D.E_TAUT_MIN], ext[D.E_TAUT_MAX])
     fit = fitness(distance, setup.squat_ratio, slack_m, eps1=p[P.EPS1], eps2=p[P.EPS2],
                   sr_optimum=p[P.SR_OPTIMUM], floor=p[P.FLOOR])
-    values = _diagnostics(ext, led, kinetic, potential_energy(q_end, p, qg) - potential_energy(setup.q0, p, qg))
+    diagnostics = _diagnostics(ext, led, kinetic,
+                               potential_energy(q_end, p, qg) - potential_energy(setup.q0, p, qg))
     out = None
     if settings.series:
         if settings.method == "fast":
@@ -194,12 +194,12 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
         else:
             qs = states[:rows, :N_COORDS]
         out = _series(series[:rows], qs, setup, p, settings.method)
-    return SimResult(STATUS_OK, "", distance, setup.squat_ratio, slack_m, fit, chain,
-                     time.perf_counter() - start, out, **values)
+    return SimResult.of(STATUS_OK, "", out, distance_m=distance, squat_ratio=setup.squat_ratio, slack_m=slack_m,
+                        fitness_m=fit, chain_length_m=chain, wall_s=time.perf_counter() - start, **diagnostics)
 
 
-def _diagnostics(ext: np.ndarray, led: np.ndarray, kinetic: float, potential: float) -> dict[str, Any]:
-    """The result's diagnostics (api.DIAGNOSTICS) from the loop's records and the end state's energies."""
+def _diagnostics(ext: np.ndarray, led: np.ndarray, kinetic: float, potential: float) -> dict[str, float]:
+    """The record's diagnostics (engine.record) from the loop's records and the end state's energies."""
     slip = float(led[D.L_SLIP])
     values = {
         "chain_tension_max_n": ext[D.E_TENSION_MAX], "chain_tension_min_n": ext[D.E_TENSION_MIN],
@@ -218,7 +218,7 @@ def _diagnostics(ext: np.ndarray, led: np.ndarray, kinetic: float, potential: fl
                                                                 + led[D.L_IMPACT] + slip),
         "tyre_dissipation_min_w": led[D.L_DISSIPATION_MIN],
     }
-    assert tuple(values) == DIAGNOSTICS
+    assert tuple(values) == DIAGNOSTICS  # every diagnostic the record declares, each once
     return {k: float(v) for k, v in values.items()}
 
 

@@ -26,9 +26,10 @@ from finaldrive.engine import (
     DE_INTEGRAL,
     DE_LIMITS,
     DE_OPTIONAL,
-    DIAGNOSTIC_MEANINGS,
+    FIELDS,
     OPTIMISERS,
     PROFILE_MAX_POINTS,
+    VALUES,
     VEHICLE_VALUE_LIMIT,
     Bounds as StudyBounds,
     DESettings,
@@ -230,21 +231,21 @@ class _EvaluationCore(BaseModel):
     a2_deg: float = Field(description="sprocket angle a2 [deg]")
     l2_m: float = Field(description="pivot-to-sprocket distance L2 [m]")
     rws_m: float = Field(description="wheel sprocket radius R_WS [m]")
-    distance_m: float | None
-    squat_ratio: float | None
-    slack_m: float | None
-    fitness_m: float | None
-    chain_length_m: float | None
     status: Literal["ok", "failed"]
     reason: str
-    wall_s: float
     cached: bool = Field(description="reused from an earlier identical simulation")
 
 
-#: An evaluation: the design, its outcome, and the run's diagnostics (finaldrive.engine.DIAGNOSTICS).
+def _described(name: str) -> str:
+    spec = FIELDS[name]
+    return f"{spec.meaning} [{spec.unit}]" if spec.unit else spec.meaning
+
+
+#: An evaluation: its slot, the design, status, and its result record (finaldrive.engine.VALUES:
+#: the outcome and the run's diagnostics; null where the run produced none).
 EvaluationOut = create_model(  # type: ignore[call-overload]  # pydantic's stubs miss the (type, Field) form
     "EvaluationOut", __base__=_EvaluationCore,
-    **{name: (float | None, Field(None, description=meaning)) for name, meaning in DIAGNOSTIC_MEANINGS.items()},
+    **{name: (float | None, Field(None, description=_described(name))) for name in VALUES},
 )
 
 

@@ -15,6 +15,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from finaldrive.engine import FIELDS, base_of, unit_of
@@ -105,3 +106,24 @@ def test_every_physical_field_is_documented_with_its_unit(tmp_path: Path, capsys
 def test_docs_fields_table_is_current() -> None:
     text = (ROOT / "docs" / "fields.md").read_text()
     assert table_markdown() in text, "regenerate: python -m finaldrive.engine.fields"
+
+
+def test_every_value_of_the_result_record_reaches_every_output() -> None:
+    """One declaration (engine.record): the engine's results, the store's columns, the API's
+    evaluation fields, the evaluate command's columns and docs/fields.md carry each value of the
+    record, under its name, and with its documented unit."""
+    from finaldrive.engine import RECORD, VALUES, BatchResult, SimResult
+    from finaldrive.service.cli.engine_cmds import EVALUATE_COLUMNS
+    from finaldrive.service.schemas import EvaluationOut
+
+    assert len(VALUES) == len(set(VALUES)) == len(RECORD) > 20
+    result = SimResult.of("ok", "", **{name: float(i) for i, name in enumerate(VALUES)})
+    assert list(result.summary()) == ["status", "reason", *VALUES]
+    assert [getattr(result, name) for name in VALUES] == [float(i) for i in range(len(VALUES))]
+    batch = BatchResult.from_results(np.zeros((1, 3)), [result])
+    assert batch.values.shape == (1, len(VALUES)) and batch.ledger_residual_j[0] == VALUES.index("ledger_residual_j")
+    columns = Base.metadata.tables["evaluations"].columns
+    for value in RECORD:
+        assert value.name in columns and value.name in EvaluationOut.model_fields, value.name
+        assert value.name in EVALUATE_COLUMNS and FIELDS[value.name].unit == unit_of(value.name), value.name
+        assert FIELDS[value.name].meaning == value.meaning

@@ -8,7 +8,7 @@ from datetime import UTC, datetime
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from finaldrive.engine import DIAGNOSTICS
+from finaldrive.engine import VALUES
 from finaldrive.service.db.models import Evaluation, Generation, Job, JobRoad, JobState
 from finaldrive.service.db.repository import roads_of, utcnow
 from finaldrive.service.schemas import EvaluationOut, JobOut, JobSpec, RoadProgress, RobustBest
@@ -21,10 +21,8 @@ def _aware(t: datetime | None) -> datetime | None:
 def evaluation_out(e: Evaluation, road_name: str) -> EvaluationOut:
     return EvaluationOut(
         id=e.id, road_index=e.road_index, road=road_name, step=e.step, candidate=e.candidate,
-        a2_deg=e.a2_deg, l2_m=e.l2_m, rws_m=e.rws_m, distance_m=e.distance_m,
-        squat_ratio=e.squat_ratio, slack_m=e.slack_m, fitness_m=e.fitness_m,
-        chain_length_m=e.chain_length_m, status=e.status,
-        reason=e.reason, wall_s=e.wall_s, cached=e.cached, **{name: getattr(e, name) for name in DIAGNOSTICS},
+        a2_deg=e.a2_deg, l2_m=e.l2_m, rws_m=e.rws_m, status=e.status, reason=e.reason, cached=e.cached,
+        **{name: getattr(e, name) for name in VALUES},
     )
 
 

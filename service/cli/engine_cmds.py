@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from finaldrive.engine import DIAGNOSTICS, design_label, human
+from finaldrive.engine import VALUES, design_label, human
 from finaldrive.service.cli.common import (
     ROAD_HELP,
     UsageError,
@@ -131,8 +131,7 @@ def _write_series(path: Path, series: dict[str, np.ndarray]) -> None:
 
 # --- evaluate -------------------------------------------------------------------------------
 
-EVALUATE_COLUMNS = ("a2_deg", "l2_m", "rws_m", "status", "distance_m", "squat_ratio", "slack_m",
-                    "fitness_m", "chain_length_m", "wall_s", "reason", *DIAGNOSTICS)
+EVALUATE_COLUMNS = ("a2_deg", "l2_m", "rws_m", "status", *VALUES, "reason")
 
 
 def batch_rows(batch: Any) -> list[dict[str, Any]]:
@@ -141,10 +140,8 @@ def batch_rows(batch: Any) -> list[dict[str, Any]]:
         a2, l2, rws = batch.designs[i]
         out.append({
             "a2_deg": math.degrees(a2), "l2_m": float(l2), "rws_m": float(rws), "status": batch.status[i],
-            "distance_m": clean(batch.distance_m[i]), "squat_ratio": clean(batch.squat_ratio[i]),
-            "slack_m": clean(batch.slack_m[i]), "fitness_m": clean(batch.fitness_m[i]),
-            "chain_length_m": clean(batch.chain_length_m[i]), "wall_s": float(batch.wall_s[i]),
-            "reason": batch.reason[i], **{name: clean(getattr(batch, name)[i]) for name in DIAGNOSTICS},
+            **{name: clean(v) for name, v in zip(VALUES, batch.values[i].tolist(), strict=True)},
+            "reason": batch.reason[i],
         })
     return out
 

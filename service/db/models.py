@@ -122,9 +122,8 @@ class RoadExplored(Base):
 
 
 class Evaluation(Base):
-    """One simulation result of a job: a design on a road (names with units,
-    docs/fields.md), with the run's
-    diagnostics (finaldrive.engine.DIAGNOSTICS, one column each, added below the class).
+    """One simulation result of a job: a design on a road and its result record (finaldrive.engine.VALUES,
+    names with units, docs/fields.md), the diagnostics' columns added below the class.
 
     ``step`` is the DE generation (0 = initial population; always 0 for sweeps) and
     ``candidate`` the row within the sweep grid or the generation.

@@ -16,7 +16,7 @@ from typing import Any
 from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
-from finaldrive.engine import DIAGNOSTICS
+from finaldrive.engine import VALUES
 from finaldrive.service.db.leases import db_now, finish_job, owns, release_jobs
 from finaldrive.service.db.models import EvalStatus, Evaluation, Generation, Job, JobState
 from finaldrive.service.db.summaries import add_explored, recount_explored
@@ -30,11 +30,11 @@ class LeaseLost(Exception):
 
 
 #: The columns of an evaluation the scheduler writes, in the order of a row tuple (units in the
-#: names, docs/fields.md; fitness None when the simulation failed), then the run's diagnostics.
+#: names, docs/fields.md): the slot, the design, the result record (engine.VALUES; NULL where not
+#: produced, fitness NULL when the simulation failed), then its status and cache bookkeeping.
 ROW_COLUMNS: tuple[str, ...] = (
-    "road_index", "step", "candidate", "a2_deg", "l2_m", "rws_m", "distance_m", "squat_ratio", "slack_m", "fitness_m",
-    "chain_length_m", "status", "reason", "wall_s", "cached", "cache_key", "cache_hash", "transient",
-    *DIAGNOSTICS)
+    "road_index", "step", "candidate", "a2_deg", "l2_m", "rws_m", *VALUES,
+    "status", "reason", "cached", "cache_key", "cache_hash", "transient")
 ROAD, STEP, CANDIDATE, A2, L2, RWS, FITNESS, STATUS, CACHED = (ROW_COLUMNS.index(c) for c in (
     "road_index", "step", "candidate", "a2_deg", "l2_m", "rws_m", "fitness_m", "status", "cached"))
 _OK = EvalStatus.ok.value
@@ -75,8 +75,7 @@ def stored_slots(session: Session, job_id: int, step: int) -> set[tuple[int, int
 
 
 #: What a cache hit gives a new row: the stored result (the rest of a row is the new slot's own).
-CACHED_COLUMNS = tuple(c for c in ROW_COLUMNS[ROW_COLUMNS.index("distance_m"):]
-                       if c not in ("wall_s", "cached", "cache_key", "cache_hash", "transient"))
+CACHED_COLUMNS = (*(name for name in VALUES if name != "wall_s"), "status", "reason")
 
 
 def cached_evaluations(session: Session, keys: Iterable[str]) -> dict[str, dict[str, Any]]:
@@ -152,7 +151,7 @@ def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequen
         recount_explored(session, job_id)
     else:
         add_explored(session, job_id, ((row[ROAD], row[A2], row[L2], row[RWS], row[FITNESS]) for row in rows
-                                       if row[STATUS] == _OK and row[FITNESS] is not None))
+                                       if row[STATUS] == _OK and _finite(row[FITNESS])))
     _update_best(session, job_id, rows)
     if generations:
         now = _bound_now(session, Generation)
@@ -209,8 +208,10 @@ def _insert_many(session: Session, table: str, columns: Sequence[str], values: l
     slot stored already)."""
     if not values:
         return 0
-    if session.get_bind().dialect.name == "postgresql" and len(values) >= COPY_ROWS:
-        return _copy_many(session, table, columns, values, unique)
+    if session.get_bind().dialect.name == "postgresql":  # SQLite stores a NaN as NULL itself
+        values = [tuple(None if isinstance(v, float) and v != v else v for v in row) for row in values]
+        if len(values) >= COPY_ROWS:
+            return _copy_many(session, table, columns, values, unique)
     marker = "?" if session.get_bind().dialect.paramstyle == "qmark" else "%s"
     sql = (f"INSERT INTO {table} ({', '.join(columns)}) VALUES ({', '.join([marker] * len(columns))}) "
            f"ON CONFLICT ({', '.join(unique)}) DO NOTHING")
@@ -272,3 +273,8 @@ def _update_best(session: Session, job_id: int, rows: Sequence[Row]) -> None:
 
 def _better(a: float | None, b: float | None) -> bool:
     return a is not None and math.isfinite(a) and (b is None or a > b)
+
+
+def _finite(value: float | None) -> bool:
+    """A number a row or the store holds: None (NULL read back) and NaN (not produced) are not."""
+    return value is not None and math.isfinite(value)

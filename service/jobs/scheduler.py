@@ -72,7 +72,7 @@ from finaldrive.service.jobs.budget import Budget, spent_s
 from finaldrive.service.jobs.cache import context_prefix, design_keys
 from finaldrive.service.jobs.plan import JobPlan, build_plan
 from finaldrive.service.jobs.recordings import RecordingProducer
-from finaldrive.service.jobs.rows import CACHED, WALL, nullable, row_from_cache, rows_from_results
+from finaldrive.service.jobs.rows import block_from_results, nullable, row_from_cache
 from finaldrive.service.jobs.writer import Guard, Writer, Writes
 from finaldrive.service.jobs.writer_process import WriterProcess, start_fork_server
 from finaldrive.service.profiles import profile_ids, resolver
@@ -382,17 +382,14 @@ class Scheduler:
             self._tell(job, part, fitness)
             return
         # designs that were duplicates of one in this part: the same result, told and stored as cached
-        rows = rows_from_results([(part, batch, fitness, keys, transient)])
-        told_candidates, told_fitness, told_designs = list(part.candidates), list(fitness), list(part.designs)
-        for j, duplicates in enumerate(copies):
-            for copy in duplicates or ():
-                rows.append((part.road, part.step, copy, *rows[j][3:WALL], 0.0, True, *rows[j][CACHED + 1:]))
-                told_candidates.append(copy)
-                told_fitness.append(fitness[j])
-                told_designs.append(part.designs[j])
-        job.writes.rows += rows
-        self._tell(job, Request(part.run, part.step, part.road, np.array(told_candidates), np.array(told_designs)),
-                   np.array(told_fitness, dtype=float))
+        block = block_from_results([(part, batch, fitness, keys, transient)])
+        rows = [j for j, duplicates in enumerate(copies) for _ in duplicates or ()]
+        candidates = [copy for duplicates in copies for copy in duplicates or ()]
+        job.writes.add(block)
+        job.writes.add(block.copied(rows, candidates))
+        self._tell(job, Request(part.run, part.step, part.road, np.concatenate([part.candidates, candidates]),
+                                np.concatenate([part.designs, part.designs[rows]])),
+                   np.concatenate([fitness, fitness[rows]]))
 
     def _on_failure(self, job: ActiveJob, part: Request, reason: str) -> None:
         """A part that could not be evaluated: failed evaluations with the reason, never reused."""

@@ -30,31 +30,37 @@ T = TypeVar("T")
 
 @dataclass
 class Writes:
-    """What a job has to store, in order: evaluations (rows; finished results, packed into blocks,
-    not yet made rows), then each completed DE generation; ``seq`` numbers it (the latest merged
-    in) for acknowledgements."""
+    """What a job has to store, in order: evaluations (rows, and blocks and finished results not
+    yet made rows), then each completed DE generation; ``seq`` numbers it (the latest merged in)
+    for acknowledgements."""
 
     rows: list[Row] = field(default_factory=list)
     finished: list[Finished] = field(default_factory=list)
     blocks: list[Block] = field(default_factory=list)
     generations: list[dict[str, Any]] = field(default_factory=list)
-    finished_rows: int = 0
+    unmade: int = 0   # evaluations in ``finished`` and ``blocks``
     seq: int = 0
 
     def __len__(self) -> int:
-        return len(self.rows) + self.finished_rows + len(self.generations)
+        return len(self.rows) + self.unmade + len(self.generations)
 
     def finish(self, result: Finished) -> None:
         """A finished part of a request, made a row later (:meth:`make_rows`)."""
         self.finished.append(result)
-        self.finished_rows += len(result[0])
+        self.unmade += len(result[0])
+
+    def add(self, block: Block) -> None:
+        """Evaluations as a block, made rows later."""
+        self.pack()
+        self.blocks.append(block)
+        self.unmade += len(block)
 
     def extend(self, later: Writes) -> None:
         self.rows += later.rows
         self.pack()
         later.pack()
         self.blocks += later.blocks
-        self.finished_rows += later.finished_rows
+        self.unmade += later.unmade
         self.generations += later.generations
         self.seq = max(self.seq, later.seq)
 
@@ -66,11 +72,11 @@ class Writes:
             self.finished = []
 
     def make_rows(self) -> None:
-        """The finished results made rows, all at once."""
+        """The blocks made rows, all at once."""
         self.pack()
         for block in self.blocks:
             self.rows += rows_from_block(block)
-        self.blocks, self.finished_rows = [], 0
+        self.blocks, self.unmade = [], 0
 
 
 #: An outage is logged as over once the store has answered without a failure for this long [s]

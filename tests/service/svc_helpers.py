@@ -26,12 +26,9 @@ def toy_batch(x: np.ndarray, road: Road, fail_above_l2: float | None = None) -> 
     fitness = 20 - (x[:, 0] - 1) ** 2 - 10 * (x[:, 1] - 0.1) ** 2 - 100 * (x[:, 2] - 0.09) ** 2 - road.height
     failed = np.zeros(len(x), bool) if fail_above_l2 is None else x[:, 1] > fail_above_l2
     fitness = np.where(failed, np.nan, fitness)
-    n = len(x)
-    return BatchResult(
-        designs=x, distance_m=fitness + 0.5, squat_ratio=np.full(n, 0.9), slack_m=np.full(n, 0.001),
-        fitness_m=fitness, chain_length_m=np.full(n, 1.2), wall_s=np.full(n, 0.01),
-        status=tuple("failed" if f else "ok" for f in failed),
-        reason=tuple("fake divergence" if f else "" for f in failed),
+    return BatchResult.of(
+        x, tuple("failed" if f else "ok" for f in failed), tuple("fake divergence" if f else "" for f in failed),
+        distance_m=fitness + 0.5, squat_ratio=0.9, slack_m=0.001, fitness_m=fitness, chain_length_m=1.2, wall_s=0.01,
     )
 
 

@@ -16,7 +16,8 @@ def toy_result(designs: np.ndarray, scale: float = 1.0) -> BatchResult:
     """A deterministic BatchResult: distance = scale * (a2 + 10 L2 + 100 R_WS)."""
     designs = np.asarray(designs, dtype=float).reshape(-1, 3)
     results = [
-        SimResult("ok", "", float(scale * (a2 + 10 * l2 + 100 * rws)), a2, l2, 0.0, 1.0, 0.0)
+        SimResult.of("ok", "", distance_m=float(scale * (a2 + 10 * l2 + 100 * rws)), squat_ratio=a2, slack_m=l2,
+                     fitness_m=0.0, chain_length_m=1.0, wall_s=0.0)
         for a2, l2, rws in designs
     ]
     return BatchResult.from_results(designs, results)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import os
 import signal
 import subprocess
@@ -67,8 +66,9 @@ def test_failed_simulations_are_counted_and_never_best(
 ) -> None:
     """Designs with L2 > 0.1 fail (and would have the largest fitness if they did not)."""
     def fake(designs: np.ndarray, road: object, settings: object, vehicle: object) -> BatchResult:
-        results = [SimResult("failed", "toy", math.nan, math.nan, math.nan, math.nan, 1.0, 0.0) if l2 > 0.1
-                   else SimResult("ok", "", l2, 1.0, 0.0, l2, 1.0, 0.0) for _, l2, _ in designs]
+        results = [SimResult.of("failed", "toy", chain_length_m=1.0, wall_s=0.0) if l2 > 0.1
+                   else SimResult.of("ok", "", distance_m=l2, squat_ratio=1.0, slack_m=0.0, fitness_m=l2,
+                                     chain_length_m=1.0, wall_s=0.0) for _, l2, _ in designs]
         return BatchResult.from_results(designs, results)
 
     monkeypatch.setattr(evaluate, "run_engine", fake)
