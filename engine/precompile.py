@@ -15,14 +15,16 @@ whose plain-Python run takes half a minute, is compiled by one run in one proces
 shares with the fast method's build may be written by both at once: numba writes each index and
 data file whole, by rename).
 
-    python -m finaldrive.engine.precompile fast [reference] [--nice]    # what compile_engine runs
+    python -m finaldrive.engine.precompile fast [reference] [--nice] [--parent PID]  # compile_engine's
     python -m finaldrive.engine.precompile --builder DIR fast           # one more builder (for the above)
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -86,10 +88,11 @@ def _compiling_elsewhere(method: str) -> bool:
 
 def _start(method: str, nice: bool = False) -> subprocess.Popen[bytes]:
     """Lock the method and compile it in a child process (which removes the lock when it ends);
-    ``nice``: in the background, in a session of its own (it outlives its caller)."""
+    ``nice``: in the background, in a session of its own (a terminal's Ctrl-C is not its), ended
+    with its caller (:func:`_end_with`): a scheduler or a command leaves no compilation behind."""
     cache_dir().mkdir(parents=True, exist_ok=True)
     _lock(method).touch()
-    command = [*_PROGRAM, method, *(["--nice"] if nice else [])]
+    command = [*_PROGRAM, method, *(["--nice", "--parent", str(os.getpid())] if nice else [])]
     return subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL if nice else subprocess.PIPE,
                             start_new_session=nice)
 
@@ -249,9 +252,28 @@ def _lower_priority() -> None:
             return
 
 
+#: prctl(2)'s option that signals a process when the thread that started it ends (Linux)
+_PR_SET_PDEATHSIG = 1
+
+
+def _end_with(parent: int) -> None:
+    """End this process (SIGTERM, the locks it holds removed) when ``parent``, its caller, ends:
+    Linux's parent-death signal; where there is none, it ends once its compilation is done."""
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))   # unwinds through main's finally: unlocked
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    if os.getppid() != parent:   # the caller ended before the signal was armed
+        sys.exit(1)
+
+
 def main(argv: list[str]) -> None:
-    """``[--nice] method...``: compile the methods (each unlocked when done); ``--builder DIR method``:
-    one more builder of the method (for :func:`_compile`)."""
+    """``[--nice] [--parent PID] method...``: compile the methods (each unlocked when done), ending
+    with process PID if given; ``--builder DIR method``: one more builder of the method (for
+    :func:`_compile`)."""
+    if "--parent" in argv:
+        at = argv.index("--parent")
+        _end_with(int(argv[at + 1]))
+        argv = argv[:at] + argv[at + 2:]
     if "--nice" in argv:
         _lower_priority()
     if "--builder" in argv:

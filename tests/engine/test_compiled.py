@@ -3,9 +3,12 @@ compile_engine's coordination between processes."""
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -185,7 +188,8 @@ _FAST_RESULT = ("import sys; from finaldrive.engine import Design, Road, SimSett
                 "r = simulate(Design.from_deg(195.3, 0.037, 0.088), Road.parse('sine:0.04:3'), "
                 "SimSettings(duration=0.5)); "
                 "assert r.ok, r.reason; ")
-_PRINT_RESULT = "print([v.hex() for k, v in vars(r).items() if isinstance(v, float) and k != 'wall_s'])"
+_PRINT_RESULT = ("print([v.hex() for k, v in r.summary().items() if isinstance(v, float) and k != 'wall_s']); "
+                 "assert len(r.summary()) > 20")
 
 
 def test_a_fast_result_loads_neither_scipy_linalg_nor_the_reference_solver() -> None:
@@ -320,3 +324,60 @@ def test_a_method_built_by_several_processes_is_whole_in_the_cache(tmp_path: Pat
     out = subprocess.run([sys.executable, "-c", _COMPILED_BY_A_RUN], env=env, check=True, capture_output=True,
                          text=True).stdout
     assert out.strip() == "[]"
+
+
+def _descendants(pid: int) -> set[int]:
+    """Every live process below ``pid`` (from /proc's parent links)."""
+    children: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError):
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    out, todo = set(), [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            out.add(child)
+            todo.append(child)
+    return out
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="walks /proc")
+def test_a_background_compilation_ends_with_its_caller(tmp_path: Path) -> None:
+    """The reference method's background compilation (in a session of its own) does not outlive the
+    process that started it, even one SIGKILLed (a scheduler's, issue 30): nothing of it is left
+    within 5 s, and its lock is removed, so the next process compiles rather than waits."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    below: set[int] = set()
+    caller = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time; from finaldrive.engine import precompile; "
+                               "precompile._start('reference', nice=True); print('started', flush=True); "
+                               "time.sleep(60)"],
+        env=env, stdout=subprocess.PIPE, text=True)
+    try:
+        assert caller.stdout is not None and caller.stdout.readline().strip() == "started"
+        deadline = time.monotonic() + 10
+        while not (below := _descendants(caller.pid)) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert below, "no background compilation started"
+        time.sleep(1.0)   # well into its work (imports, the lock held)
+        below = _descendants(caller.pid)
+        assert (tmp_path / "compiling-reference").exists() and not (tmp_path / "compiled-reference").exists()
+        caller.kill()
+        caller.wait()
+        deadline = time.monotonic() + 5
+        while (left := {p for p in below if Path(f"/proc/{p}").exists() and not _zombie(p)}) and \
+                time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not left, f"left behind: {sorted(left)}"
+        assert not (tmp_path / "compiling-reference").exists()
+    finally:
+        caller.kill()
+        for pid in below:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+
+
+def _zombie(pid: int) -> bool:
+    with contextlib.suppress(OSError):
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
+    return True
