@@ -119,6 +119,11 @@ _STUDY = [
     _f("best_fitness_m", "DE: the best fitness found so far (robust DE: the best aggregate score)", 4),
     _f("mean_fitness_m", "DE: the mean fitness of the population's finite members", 4),
     _f("score_m", "robust DE: the aggregate (mean or worst) fitness over the roads", 4),
+    _f("band_m", "numerical band of the fitness: its largest change when the run is re-simulated 100x tighter "
+                 "and with the reference method (engine.study.band)", 4),
+    _f("distance_band_m", "numerical band of the distance, as band_m", 4),
+    _f("exceeds_limit", "the band is wider than 1 mm: a 1 mm difference is not decided by the numerics"),
+    _f("tie", "the design's fitness is within the sum of its band and the best's band of the best's: a tie"),
 ]
 
 

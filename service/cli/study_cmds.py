@@ -128,6 +128,8 @@ def run_optimize(args: argparse.Namespace) -> int:
         per_road.append({"road": road.name, "spec": road.road.spec, "best_design": here, "best_seen": seen,
                          "regret_pct": regret, "paper": _paper(road)})
     sharp = _sharpness(args, tally, plan, settings, vehicle, de_run.best_x if best is not None else None)
+    if best is not None and args.band:
+        _bands(sharp, best, per_road, de_run.best_x, tally, plan, settings, vehicle, args.objective)
     if best is not None:
         sharp["final_population"] = _population(de_run)
         if len(de_runs) > 1:
@@ -192,6 +194,33 @@ def _sharpness(args: argparse.Namespace, tally: Tally, plan: Any, settings: Any,
     else:
         out["sensitivity"] = sensitivities(Design(*(float(v) for v in best_x)), plan.roads[0].road, settings, vehicle)
     return out
+
+
+def _bands(sharp: dict[str, Any], best: dict[str, Any], per_road: list[dict[str, Any]], best_x: np.ndarray,
+           tally: Tally, plan: Any, settings: Any, vehicle: Any, objective: Any) -> None:
+    """Numerical bands (engine study.band): on one road, of the best and the next best distinct
+    designs, with which of them tie with it (``sharpness.ties``); over several roads, of the best
+    design on each road and of its score (each re-run's fitness aggregated as the score is)."""
+    from finaldrive.engine import BAND_LIMIT_M, aggregate, numerical_bands, tie_flags, top_designs
+
+    if len(plan.roads) > 1:
+        bands = [numerical_bands(best_x[None, :], road.road, settings, vehicle)[0] for road in plan.roads]
+        for row, band in zip(per_road, bands, strict=True):
+            if row["best_design"] is not None:
+                row["best_design"]["band"] = band
+        if all(b["band_m"] is not None for b in bands):
+            scores = {label: float(aggregate(np.array([[b["runs"][label]["fitness_m"]] for b in bands]),
+                                             objective)[0]) for label in bands[0]["runs"]}
+            width = max(abs(v - scores["production"]) for v in scores.values())
+            best["band"] = {"fitness_m": scores["production"], "band_m": width, "exceeds_limit": width > BAND_LIMIT_M,
+                            "runs": {label: {"fitness_m": v} for label, v in scores.items()}}
+        return
+    designs, fitness, _ = tally.arrays()
+    rows = top_designs(designs, fitness[0])
+    bands = numerical_bands(rows, plan.roads[0].road, settings, vehicle)
+    best["band"] = bands[0]
+    sharp["ties"] = [{**design_dict(row), **band, "tie": tie}
+                     for row, band, tie in zip(rows, bands, tie_flags(bands), strict=True)]
 
 
 def _mean(values: list[Any], n: int) -> float | None:
@@ -286,6 +315,9 @@ def register(sub: Any) -> None:
     p.add_argument("--repeat", type=int, default=1, metavar="K",
                    help="run the DE K times (seeds SEED..SEED+K-1) and report how far apart their optima are")
     add_tolerance_arg(p)
+    p.add_argument("--no-band", dest="band", action="store_false",
+                   help="skip the numerical bands (the best re-simulated 100x tighter and with the reference "
+                        "method; one road: the next best too, with which of them tie)")
     add_run_args(p)
     p.set_defaults(run=run_optimize)
 

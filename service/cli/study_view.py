@@ -17,7 +17,9 @@ def print_result(out: dict[str, Any], as_json: bool) -> None:
     print(f"best: {_design_text(out['best'])}{where}")
     if len(out["roads"]) > 1:
         for road in out["per_road"]:
-            print(f"  {road['road']:<22} {_design_text(road.get('best') or road.get('best_design'))}")
+            print(f"  {road['road']:<22} {_design_text(road.get('best') or road.get('best_design'), band=True)}")
+    for line in _band_lines(out):
+        print(line)
     extra = f", {out['generations']} generations, stop: {out['stop_reason']}" if out["command"] == "optimize" else ""
     print(f"evaluations: {out['evaluations']} ({out['failed']} failed){extra}, "
           f"executor {out['executor']}, {out['wall_s']:.1f} s")
@@ -26,10 +28,34 @@ def print_result(out: dict[str, Any], as_json: bool) -> None:
     print("\n".join(sharpness_lines(out["sharpness"])))
 
 
-def _design_text(d: dict[str, Any] | None) -> str:
+def _band_lines(out: dict[str, Any]) -> list[str]:
+    """The best's numerical band (and its ties), when ``optimize`` computed them."""
+    band = (out.get("best") or {}).get("band")
+    if band is None:
+        return []
+    what = "fitness" if len(out["roads"]) == 1 else f"{out['objective']} fitness"
+    lines = [f"numerical band of the best's {what}: {_band_text(band)} (re-simulated 100x tighter and with "
+             "the reference method)"]
+    ties = out["sharpness"].get("ties") or []
+    if len(ties) > 1:
+        tied = sum(t["tie"] for t in ties[1:])
+        lines.append(f"  of the next {len(ties) - 1} best designs, {tied} tie with it (fitness closer than the "
+                     "two bands together)" + (": the numerics do not decide between them" if tied else ""))
+    return lines
+
+
+def _band_text(band: dict[str, Any]) -> str:
+    if band["band_m"] is None:
+        return "unknown (a re-run failed: " + "; ".join(f"{k}: {v}" for k, v in band.get("failed", {}).items()) + ")"
+    flag = ", wider than 1 mm" if band["exceeds_limit"] else ""
+    return f"+-{band['band_m'] * 1000:.2f} mm{flag}"
+
+
+def _design_text(d: dict[str, Any] | None, *, band: bool = False) -> str:
     if d is None:
         return "none (every simulation failed)"
     fitness = "failed" if d["fitness_m"] is None else f"{d['fitness_m']:.4f} m"
     distance = "-" if d.get("distance_m") is None else f"{d['distance_m']:.3f} m"
+    within = f" (band {_band_text(d['band'])})" if band and d.get("band") else ""
     return (f"a2 = {d['a2_deg']:.2f} deg, L2 = {d['l2_m']:.4f} m, R_WS = {d['rws_m']:.4f} m, "
-            f"fitness {fitness}, distance {distance}")
+            f"fitness {fitness}{within}, distance {distance}")

@@ -1,0 +1,102 @@
+"""How well the numerics decide a result: a design's numerical band, and ties between designs.
+
+The band of a design on a road is how far its fitness (eq. 67) and distance move when the same
+run is integrated otherwise: with the production method's error control :data:`TIGHT_FACTOR` times
+tighter, and with the reference method (the paper's augmented Lagrangian with the ABM
+predictor-corrector, eqs. 57-66, at its own step). It is the largest difference from the
+production value; a band above :data:`BAND_LIMIT_M` is flagged. Two designs whose fitness differs
+by less than the sum of their bands are a tie: the numerics do not say which is better.
+See docs/optimisation.md#numerical-bands-and-ties.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from finaldrive.engine.api import STATUS_OK, SimSettings
+from finaldrive.engine.simulation import evaluate
+
+if TYPE_CHECKING:
+    from finaldrive.engine.model.road import Road
+    from finaldrive.engine.vehicle import Vehicle
+
+#: The tight re-run's local error tolerance is the production one divided by this.
+TIGHT_FACTOR = 100.0
+#: A band wider than this [m] is flagged (``exceeds_limit``): a difference of 1 mm between two
+#: designs is then not decided by the numerics.
+BAND_LIMIT_M = 1.0e-3
+#: Designs of a near-optimal set given a band to look for ties with the best (the best included).
+TIE_CANDIDATES = 5
+
+
+def band_settings(settings: SimSettings) -> dict[str, SimSettings]:
+    """The re-runs of a band: label -> settings (the production ones' duration, drive and limits)."""
+    return {
+        "tight": settings.with_(method="fast", fast_tolerance=settings.fast_tolerance / TIGHT_FACTOR),
+        "reference": settings.with_(method="reference"),
+    }
+
+
+def numerical_bands(designs: np.ndarray, road: Road, settings: SimSettings,
+                    vehicle: Vehicle | None = None) -> list[dict[str, Any]]:
+    """Each design row's (a2 [rad], L2 [m], R_WS [m]) fitness and distance at ``settings`` and its
+    band: ``band_m`` (fitness) and ``distance_band_m``, the largest difference to a re-run of
+    :func:`band_settings`, ``exceeds_limit`` when ``band_m`` > :data:`BAND_LIMIT_M`, and each re-run's
+    values. A re-run that fails is left out of the band and named in ``failed`` with its reason (the
+    band is then of the re-runs that finished); a design whose production run fails, or whose every
+    re-run fails, has no band (None)."""
+    rows = np.asarray(designs, dtype=float).reshape(-1, 3)
+    runs = {"production": evaluate(rows, road, settings, vehicle),
+            **{label: evaluate(rows, road, s, vehicle) for label, s in band_settings(settings).items()}}
+    out = []
+    for i in range(len(rows)):
+        values = {label: (batch.fitness_m[i], batch.distance_m[i]) for label, batch in runs.items()
+                  if batch.status[i] == STATUS_OK}
+        failed = {label: batch.reason[i] for label, batch in runs.items() if batch.status[i] != STATUS_OK}
+        fitness, distance = values.get("production", (math.nan, math.nan))
+        whole = "production" in values and len(values) > 1
+        band = max(abs(f - fitness) for f, _ in values.values()) if whole else math.nan
+        distance_band = max(abs(d - distance) for _, d in values.values()) if whole else math.nan
+        out.append({
+            "fitness_m": _plain(fitness), "distance_m": _plain(distance), "band_m": _plain(band),
+            "distance_band_m": _plain(distance_band), "exceeds_limit": None if not whole else bool(band > BAND_LIMIT_M),
+            "runs": {label: {"fitness_m": _plain(f), "distance_m": _plain(d)} for label, (f, d) in values.items()},
+            "failed": failed,
+        })
+    return out
+
+
+def tie_flags(bands: list[dict[str, Any]]) -> list[bool]:
+    """Which designs tie with the first (the best): fitness closer to it than the two bands together.
+    The first ties with itself; a design without a band (a failed re-run) ties with none."""
+    if not bands or bands[0]["band_m"] is None:
+        return [False] * len(bands)
+    best = bands[0]
+    return [b["band_m"] is not None and abs(best["fitness_m"] - b["fitness_m"]) <= best["band_m"] + b["band_m"]
+            for b in bands]
+
+
+def top_designs(designs: np.ndarray, score: np.ndarray, n: int = TIE_CANDIDATES,
+                decimals: int = 9) -> np.ndarray:
+    """The ``n`` best distinct design rows by ``score`` (NaN last), best first (a design evaluated
+    twice, as DE re-evaluates, counted once)."""
+    order = np.argsort(np.where(np.isfinite(score), -score, np.inf), kind="stable")
+    seen: set[tuple[float, ...]] = set()
+    out = []
+    for i in order:
+        if not np.isfinite(score[i]):
+            break
+        key = tuple(np.round(designs[i], decimals).tolist())
+        if key not in seen:
+            seen.add(key)
+            out.append(designs[i])
+            if len(out) == n:
+                break
+    return np.array(out).reshape(-1, 3)
+
+
+def _plain(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
