@@ -119,6 +119,7 @@ _STUDY = [
     _f("best_fitness_m", "DE: the best fitness found so far (robust DE: the best aggregate score)", 4),
     _f("mean_fitness_m", "DE: the mean fitness of the population's finite members", 4),
     _f("score_m", "robust DE: the aggregate (mean or worst) fitness over the roads", 4),
+    _f("numerical_band", "a design's numerical band: band_m, distance_band_m, exceeds_limit and each run's values"),
     _f("band_m", "numerical band of the fitness: its largest change when the run is re-simulated 100x tighter "
                  "and with the reference method (engine.study.band)", 4),
     _f("distance_band_m", "numerical band of the distance, as band_m", 4),

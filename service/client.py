@@ -104,10 +104,11 @@ class ServiceClient:
         return self.object("POST", f"/v1/jobs/{job_id}/cancel")
 
     def best(self, job_id: int, tolerance_pct: float | None = None, sensitivity: bool = False,
-             wait_s: float = 600.0) -> dict[str, Any]:
-        """The job's best designs; with ``sensitivity``, polled (as Retry-After asks) until the
-        scheduler has simulated the finite differences, at most ``wait_s`` (then ApiError 504)."""
-        params = {"sensitivity": "true"} if sensitivity else {}
+             wait_s: float = 600.0, band: bool = False) -> dict[str, Any]:
+        """The job's best designs; with ``sensitivity`` (``band``), polled (as Retry-After asks) until the
+        scheduler has simulated the finite differences (the numerical bands), at most ``wait_s``
+        (then ApiError 504)."""
+        params = {name: "true" for name, wanted in (("sensitivity", sensitivity), ("band", band)) if wanted}
         if tolerance_pct is not None:
             params["tolerance_pct"] = repr(tolerance_pct)
         deadline = time.monotonic() + wait_s
@@ -117,8 +118,9 @@ class ServiceClient:
                 body: dict[str, Any] = response.json()
                 return body
             if time.monotonic() > deadline:
-                raise ApiError(504, f"job {job_id}: its sensitivity job {response.json().get('sensitivity_job')} "
-                               f"has not finished within {wait_s:g} s")
+                body = response.json()
+                raise ApiError(504, f"job {job_id}: its sensitivity job {body.get('sensitivity_job')} or band jobs "
+                               f"{body.get('band_jobs')} have not finished within {wait_s:g} s")
             retry = response.headers.get("Retry-After", "")
             time.sleep(min(float(retry), 10.0) if retry.isdigit() else 2.0)
 

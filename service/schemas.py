@@ -64,6 +64,8 @@ class SimulationSpec(BaseModel):
     dt: Num = Field(_SIM.dt, ge=1e-6, le=0.01, description="time step [s]")
     method: Literal["reference", "fast"] = Field(
         _SIM.method, description="fast (default, validated against the paper's method) or reference")
+    fast_tolerance: Num = Field(_SIM.fast_tolerance, ge=1e-9, le=1e-2, description="fast method: local error "
+                                "tolerance of its step control (m, rad; 10x for rates)")
 
 
 class _DESpecBase(BaseModel):
@@ -324,6 +326,10 @@ class BestOut(BaseModel):
                                         "the finite differences")
     sensitivity_state: JobStateName | None = Field(None, description="sensitivity=true: that job's state (the "
                                                    "sensitivities are there once it has succeeded)")
+    band_jobs: dict[str, int] | None = Field(None, description="band=true: the jobs (kind designs) of the band's "
+                                             "re-runs, tight and reference")
+    band_state: JobStateName | None = Field(None, description="band=true: the least finished of those jobs' states "
+                                            "(the bands are there once both have succeeded)")
 
 
 class RoadOut(BaseModel):
@@ -545,6 +551,31 @@ class SensitivityOut(BaseModel):
     dfitness_drws_m_per_m: float
 
 
+class BandRunOut(BaseModel):
+    fitness_m: float | None = None
+    distance_m: float | None = None
+
+
+class BandOut(BaseModel):
+    """A design's numerical band (engine.study.band): its fitness and distance re-simulated 100x
+    tighter and with the reference method; the band the largest change from the job's own run."""
+
+    fitness_m: float | None = Field(None, description="the job's own run [m]")
+    distance_m: float | None = None
+    band_m: float | None = Field(None, description=_described("band_m"))
+    distance_band_m: float | None = Field(None, description=_described("distance_band_m"))
+    exceeds_limit: bool | None = Field(None, description=_described("exceeds_limit"))
+    runs: dict[str, BandRunOut] = Field({}, description="each run that finished: production, tight, reference")
+    failed: dict[str, str] = Field({}, description="each re-run that failed, and why (left out of the band)")
+
+
+class TieOut(BandOut):
+    a2_deg: float
+    l2_m: float
+    rws_m: float
+    tie: bool = Field(description=_described("tie"))
+
+
 class SharpnessOut(BaseModel):
     """How sharp a best design is: the evaluated designs within a tolerance of the best fitness."""
 
@@ -560,6 +591,10 @@ class SharpnessOut(BaseModel):
     verdicts: dict[str, Literal["decided", "loose", "undetermined", "fixed"]] = Field({})
     sentences: list[str] = Field(description="which variables are decided, in words")
     sensitivity: SensitivityOut | None = Field(None, description="with sensitivity=true, single roads")
+    numerical_band: BandOut | None = Field(None, description="with band=true, single roads: the best's "
+                                           "numerical band")
+    ties: list[TieOut] | None = Field(None, description="with band=true, single roads: the best distinct designs "
+                                      "(the best first) with their bands, and which tie with the best")
     final_population: PopulationOut | None = Field(None, description="a DE's last stored population")
 
 

@@ -53,20 +53,27 @@ def numerical_bands(designs: np.ndarray, road: Road, settings: SimSettings,
             **{label: evaluate(rows, road, s, vehicle) for label, s in band_settings(settings).items()}}
     out = []
     for i in range(len(rows)):
-        values = {label: (batch.fitness_m[i], batch.distance_m[i]) for label, batch in runs.items()
-                  if batch.status[i] == STATUS_OK}
-        failed = {label: batch.reason[i] for label, batch in runs.items() if batch.status[i] != STATUS_OK}
-        fitness, distance = values.get("production", (math.nan, math.nan))
-        whole = "production" in values and len(values) > 1
-        band = max(abs(f - fitness) for f, _ in values.values()) if whole else math.nan
-        distance_band = max(abs(d - distance) for _, d in values.values()) if whole else math.nan
-        out.append({
-            "fitness_m": _plain(fitness), "distance_m": _plain(distance), "band_m": _plain(band),
-            "distance_band_m": _plain(distance_band), "exceeds_limit": None if not whole else bool(band > BAND_LIMIT_M),
-            "runs": {label: {"fitness_m": _plain(f), "distance_m": _plain(d)} for label, (f, d) in values.items()},
-            "failed": failed,
-        })
+        out.append(band_of(
+            {label: (batch.fitness_m[i], batch.distance_m[i]) for label, batch in runs.items()
+             if batch.status[i] == STATUS_OK},
+            {label: batch.reason[i] for label, batch in runs.items() if batch.status[i] != STATUS_OK}))
     return out
+
+
+def band_of(values: dict[str, tuple[float, float]], failed: dict[str, str]) -> dict[str, Any]:
+    """A design's band from its runs: ``values`` label -> (fitness [m], distance [m]) of the runs that
+    finished ("production" and the re-runs of :func:`band_settings`), ``failed`` label -> reason of
+    the others (:func:`numerical_bands`' record)."""
+    fitness, distance = values.get("production", (math.nan, math.nan))
+    whole = "production" in values and len(values) > 1
+    band = max(abs(f - fitness) for f, _ in values.values()) if whole else math.nan
+    distance_band = max(abs(d - distance) for _, d in values.values()) if whole else math.nan
+    return {
+        "fitness_m": _plain(fitness), "distance_m": _plain(distance), "band_m": _plain(band),
+        "distance_band_m": _plain(distance_band), "exceeds_limit": None if not whole else bool(band > BAND_LIMIT_M),
+        "runs": {label: {"fitness_m": _plain(f), "distance_m": _plain(d)} for label, (f, d) in values.items()},
+        "failed": failed,
+    }
 
 
 def tie_flags(bands: list[dict[str, Any]]) -> list[bool]:

@@ -75,9 +75,11 @@ class InFlight:
 
 
 def job_sharpness(session: Session, job: Job, tolerance_pct: float,
-                  sensitivity: dict[int, dict[str, Any]] | None = None) -> list[SharpnessOut]:
+                  sensitivity: dict[int, dict[str, Any]] | None = None,
+                  bands: dict[int, dict[str, Any]] | None = None) -> list[SharpnessOut]:
     """Near-optimal set on each road (and by the aggregate score of a robust-de), with each road's
-    ``sensitivity`` (road index -> derivatives) where given."""
+    ``sensitivity`` (road index -> derivatives) and ``bands`` (road index -> its best's band and
+    ties, service.api.bands) where given."""
     roads = [r for r, _ in roads_of(session, [job.id])[job.id]]
     generations = last_generations(session, job.id) if job.kind not in ("sweep", "designs") else {}
     out: list[SharpnessOut] = []
@@ -85,7 +87,8 @@ def job_sharpness(session: Session, job: Job, tolerance_pct: float,
         near = road_sharpness(session, job.id, r.road_index, tolerance_pct)
         population = None if job.kind == "robust-de" else _population(generations.get(r.road_index))
         out.append(SharpnessOut(road=r.name, final_population=population,
-                                sensitivity=(sensitivity or {}).get(r.road_index), **near))
+                                sensitivity=(sensitivity or {}).get(r.road_index),
+                                **(bands or {}).get(r.road_index, {}), **near))
     if job.kind == "robust-de" and roads:
         near = aggregate_sharpness(session, job.id, len(roads), job.spec.get("aggregate") or "mean", tolerance_pct)
         out.append(SharpnessOut(road=None, final_population=_population(generations.get(0)), **near))
@@ -105,6 +108,8 @@ def _population(generation: Generation | None) -> PopulationOut | None:
 
 #: The Idempotency-Keys the service keeps for itself: a job's sensitivity job (clients may not use them).
 SENSITIVITY_KEY_PREFIX = "sensitivity:"
+#: Every prefix of the service's own keys (a job's sensitivity job, its band jobs: service.api.bands).
+OWN_KEY_PREFIXES = (SENSITIVITY_KEY_PREFIX, "band:")
 
 
 def sensitivity_key(job_id: int) -> str:
@@ -132,22 +137,27 @@ def sensitivity_job(services: Services, job: Job) -> Job:
     rows = [stencil(b.a2_deg, b.l2_m, b.rws_m, upper)[0] for b in bests]
     spec = JobSpec(kind="designs", roads=[b.spec for b in bests], settings=source.settings, vehicle=source.vehicle,
                    designs=[[(math.degrees(a2), l2, rws) for a2, l2, rws in r] for r in rows])
+    return own_designs_job(services, job, sensitivity_key(job.id), spec, existing, "sensitivity")
+
+
+def own_designs_job(services: Services, job: Job, key: str, spec: JobSpec, existing: Job | None, what: str) -> Job:
+    """The service's own ``designs`` job under ``key`` (``existing``: the job holding it now): kept if
+    it is this ``spec`` and not cancelled, else the key is given up and ``spec`` queued anew."""
     if existing is not None:
         if existing.request_hash == request_hash(spec.normalised()) and existing.state != JobState.cancelled.value:
             return existing
         with services.db.write() as session:
-            expire_idempotency_key(session, sensitivity_key(job.id), older_than=timedelta(0))
+            expire_idempotency_key(session, key, older_than=timedelta(0))
     settings = services.settings
     try:
-        created, _ = submit_job(services.db, spec, idempotency_key=sensitivity_key(job.id),
+        created, _ = submit_job(services.db, spec, idempotency_key=key,
                                 max_evaluations=settings.max_job_evaluations, max_cpu_hours=settings.max_job_cpu_hours,
                                 max_active_jobs=settings.max_active_jobs, key_hours=settings.idempotency_key_hours)
     except PlanError as exc:
-        raise validation_problem(("query", "sensitivity"), f"job {job.id}'s best cannot be simulated again: "
+        raise validation_problem(("query", what), f"job {job.id}'s designs cannot be simulated again: "
                                  f"{exc}") from None
     except IdempotencyKeyReused:
-        raise ApiProblem(409, f"the Idempotency-Key {sensitivity_key(job.id)} names another job",
-                         slug="idempotency-key-reused") from None
+        raise ApiProblem(409, f"the Idempotency-Key {key} names another job", slug="idempotency-key-reused") from None
     return created
 
 

@@ -30,7 +30,7 @@ from finaldrive.service.cli.remote import (
     follow,
     progress_line,
 )
-from finaldrive.service.cli.sharpness_view import near_lines, sensitivity_lines, spread_text
+from finaldrive.service.cli.sharpness_view import band_lines, near_lines, sensitivity_lines, spread_text
 
 if TYPE_CHECKING:
     from finaldrive.service.client import ServiceClient
@@ -180,6 +180,8 @@ def _print_best(best: dict[str, Any]) -> None:
         print("\n".join(near_lines(sharp)))
         if sharp.get("sensitivity"):
             print("\n".join(sensitivity_lines(sharp["sensitivity"], sharp["tolerance_m"])))
+        if sharp.get("numerical_band"):
+            print("\n".join(band_lines(sharp["numerical_band"], sharp["ties"])))
         pop = sharp.get("final_population")
         if pop:
             print(f"  final DE population ({pop['count']} designs): {spread_text(pop['ranges'])}")
@@ -188,7 +190,7 @@ def _print_best(best: dict[str, Any]) -> None:
 @client_command
 def run_best(args: argparse.Namespace) -> int:
     with remote.connect(args) as client:
-        best = client.best(args.id, args.tolerance_pct, args.sensitivity)
+        best = client.best(args.id, args.tolerance_pct, args.sensitivity, band=args.band)
     if args.json:
         print_json(best)
     else:
@@ -263,6 +265,9 @@ def register(sub: Any) -> None:
     p.add_argument("--sensitivity", action="store_true",
                    help="also the finite differences at each road's best (of a finished job: its scheduler runs 7 "
                    "simulations a road as a job of kind designs; waits for them, at most 10 minutes)")
+    p.add_argument("--band", action="store_true",
+                   help="also each road's best designs' numerical bands and ties (of a finished job: its scheduler "
+                   "re-simulates up to 5 designs a road 100x tighter and with the reference method; waits for them)")
     add_server_args(p)
     p.set_defaults(run=run_best)
 

@@ -59,3 +59,23 @@ def sharpness_lines(sharp: dict[str, Any]) -> list[str]:
         lines += [f"    seed {o['seed']}: a2 {o['a2_deg']:.1f} deg, L2 {1000 * o['l2_m']:.1f} mm, "
                   f"R_WS {1000 * o['rws_m']:.1f} mm, fitness {o['fitness_m']:.3f} m" for o in rep["optima"]]
     return lines
+
+
+def band_lines(band: dict[str, Any], ties: list[dict[str, Any]], *, what: str = "fitness",
+               indent: str = "  ") -> list[str]:
+    """A best's numerical band, and how many of the next best designs tie with it (engine.study.band)."""
+    lines = [f"{indent}numerical band of the best's {what}: {band_text(band)} (re-simulated 100x tighter and with "
+             "the reference method)"]
+    if len(ties) > 1:
+        tied = sum(t["tie"] for t in ties[1:])
+        lines.append(f"{indent}  of the next {len(ties) - 1} best designs, {tied} tie with it (fitness closer than "
+                     "the two bands together)" + (": the numerics do not decide between them" if tied else ""))
+    return lines
+
+
+def band_text(band: dict[str, Any]) -> str:
+    """A band as people read it: +-x mm, flagged above 1 mm, or why it is unknown."""
+    if band["band_m"] is None:
+        return "unknown (a re-run failed: " + "; ".join(f"{k}: {v}" for k, v in band.get("failed", {}).items()) + ")"
+    flag = ", wider than 1 mm" if band["exceeds_limit"] else ""
+    return f"+-{band['band_m'] * 1000:.2f} mm{flag}"

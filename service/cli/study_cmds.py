@@ -207,18 +207,19 @@ def _bands(sharp: dict[str, Any], best: dict[str, Any], per_road: list[dict[str,
         bands = [numerical_bands(best_x[None, :], road.road, settings, vehicle)[0] for road in plan.roads]
         for row, band in zip(per_road, bands, strict=True):
             if row["best_design"] is not None:
-                row["best_design"]["band"] = band
+                row["best_design"]["numerical_band"] = band
         if all(b["band_m"] is not None for b in bands):
             scores = {label: float(aggregate(np.array([[b["runs"][label]["fitness_m"]] for b in bands]),
                                              objective)[0]) for label in bands[0]["runs"]}
             width = max(abs(v - scores["production"]) for v in scores.values())
-            best["band"] = {"fitness_m": scores["production"], "band_m": width, "exceeds_limit": width > BAND_LIMIT_M,
-                            "runs": {label: {"fitness_m": v} for label, v in scores.items()}}
+            best["numerical_band"] = {"fitness_m": scores["production"], "band_m": width,
+                                      "exceeds_limit": width > BAND_LIMIT_M,
+                                      "runs": {label: {"fitness_m": v} for label, v in scores.items()}}
         return
     designs, fitness, _ = tally.arrays()
     rows = top_designs(designs, fitness[0])
     bands = numerical_bands(rows, plan.roads[0].road, settings, vehicle)
-    best["band"] = bands[0]
+    best["numerical_band"] = bands[0]
     sharp["ties"] = [{**design_dict(row), **band, "tie": tie}
                      for row, band, tie in zip(rows, bands, tie_flags(bands), strict=True)]
 

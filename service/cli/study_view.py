@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from finaldrive.service.cli.common import print_json
-from finaldrive.service.cli.sharpness_view import sharpness_lines
+from finaldrive.service.cli.sharpness_view import band_lines, band_text, sharpness_lines
 
 
 def print_result(out: dict[str, Any], as_json: bool) -> None:
@@ -30,25 +30,11 @@ def print_result(out: dict[str, Any], as_json: bool) -> None:
 
 def _band_lines(out: dict[str, Any]) -> list[str]:
     """The best's numerical band (and its ties), when ``optimize`` computed them."""
-    band = (out.get("best") or {}).get("band")
+    band = (out.get("best") or {}).get("numerical_band")
     if band is None:
         return []
     what = "fitness" if len(out["roads"]) == 1 else f"{out['objective']} fitness"
-    lines = [f"numerical band of the best's {what}: {_band_text(band)} (re-simulated 100x tighter and with "
-             "the reference method)"]
-    ties = out["sharpness"].get("ties") or []
-    if len(ties) > 1:
-        tied = sum(t["tie"] for t in ties[1:])
-        lines.append(f"  of the next {len(ties) - 1} best designs, {tied} tie with it (fitness closer than the "
-                     "two bands together)" + (": the numerics do not decide between them" if tied else ""))
-    return lines
-
-
-def _band_text(band: dict[str, Any]) -> str:
-    if band["band_m"] is None:
-        return "unknown (a re-run failed: " + "; ".join(f"{k}: {v}" for k, v in band.get("failed", {}).items()) + ")"
-    flag = ", wider than 1 mm" if band["exceeds_limit"] else ""
-    return f"+-{band['band_m'] * 1000:.2f} mm{flag}"
+    return band_lines(band, out["sharpness"].get("ties") or [], what=what, indent="")
 
 
 def _design_text(d: dict[str, Any] | None, *, band: bool = False) -> str:
@@ -56,6 +42,6 @@ def _design_text(d: dict[str, Any] | None, *, band: bool = False) -> str:
         return "none (every simulation failed)"
     fitness = "failed" if d["fitness_m"] is None else f"{d['fitness_m']:.4f} m"
     distance = "-" if d.get("distance_m") is None else f"{d['distance_m']:.3f} m"
-    within = f" (band {_band_text(d['band'])})" if band and d.get("band") else ""
+    within = f" (band {band_text(d['numerical_band'])})" if band and d.get("numerical_band") else ""
     return (f"a2 = {d['a2_deg']:.2f} deg, L2 = {d['l2_m']:.4f} m, R_WS = {d['rws_m']:.4f} m, "
             f"fitness {fitness}{within}, distance {distance}")

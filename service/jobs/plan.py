@@ -59,7 +59,7 @@ def build_plan(spec: JobSpec, *, profiles: ProfileResolver | None = None,
                        seed=spec.seed, profiles=profiles, vehicle=vehicle, road_designs=road_designs)
     try:
         settings = SimSettings(duration=spec.settings.duration, dt=spec.settings.dt, method=spec.settings.method,
-                               max_wall_s=max_simulation_s)
+                               fast_tolerance=spec.settings.fast_tolerance, max_wall_s=max_simulation_s)
     except ValueError as exc:
         raise PlanError(("settings",), str(exc)) from None
     if vehicle is not None:

@@ -16,7 +16,7 @@ import numpy as np
 import psutil
 import pytest
 
-from finaldrive.engine import DIAGNOSTICS, evaluate
+from finaldrive.engine import DIAGNOSTICS, evaluate, numerical_bands, tie_flags
 from finaldrive.service.jobs.plan import build_plan
 from finaldrive.service.schemas import JobSpec
 from tests.service.processes import Server
@@ -120,6 +120,31 @@ def test_sweep_and_de_over_http_match_in_process(server: Any) -> None:
     assert best["fitness_m"] == pytest.approx(reference.best_f, rel=1e-12)
     assert [math.radians(best["a2_deg"]), best["l2_m"], best["rws_m"]] == pytest.approx(reference.best_x.tolist(),
                                                                                           rel=1e-12)
+
+    # numerical bands: re-simulated by the scheduler (tight; reference), each equal to the engine's own
+    url = f"/v1/jobs/{de_job['id']}/best"
+    first = client.get(url, params={"band": "true"})
+    assert first.status_code in (200, 202) and set(first.json()["band_jobs"]) == {"tight", "reference"}
+    for job_id in first.json()["band_jobs"].values():
+        assert wait(client, job_id)["state"] == "succeeded"
+    done = client.get(url, params={"band": "true"})
+    assert done.status_code == 200 and done.json()["band_state"] == "succeeded"
+    road = done.json()["sharpness"][0]
+    rows = np.array([[math.radians(t["a2_deg"]), t["l2_m"], t["rws_m"]] for t in road["ties"]])
+    plan = build_plan(JobSpec.model_validate(DE).normalised())
+    engine = numerical_bands(rows, plan.study.roads[0].road, plan.settings)
+    assert road["ties"][0]["fitness_m"] == best["fitness_m"] and road["numerical_band"] == {
+        k: v for k, v in road["ties"][0].items() if k not in ("a2_deg", "l2_m", "rws_m", "tie")}
+    assert 2 <= len(rows) <= 5 and [t["fitness_m"] for t in road["ties"]] == sorted(
+        (t["fitness_m"] for t in road["ties"]), reverse=True)
+    for got, want in zip(road["ties"], engine, strict=True):
+        for name in ("fitness_m", "distance_m", "band_m", "distance_band_m"):
+            assert got[name] == pytest.approx(want[name], rel=1e-9, abs=1e-12), name
+        assert (got["exceeds_limit"], got["failed"], set(got["runs"])) == (want["exceeds_limit"], want["failed"],
+                                                                           set(want["runs"]))
+        for label, values in want["runs"].items():
+            assert got["runs"][label] == pytest.approx(values, rel=1e-9, abs=1e-12), label
+    assert [t["tie"] for t in road["ties"]] == tie_flags(engine)
 
 
 def test_de_survives_three_sigkills(server: Any, tmp_path: Path) -> None:

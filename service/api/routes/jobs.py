@@ -19,7 +19,7 @@ from finaldrive.service.api.deps import JobId, ServicesDep
 from finaldrive.service.api.event_hub import EventHub, status_snapshots
 from finaldrive.service.api.lookups import load_job, parse_cursor
 from finaldrive.service.api.problems import ApiProblem, documented, validation_problem
-from finaldrive.service.api.sharpness import SENSITIVITY_KEY_PREFIX
+from finaldrive.service.api.sharpness import OWN_KEY_PREFIXES
 from finaldrive.service.api.views import jobs_out
 from finaldrive.service.db.models import Job
 from finaldrive.service.db.repository import cancel_job, list_jobs
@@ -48,9 +48,9 @@ def submit(
     spec: JobSpec, services: ServicesDep, response: Response,
     idempotency_key: Annotated[str | None, Header(max_length=255)] = None,
 ) -> JobOut:
-    if idempotency_key is not None and idempotency_key.startswith(SENSITIVITY_KEY_PREFIX):
-        raise validation_problem(("header", "idempotency-key"), f"keys starting with {SENSITIVITY_KEY_PREFIX!r} are "
-                                 "the service's own (a job's sensitivity job)")
+    if idempotency_key is not None and idempotency_key.startswith(OWN_KEY_PREFIXES):
+        raise validation_problem(("header", "idempotency-key"), f"keys starting with {' or '.join(OWN_KEY_PREFIXES)} "
+                                 "are the service's own (a job's sensitivity and band jobs)")
     try:
         job, created = submit_job(
             services.db, spec, idempotency_key=idempotency_key,

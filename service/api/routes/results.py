@@ -11,6 +11,7 @@ from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response, StreamingResponse
 
 from finaldrive.engine import DEFAULT_TOLERANCE_PCT, MAX_TOLERANCE_PCT
+from finaldrive.service.api.bands import band_jobs, stored_bands
 from finaldrive.service.api.deps import JobId, ServicesDep
 from finaldrive.service.api.lookups import find_road, load_job, parse_cursor
 from finaldrive.service.api.problems import ApiProblem, documented, validation_problem
@@ -106,7 +107,9 @@ IN_FLIGHT = InFlight()
         "Computed in the database (bounded memory whatever the job's size); at most 2 requests in flight a "
         "client (else 429 with Retry-After). With sensitivity=true on a finished job, the finite differences "
         "are simulated by a scheduler as a small job of kind `designs`, queued once per job: 202 with "
-        "Retry-After until it has finished, then 200 with each road's sensitivity."),
+        "Retry-After until it has finished, then 200 with each road's sensitivity. With band=true, likewise "
+        "two such jobs re-simulate each road's best designs (100x tighter; the reference method): then 200 "
+        "with each road's band and ties."),
 )
 def best(
     job_id: JobId, services: ServicesDep, request: Request, response: Response,
@@ -115,6 +118,9 @@ def best(
     sensitivity: Annotated[bool, Query(description="also finite differences of distance and fitness at each "
                                        "road's best (7 simulations a road, the job's settings), run by a "
                                        "scheduler: 202 until they are stored")] = False,
+    band: Annotated[bool, Query(description="also the numerical band of each road's best and next best designs "
+                                "(up to 5 a road, re-simulated 100x tighter and with the reference method by a "
+                                "scheduler), with which tie with the best: 202 until they are stored")] = False,
 ) -> BestOut:
     with IN_FLIGHT.slot(request.client.host if request.client else ""):
         job = load_job(services, job_id)
@@ -123,14 +129,29 @@ def best(
             if row is None:
                 raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
         designs = sensitivity_job(services, row) if sensitivity else None
+        re_runs = band_jobs(services, row) if band else {}
         with services.db.read() as session:
             ready = designs is not None and designs.state == JobState.succeeded.value
             derivatives = stored_sensitivities(session, row, designs) if ready and designs is not None else None
-            sharp = job_sharpness(session, row, tolerance_pct, derivatives)
-    if designs is not None and designs.state not in {s.value for s in TERMINAL_STATES}:
+            banded = (stored_bands(session, row, re_runs)
+                      if re_runs and all(j.state == JobState.succeeded.value for j in re_runs.values()) else None)
+            sharp = job_sharpness(session, row, tolerance_pct, derivatives, banded)
+    running = [j for j in [designs, *re_runs.values()] if j is not None and j.state not in TERMINAL]
+    if running:
         response.status_code = 202
         response.headers["Retry-After"] = str(RETRY_AFTER_S)
-        response.headers["Location"] = f"/v1/jobs/{designs.id}"
+        response.headers["Location"] = f"/v1/jobs/{running[0].id}"
     return BestOut(job_id=job.id, roads=job.roads, robust_best=job.robust_best, sharpness=sharp,
                    sensitivity_job=None if designs is None else designs.id,
-                   sensitivity_state=None if designs is None else designs.state)
+                   sensitivity_state=None if designs is None else designs.state,
+                   band_jobs={label: j.id for label, j in re_runs.items()} or None,
+                   band_state=_least_finished([j.state for j in re_runs.values()]))
+
+
+#: Terminal job states, and the order in which a set of jobs' state is told (the least finished first).
+TERMINAL = {s.value for s in TERMINAL_STATES}
+_PROGRESS = ("queued", "interrupted", "running", "cancelled", "failed", "succeeded")
+
+
+def _least_finished(states: list[str]) -> str | None:
+    return min(states, key=lambda s: _PROGRESS.index(s) if s in _PROGRESS else -1) if states else None

@@ -132,7 +132,37 @@ def test_a_designs_job_evaluates_each_roads_own_designs(client: TestClient) -> N
         assert r.status_code == 422 and field in r.text, bad
 
 
-def test_a_client_cannot_take_a_sensitivity_key(client: TestClient) -> None:
+def test_a_client_cannot_take_a_sensitivity_or_band_key(client: TestClient) -> None:
     job = wait_done(client, client.post("/v1/jobs", json=SWEEP | {"roads": ["flat"]}).json()["id"])
-    r = client.post("/v1/jobs", json=SWEEP, headers={"Idempotency-Key": f"sensitivity:{job['id']}"})
-    assert r.status_code == 422 and "idempotency-key" in r.json()["detail"]
+    for key in (f"sensitivity:{job['id']}", f"band:tight:{job['id']}"):
+        r = client.post("/v1/jobs", json=SWEEP, headers={"Idempotency-Key": key})
+        assert r.status_code == 422 and "idempotency-key" in r.json()["detail"]
+
+
+def test_best_bands_are_simulated_by_the_scheduler(client: TestClient, fake: ToyTask) -> None:
+    """202 while the two re-run jobs (kind designs: 100x tighter, the reference method) run, then each
+    road's best distinct designs with their bands: the toy fitness ignores the settings, so every band
+    is 0 and only the best ties with itself (the real engine's: test_e2e_server.py)."""
+    job = wait_done(client, client.post("/v1/jobs", json=SWEEP).json()["id"])
+    url = f"/v1/jobs/{job['id']}/best"
+    assert client.get(url).json()["band_jobs"] is None
+    fake.gate.clear()
+    first = client.get(url, params={"band": "true"})
+    assert first.status_code == 202 and first.json()["band_state"] in ("queued", "running")
+    jobs = first.json()["band_jobs"]
+    assert client.get(url, params={"band": "true"}).json()["band_jobs"] == jobs
+    specs = {label: client.get(f"/v1/jobs/{i}").json()["spec"] for label, i in jobs.items()}
+    assert specs["tight"]["settings"]["fast_tolerance"] == pytest.approx(5e-7)
+    assert specs["reference"]["settings"]["method"] == "reference"
+    assert [len(d) for d in specs["tight"]["designs"]] == [5, 5] and specs["tight"]["roads"] == SWEEP["roads"]
+    fake.gate.set()
+    for i in jobs.values():
+        wait_done(client, i)
+    done = client.get(url, params={"band": "true"})
+    assert done.status_code == 200 and done.json()["band_state"] == "succeeded"
+    for road, sharp in zip(job["roads"], done.json()["sharpness"], strict=True):
+        ties = sharp["ties"]
+        assert sharp["numerical_band"]["fitness_m"] == road["best"]["fitness_m"] == ties[0]["fitness_m"]
+        assert [t["band_m"] for t in ties] == [0.0] * 5 and [t["tie"] for t in ties] == [True] + [False] * 4
+        assert len({(t["a2_deg"], t["l2_m"], t["rws_m"]) for t in ties}) == 5
+        assert all(set(t["runs"]) == {"production", "tight", "reference"} for t in ties)

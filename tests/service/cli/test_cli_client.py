@@ -164,3 +164,32 @@ def test_best_prints_which_variables_are_decided(monkeypatch: pytest.MonkeyPatch
     out = capsys.readouterr().out
     assert "near-optimal set: 9 of 84 evaluated designs" in out and "a2 is not decided" in out
     assert seen[0].url.params["tolerance_pct"] == "0.5"
+
+
+def test_best_band_polls_and_prints_the_band_and_ties(monkeypatch: pytest.MonkeyPatch,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """202 (the band jobs running) is polled as Retry-After asks; then the best's band and its ties."""
+    seen: list[httpx.Request] = []
+    band = {"fitness_m": 20.5, "distance_m": 20.6, "band_m": 0.0021, "distance_band_m": 0.002, "exceeds_limit": True,
+            "runs": {}, "failed": {}}
+    ties = [{**band, "a2_deg": 0.0, "l2_m": 0.0, "rws_m": 0.09, "tie": True},
+            {**band, "fitness_m": 20.499, "a2_deg": 10.0, "l2_m": 0.0, "rws_m": 0.09, "tie": True},
+            {**band, "fitness_m": 20.4, "a2_deg": 20.0, "l2_m": 0.0, "rws_m": 0.09, "tie": False}]
+    sharp = {"road": "flat", "tolerance_pct": 0.1, "tolerance_m": 0.0205, "best_fitness_m": 20.5, "count": 2,
+             "evaluated": 3, "ranges": {"a2_deg": [0.0, 10.0], "l2_m": [0.0, 0.0], "rws_m": [0.09, 0.09]},
+             "explored": {}, "verdicts": {}, "sentences": []}
+
+    def handler(request: httpx.Request) -> httpx.Response:
+        seen.append(request)
+        if len(seen) == 1:
+            return httpx.Response(202, headers={"Retry-After": "0"}, json={"job_id": 7, "roads": job()["roads"],
+                                                                          "sharpness": [sharp]})
+        return httpx.Response(200, json={"job_id": 7, "roads": job()["roads"],
+                                         "sharpness": [sharp | {"numerical_band": band, "ties": ties}]})
+
+    use_transport(monkeypatch, handler)
+    assert main(["best", "7", "--band"]) == 0
+    out = capsys.readouterr().out
+    assert len(seen) == 2 and all(r.url.params["band"] == "true" for r in seen)
+    assert "numerical band of the best's fitness: +-2.10 mm, wider than 1 mm" in out
+    assert "of the next 2 best designs, 1 tie with it" in out

@@ -43,14 +43,14 @@ def test_optimize_toy_budget_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert best["fitness_m"] == pytest.approx(r["history"][-1]["best_fitness_m"]) and best["distance_m"] > 0
     assert r["per_road"][0]["paper"]["a2_deg"] == pytest.approx(192.2)
     # the best's numerical band, and the next best designs' with their ties (engine.study.band)
-    band, ties = best["band"], r["sharpness"]["ties"]
+    band, ties = best["numerical_band"], r["sharpness"]["ties"]
     assert band["fitness_m"] == best["fitness_m"] and band["band_m"] >= 0 and set(band["runs"]) == {
         "production", "tight", "reference"}
     assert ties[0]["tie"] is True and ties[0]["band_m"] == band["band_m"] and 2 <= len(ties) <= 5
     assert [t["fitness_m"] for t in ties] == sorted((t["fitness_m"] for t in ties), reverse=True)
     assert all(t["tie"] == (abs(t["fitness_m"] - best["fitness_m"]) <= t["band_m"] + band["band_m"]) for t in ties)
     skipped = run_json(["optimize", "--road", "sine-h4cm-l3m", *TOY, "--executor", "serial", "--no-band"], capsys)
-    assert "band" not in skipped["best"] and "ties" not in skipped["sharpness"]
+    assert "numerical_band" not in skipped["best"] and "ties" not in skipped["sharpness"]
 
 
 def test_same_seed_same_best_serial_and_process(capsys: pytest.CaptureFixture[str]) -> None:
@@ -67,10 +67,10 @@ def test_robust_optimize_over_roads(capsys: pytest.CaptureFixture[str]) -> None:
     assert 90 <= r["best"]["a2_deg"] <= 270 and 0.08 <= r["best"]["rws_m"] <= 0.1
     on_roads = [road["best_design"]["fitness_m"] for road in r["per_road"]]
     assert r["best"]["fitness_m"] == pytest.approx(min(on_roads))
-    bands = [road["best_design"]["band"] for road in r["per_road"]]  # the score's band: the worst's re-runs
+    bands = [road["best_design"]["numerical_band"] for road in r["per_road"]]  # the score's band: the worst's re-runs
     worst = {label: min(b["runs"][label]["fitness_m"] for b in bands) for label in bands[0]["runs"]}
-    assert r["best"]["band"]["runs"] == {label: {"fitness_m": v} for label, v in worst.items()}
-    assert r["best"]["band"]["band_m"] == max(abs(v - worst["production"]) for v in worst.values())
+    assert r["best"]["numerical_band"]["runs"] == {label: {"fitness_m": v} for label, v in worst.items()}
+    assert r["best"]["numerical_band"]["band_m"] == max(abs(v - worst["production"]) for v in worst.values())
     assert all(road["best_seen"]["fitness_m"] >= road["best_design"]["fitness_m"] for road in r["per_road"])
 
 

@@ -1,0 +1,119 @@
+"""Numerical bands of a finished job's best designs, with their ties (engine.study.band).
+
+The API process never simulates. For each road, the job's best distinct designs (at most
+``TIE_CANDIDATES``, the best first) are re-simulated by a scheduler as two small jobs of kind
+``designs``, one a re-run of :func:`~finaldrive.engine.band_settings` (100x tighter; the reference
+method), each queued once per finished job (Idempotency-Key ``band:<re-run>:<job id>``). Their
+stored evaluations, beside the job's own (the production run), give each design's band, and which
+designs tie with the best.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from finaldrive.engine import TIE_CANDIDATES, TIGHT_FACTOR, band_of, tie_flags
+from finaldrive.service.api.problems import ApiProblem
+from finaldrive.service.api.sharpness import own_designs_job
+from finaldrive.service.db.models import TERMINAL_STATES, EvalStatus, Evaluation, Job, JobRoad
+from finaldrive.service.db.repository import job_by_idempotency_key
+from finaldrive.service.schemas import JobSpec, SimulationSpec
+from finaldrive.service.services import Services
+
+#: The re-runs of a band (engine.band_settings) as a job's settings: label -> the changes.
+RE_RUNS = ("tight", "reference")
+#: Best rows read a road to find its distinct best designs (a DE evaluates a design more than once).
+_SCAN = 20 * TIE_CANDIDATES
+
+Top = list[tuple[float, float, float, float, float]]   # (a2 [deg], L2 [m], R_WS [m], fitness [m], distance [m])
+
+
+def band_key(job_id: int, label: str) -> str:
+    """The Idempotency-Key of a job's band re-run ``label``."""
+    return f"band:{label}:{job_id}"
+
+
+def top_designs(session: Session, job: Job) -> list[tuple[JobRoad, Top]]:
+    """Each road's best distinct successful designs, best first (ties of fitness: the first stored)."""
+    out = []
+    for road in session.scalars(select(JobRoad).where(JobRoad.job_id == job.id).order_by(JobRoad.road_index)):
+        e = Evaluation
+        rows = session.execute(
+            select(e.a2_deg, e.l2_m, e.rws_m, e.fitness_m, e.distance_m)
+            .where(e.job_id == job.id, e.road_index == road.road_index, e.status == EvalStatus.ok.value,
+                   e.fitness_m.is_not(None))
+            .order_by(e.fitness_m.desc(), e.id).limit(_SCAN)).all()
+        seen: set[tuple[float, float, float]] = set()
+        top: Top = []
+        for a2, l2, rws, fitness, distance in rows:
+            if (a2, l2, rws) not in seen and len(top) < TIE_CANDIDATES:
+                seen.add((a2, l2, rws))
+                top.append((a2, l2, rws, _number(fitness), _number(distance)))
+        out.append((road, top))
+    return out
+
+
+def band_jobs(services: Services, job: Job) -> dict[str, Job]:
+    """The job's band re-runs (label -> its ``designs`` job), queued now unless they exist (409 while
+    ``job`` has not finished, or when it has no successful evaluation)."""
+    if job.state not in {s.value for s in TERMINAL_STATES}:
+        raise ApiProblem(409, f"job {job.id} is {job.state}: ask for its bands once it has finished",
+                         slug="not-finished")
+    with services.db.read() as session:
+        roads = [(road, top) for road, top in top_designs(session, job) if top]
+        existing = {label: job_by_idempotency_key(session, band_key(job.id, label)) for label in RE_RUNS}
+    if not roads:
+        raise ApiProblem(409, f"job {job.id} has no successful evaluation to band", slug="no-result")
+    source = JobSpec.model_validate(job.spec)
+    out = {}
+    for label in RE_RUNS:
+        spec = JobSpec(kind="designs", roads=[road.spec for road, _ in roads], settings=re_run(source.settings, label),
+                       vehicle=source.vehicle, designs=[[row[:3] for row in top] for _, top in roads])
+        out[label] = own_designs_job(services, job, band_key(job.id, label), spec, existing[label], "band")
+    return out
+
+
+def re_run(settings: SimulationSpec, label: str) -> SimulationSpec:
+    """A job's settings for the band's re-run ``label`` (as engine.band_settings)."""
+    if label == "tight":
+        return settings.model_copy(update={"method": "fast", "fast_tolerance": settings.fast_tolerance / TIGHT_FACTOR})
+    return settings.model_copy(update={"method": "reference"})
+
+
+def stored_bands(session: Session, job: Job, jobs: dict[str, Job]) -> dict[int, dict[str, Any]]:
+    """Each road's band of its best and its ties (by the job's road index) from the finished band
+    jobs' evaluations: ``{"numerical_band": {...}, "ties": [{design, band, tie}, ...]}``."""
+    runs: dict[str, dict[tuple[str, int], Any]] = {}
+    for label, designs_job in jobs.items():
+        roads = {r.road_index: r.spec for r in session.scalars(select(JobRoad).where(JobRoad.job_id == designs_job.id))}
+        for r in session.execute(select(Evaluation.road_index, Evaluation.candidate, Evaluation.status,
+                                        Evaluation.reason, Evaluation.fitness_m, Evaluation.distance_m)
+                                 .where(Evaluation.job_id == designs_job.id)):
+            runs.setdefault(label, {})[(roads[r.road_index], r.candidate)] = r
+    out = {}
+    for road, top in top_designs(session, job):
+        bands = []
+        for candidate, (_, _, _, fitness, distance) in enumerate(top):
+            values, failed = {"production": (fitness, distance)}, {}
+            for label in RE_RUNS:
+                row = runs.get(label, {}).get((road.spec, candidate))
+                if row is None:
+                    failed[label] = "not simulated"
+                elif row.status == EvalStatus.ok.value and row.fitness_m is not None:
+                    values[label] = (row.fitness_m, _number(row.distance_m))
+                else:
+                    failed[label] = row.reason or "failed"
+            bands.append(band_of(values, failed))
+        if bands:
+            ties = [{"a2_deg": a2, "l2_m": l2, "rws_m": rws, **band, "tie": tie}
+                    for (a2, l2, rws, _, _), band, tie in zip(top, bands, tie_flags(bands), strict=True)]
+            out[road.road_index] = {"numerical_band": bands[0], "ties": ties}
+    return out
+
+
+def _number(value: float | None) -> float:
+    return math.nan if value is None else float(value)
