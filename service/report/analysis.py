@@ -23,8 +23,19 @@ from typing import Any
 import numpy as np
 from scipy.stats import spearmanr
 
-from finaldrive.engine import DEFAULT_TOLERANCE_PCT, PRESETS, aggregate, near_optimal, regret
+from finaldrive.engine import (
+    DEFAULT_TOLERANCE_PCT,
+    PRESETS,
+    Road,
+    aggregate,
+    near_optimal,
+    numerical_bands,
+    regret,
+    tie_flags,
+    top_designs,
+)
 from finaldrive.service.report.data import StudyData
+from finaldrive.service.report.table14 import study_settings
 
 #: ``step`` of the sweep part of a paper-study (service.jobs.drivers.SWEEP_STEP).
 SWEEP_STEP = -1
@@ -160,6 +171,27 @@ def per_road(data: StudyData) -> list[dict[str, Any]]:
             },
         })
     return out
+
+
+def add_bands(data: StudyData, roads: list[dict[str, Any]]) -> None:
+    """Each road's numerical band (engine.study.band) of its best successful evaluation (sweep or DE)
+    and of the next best distinct designs, with which tie with it: ``numerical_band`` and ``ties``."""
+    settings, vehicle = study_settings(data.spec)
+    e = data.evals
+    for r in roads:
+        mask = (e["road_index"] == r["index"]) & e["ok"]
+        rows = top_designs(np.stack([e["a2"][mask], e["l2_m"][mask], e["rws_m"][mask]], axis=1), e["fitness_m"][mask])
+        bands = numerical_bands(rows, Road.parse(r["spec"]), settings, vehicle) if len(rows) else []
+        r["numerical_band"] = _band(bands[0]) if bands else None
+        r["ties"] = [{"a2_deg": _r(math.degrees(x[0]) % 360.0, 4), "l2_m": _r(x[1], 6), "rws_m": _r(x[2], 6),
+                      **_band(b), "tie": tie} for x, b, tie in zip(rows, bands, tie_flags(bands), strict=True)]
+
+
+def _band(band: dict[str, Any]) -> dict[str, Any]:
+    """A band rounded as the report rounds (to the 0.1 um; fitness and distance to the 10 um)."""
+    return {"fitness_m": _r(band["fitness_m"], 5), "distance_m": _r(band["distance_m"], 5),
+            "band_m": _r(band["band_m"], 7), "distance_band_m": _r(band["distance_band_m"], 7),
+            "exceeds_limit": band["exceeds_limit"], "failed": band["failed"]}
 
 
 def _near(e: dict[str, np.ndarray], mask: np.ndarray) -> dict[str, Any]:

@@ -40,6 +40,7 @@ def machine() -> dict[str, Any]:
 def build_paper_study(data: StudyData) -> tuple[dict[str, Any], dict[str, Any]]:
     """(report dict, series of the Table 14 runs) for a stored study."""
     roads = A.per_road(data)
+    A.add_bands(data, roads)
     table14, series = run_table14(data.spec)
     l2 = tuple(data.spec["bounds"]["l2_m"])
     report = {

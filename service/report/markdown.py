@@ -225,26 +225,41 @@ def _sweep(roads: list[dict[str, Any]], figs: dict[str, str]) -> list[str]:
     return out
 
 
+def _band_cells(r: dict[str, Any]) -> list[str]:
+    """A road's numerical band [mm] (flagged above 1 mm) and its ties among the next best designs."""
+    band, ties = r.get("numerical_band"), r.get("ties") or []
+    if band is None or band["band_m"] is None:
+        return ["–" if band is None else "unknown (" + "; ".join(band["failed"].values()) + ")", "–"]
+    flag = " (> 1 mm)" if band["exceeds_limit"] else ""
+    tied = f"{sum(t['tie'] for t in ties[1:])} of {len(ties) - 1}" if len(ties) > 1 else "–"
+    return [f"{1000 * band['band_m']:.3f}{flag}", tied]
+
+
 def _sharpness(roads: list[dict[str, Any]]) -> list[str]:
-    header = ["road", "near-optimal", "a2 [deg]", "L2 [mm]", "R_WS [mm]", "not decided"]
+    header = ["road", "near-optimal", "a2 [deg]", "L2 [mm]", "R_WS [mm]", "not decided", "band [mm]", "ties"]
     rows = []
     for r in roads:
         n = r.get("near_optimal") or {}
         g = n.get("ranges") or {}
         if not g:
-            rows.append([f"`{r['name']}`", "–", "–", "–", "–", "–"])
+            rows.append([f"`{r['name']}`", "–", "–", "–", "–", "–", *_band_cells(r)])
             continue
         lo, hi = g["a2_deg"]
         a2 = "any (L2 = 0)" if lo is None else f"{lo:.0f} – {hi % 360 if hi >= 360 else hi:.0f}"
         rows.append([f"`{r['name']}`", f"{n['count']}/{n['evaluated']}", a2,
                      f"{1000 * g['l2_m'][0]:.1f} – {1000 * g['l2_m'][1]:.1f}",
                      f"{1000 * g['rws_m'][0]:.1f} – {1000 * g['rws_m'][1]:.1f}",
-                     ", ".join(k.split("_")[0] for k, v in n["verdicts"].items() if v == "undetermined") or "–"])
+                     ", ".join(k.split("_")[0] for k, v in n["verdicts"].items() if v == "undetermined") or "–",
+                     *_band_cells(r)])
     return ["## Sharpness of each optimum", "",
             "Near-optimal set: the road's successful evaluations (sweep and DE) whose fitness is within 0.1 % of "
             "the best, with each variable's range over it (a2: the shortest arc, through 0 where the second "
             "value is smaller). Not decided: a variable whose range covers at least half of what the study "
-            "explored (engine/study/sharpness.py; docs/optimisation.md#sharpness-of-an-optimum).", "",
+            "explored (engine/study/sharpness.py; docs/optimisation.md#sharpness-of-an-optimum). Band: the "
+            "numerical band of the road's best fitness, its largest change when re-simulated 100x tighter and "
+            "with the reference method; ties: how many of the next best distinct designs have a fitness closer "
+            "to the best's than their two bands together (engine/study/band.py; "
+            "docs/optimisation.md#numerical-bands-and-ties).", "",
             *_table(header, rows)]
 
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from finaldrive.engine import Design, Road, SimSettings, load_vehicle_dict, paper_row, paper_tables, simulate
+from finaldrive.engine import Design, Road, SimSettings, Vehicle, load_vehicle_dict, paper_row, paper_tables, simulate
 
 ROAD_SPEC = "sine:0.04:3"
 #: (a2 [deg], L2 [m], R_WS [m]) as simulated here.
@@ -26,11 +26,18 @@ def _gain(d1: float | None, d2: float | None) -> float | None:
     return round(100.0 * (d1 - d2) / d2, 3)
 
 
+def study_settings(spec: dict[str, Any]) -> tuple[SimSettings, Vehicle | None]:
+    """The stored study spec's simulation settings and vehicle (None: the default one)."""
+    s = spec["settings"]
+    tolerance = {"fast_tolerance": s["fast_tolerance"]} if "fast_tolerance" in s else {}  # older specs lack it
+    settings = SimSettings(duration=s["duration"], dt=s["dt"], method=s["method"], **tolerance)
+    return settings, None if spec.get("vehicle") is None else load_vehicle_dict(spec["vehicle"])
+
+
 def run_table14(spec: dict[str, Any]) -> tuple[dict[str, Any], dict[str, dict[str, np.ndarray]]]:
     """(JSON-ready comparison, series by geometry) with the study spec's settings and vehicle."""
-    s = spec["settings"]
-    settings = SimSettings(duration=s["duration"], dt=s["dt"], method=s["method"], series=True)
-    vehicle = None if spec.get("vehicle") is None else load_vehicle_dict(spec["vehicle"])
+    settings, vehicle = study_settings(spec)
+    settings = settings.with_(series=True)
     road = Road.parse(ROAD_SPEC)
     ours: dict[str, Any] = {}
     series: dict[str, dict[str, np.ndarray]] = {}

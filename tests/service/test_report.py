@@ -55,6 +55,11 @@ def test_report_is_complete_and_byte_identical_when_rerun(study: str, tmp_path: 
     assert report["roads"][0]["paper"]["fitness_m"] == 20.708
     assert report["robust"]["method"].startswith("best mean fitness over the stored Table 9 sweep grid")
     assert report["table14"]["ours"]["geometry2"]["rws_m"] == 0.05
+    for road in report["roads"]:  # each road's best banded, as engine.numerical_bands gives it, and its ties
+        band, ties = road["numerical_band"], road["ties"]
+        assert band["band_m"] is not None and band["band_m"] >= 0 and ties[0]["tie"] is True and len(ties) == 5
+        assert band["fitness_m"] == pytest.approx(road["near_optimal"]["best_fitness_m"], abs=1e-5)
+    assert "| band [mm] | ties |" in md
 
 
 def test_the_server_and_the_database_give_the_same_study(study: str, tmp_path: Path) -> None:

@@ -17,6 +17,7 @@ const PAGE = 25;
 let job = null;
 let points = null; // columns of the chosen road's evaluations
 let best = null;
+let banded = false; // the numerical bands were asked for: /best?band=true from then on
 let sort = { key: "fitness_m", desc: true };
 let page = 0;
 
@@ -45,21 +46,62 @@ function bestTable() {
                                "design page");
   for (const r of job.roads) {
     const s = sharp.get(r.name);
-    rows.push(el("tr", {}, el("td", {}, r.name), ...(r.best ? design(r.best) : [el("td", { colspan: 3, class: "muted" }, "no result yet")]),
+    rows.push(el("tr", { "data-road": r.name }, el("td", {}, r.name), ...(r.best ? design(r.best) : [el("td", { colspan: 3, class: "muted" }, "no result yet")]),
       el("td", { class: "num" }, num(r.best?.distance_m, 4)), el("td", { class: "num" }, num(r.best?.fitness_m, 4)),
+      bandCell(s),
       el("td", { class: "num" }, s ? `${s.count} of ${s.evaluated} within ${s.tolerance_pct} %` : "–"),
-      el("td", { class: "muted", style: "white-space: normal" }, s ? s.sentences.join(" ") : ""),
+      el("td", { class: "muted", style: "white-space: normal" }, s ? [...s.sentences, ...tieSentence(s)].join(" ") : ""),
       el("td", {}, r.best ? link(r.best, r.spec) : "")));
   }
   if (job.robust_best) {
     const rb = job.robust_best;
     const s = sharp.get(null);
     rows.push(el("tr", {}, el("td", {}, `all roads (${rb.aggregate})`), ...design(rb), el("td", {}, ""),
-      el("td", { class: "num" }, num(rb.score_m, 4)), el("td", { class: "num" }, s ? `${s.count} of ${s.evaluated}` : "–"),
+      el("td", { class: "num" }, num(rb.score_m, 4)), el("td", {}, ""), el("td", { class: "num" }, s ? `${s.count} of ${s.evaluated}` : "–"),
       el("td", { class: "muted", style: "white-space: normal" }, s ? s.sentences.join(" ") : ""),
       el("td", {}, link(rb, job.roads[0].spec))));
   }
   $("best").tBodies[0].replaceChildren(...rows);
+  $("bands").hidden = !TERMINAL.has(job.state) || banded;
+}
+
+/** A road's numerical band (engine.study.band): +-x mm, flagged above 1 mm; pending while its jobs run. */
+function bandCell(s) {
+  const band = s?.numerical_band;
+  if (!band) return el("td", { class: "num muted", "data-band": "" }, banded && best?.band_state !== "succeeded" ? "simulating…" : "–");
+  const text = band.band_m == null ? "unknown" : `±${(band.band_m * 1000).toFixed(2)} mm`;
+  const failed = Object.entries(band.failed ?? {}).map(([k, v]) => `${k}: ${v}`).join("; ");
+  return el("td", { class: band.exceeds_limit ? "num error" : "num", "data-band": String(band.band_m),
+                    title: `re-simulated 100x tighter and with the reference method${failed ? ` (failed: ${failed})` : ""}` }, text);
+}
+
+/** Which of the next best designs tie with the best (fitness closer than their two bands), in words. */
+function tieSentence(s) {
+  const ties = s.ties ?? [];
+  if (ties.length < 2) return [];
+  const tied = ties.slice(1).filter((t) => t.tie).length;
+  return [`Of the next ${ties.length - 1} best designs, ${tied} tie with the best within their numerical bands.`];
+}
+
+/** Ask for the bands (the service queues their jobs), then poll until they are there. */
+async function askBands() {
+  const wait = () => new Promise((resolve) => setTimeout(resolve, 2000));
+  banded = true;
+  $("bands").hidden = true;
+  for (;;) {
+    try {
+      best = await api(`/v1/jobs/${jobId}/best?band=true`);
+    } catch (e) {
+      if (e.status === 429) { await wait(); continue; } // another /best in flight: as Retry-After asks
+      banded = false;
+      showBanner(`numerical bands: ${e.message}`, true);
+      bestTable();
+      return;
+    }
+    bestTable();
+    if (TERMINAL.has(best.band_state)) return;
+    await wait();
+  }
 }
 
 const describe = (i) => [
@@ -184,7 +226,8 @@ async function loadHistory() {
 }
 
 async function loadAll() {
-  [job, best] = await Promise.all([api(`/v1/jobs/${jobId}`), api(`/v1/jobs/${jobId}/best`).catch(() => best)]); // 429: keep the last
+  const bestUrl = `/v1/jobs/${jobId}/best${banded ? "?band=true" : ""}`;
+  [job, best] = await Promise.all([api(`/v1/jobs/${jobId}`), api(bestUrl).catch(() => best)]); // 429: keep the last
   summary();
   bestTable();
   await Promise.all([loadPoints(), loadHistory()]);
@@ -213,6 +256,7 @@ async function init() {
   $("sx").replaceChildren(...AXES.map(([k, l]) => el("option", { value: k }, l)));
   $("sy").replaceChildren(...AXES.map(([k, l]) => el("option", { value: k, selected: k === "fitness_m" }, l)));
   $("road").addEventListener("change", () => (loadPoints(), loadHistory()));
+  $("bands").addEventListener("click", askBands);
   $("value").addEventListener("change", drawMap);
   $("sx").addEventListener("change", drawScatter);
   $("sy").addEventListener("change", drawScatter);

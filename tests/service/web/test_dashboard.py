@@ -99,7 +99,24 @@ def test_the_sweep_map_renders_and_a_click_selects_a_design(tab: Page, server: S
     assert tab.page.locator("#evaluations tbody tr").count() == 12
 
 
+def test_the_numerical_bands_are_asked_for_and_shown(tab: Page, server: Server) -> None:
+    """The button queues the band jobs through /best?band=true; the page polls until they are stored and
+    shows the band the API gives, and the ties in words."""
+    job_id = submit_sweep(server)
+    tab.goto(f"/jobs/{job_id}")
+    tab.ready()
+    assert tab.page.inner_text('tr[data-road="flat"] td[data-band]') == "–"
+    tab.page.click("#bands")
+    cell = tab.page.wait_for_selector('tr[data-road="flat"] td[data-band]:not([data-band=""])', timeout=120_000)
+    band = server.client.get(f"/v1/jobs/{job_id}/best", params={"band": "true"}).json()["sharpness"][0]
+    assert float(cell.get_attribute("data-band") or "nan") == band["numerical_band"]["band_m"]
+    assert cell.inner_text() == f"±{band['numerical_band']['band_m'] * 1000:.2f} mm"
+    assert "tie with the best within their numerical bands" in tab.page.inner_text('tr[data-road="flat"]')
+    assert tab.page.is_hidden("#bands")
+
+
 def _run_pixels(png: bytes) -> list[int]:
+
     """Pixels of each run's colour (within a few levels) in the left part of the viewer: its 2D view of
     the bikes (the series panels on the right draw in the same colours)."""
     from PIL import Image
