@@ -47,7 +47,7 @@ class RoadError(ValueError):
 class Road:
     """One road profile.
 
-    kind: ``flat`` (32c), ``sine`` (32a: H_y sin(2 pi x / lambda)), ``bump``
+    kind: ``flat`` (32c), ``sine`` (32a: H_y sin(2 pi x / lambda + phi); the paper's phi = 0), ``bump``
     (32b: H_y exp(-(x - mu)^2 / (2 sigma^2))) or ``profile`` (piecewise-linear
     through user points, constant beyond the ends).
     """
@@ -55,6 +55,7 @@ class Road:
     kind: str = "flat"
     height: float = 0.0       # H_y [m]
     wavelength: float = 0.0   # lambda [m], sine only
+    phase_deg: float = 0.0    # phi [deg], sine only: where in its period the road starts (beyond the paper)
     sigma: float = 0.0        # bump width [m]
     mu: float = DEFAULT_BUMP_CENTRE_M  # bump centre [m]
     xs: tuple[float, ...] = field(default=())  # profile only
@@ -64,7 +65,7 @@ class Road:
     def __post_init__(self) -> None:
         if self.kind not in _KIND_CODES:
             raise RoadError(f"unknown road kind {self.kind!r}")
-        for key in ("height", "wavelength", "sigma", "mu"):
+        for key in ("height", "wavelength", "phase_deg", "sigma", "mu"):
             if not math.isfinite(getattr(self, key)):
                 raise RoadError(f"road {key} must be a finite number")
         if abs(self.height) > MAX_HEIGHT_M:
@@ -74,6 +75,8 @@ class Road:
         if self.kind == "sine" and not MIN_WAVELENGTH_M <= self.wavelength <= MAX_LENGTH_M:
             raise RoadError(f"sine road: wavelength LAMBDA must be in [{MIN_WAVELENGTH_M:g}, {MAX_LENGTH_M:g}] m, "
                             f"got {self.wavelength:g}")
+        if abs(self.phase_deg) > 360.0:
+            raise RoadError(f"sine road: PHASE_DEG must be within +-360 deg, got {self.phase_deg:g}")
         if self.kind == "bump" and not MIN_SIGMA_M <= self.sigma <= MAX_LENGTH_M:
             raise RoadError(f"bump road: width SIGMA must be in [{MIN_SIGMA_M:g}, {MAX_LENGTH_M:g}] m, "
                             f"got {self.sigma:g}")
@@ -91,7 +94,8 @@ class Road:
         if self.kind == "flat":
             return "flat"
         if self.kind == "sine":
-            return f"sine:{self.height:g}:{self.wavelength:g}"
+            phase = f":{self.phase_deg:g}" if self.phase_deg else ""
+            return f"sine:{self.height:g}:{self.wavelength:g}{phase}"
         if self.kind == "bump":
             return f"bump:{self.height:g}:{self.sigma:g}:{self.mu:g}"
         return f"profile:{self.name or 'user'}"
@@ -99,12 +103,12 @@ class Road:
     def packed(self) -> tuple[int, np.ndarray]:
         """(kind code, parameters) for the compiled road functions.
 
-        flat: []; sine: [H, lambda]; bump: [H, sigma, mu]; profile: [n, x..., y...].
+        flat: []; sine: [H, lambda, phi [rad]]; bump: [H, sigma, mu]; profile: [n, x..., y...].
         """
         if self.kind == "flat":
             return FLAT, np.zeros(1)
         if self.kind == "sine":
-            return SINE, np.array([self.height, self.wavelength])
+            return SINE, np.array([self.height, self.wavelength, math.radians(self.phase_deg)])
         if self.kind == "bump":
             return BUMP, np.array([self.height, self.sigma, self.mu])
         n = len(self.xs)
@@ -116,7 +120,7 @@ class Road:
         if self.kind == "flat":
             return np.zeros_like(x)
         if self.kind == "sine":
-            return self.height * np.sin(2.0 * np.pi * x / self.wavelength)
+            return self.height * np.sin(2.0 * np.pi * x / self.wavelength + math.radians(self.phase_deg))
         if self.kind == "bump":
             return self.height * np.exp(-((x - self.mu) ** 2) / (2.0 * self.sigma**2))
         return np.asarray(np.interp(x, self.xs, self.ys), dtype=float)
@@ -138,7 +142,7 @@ class Road:
 
     @classmethod
     def parse(cls, spec: str) -> Road:
-        """Parse ``flat``, ``sine:H:LAMBDA`` or ``bump:H:SIGMA[:MU]`` (SI units).
+        """Parse ``flat``, ``sine:H:LAMBDA[:PHASE_DEG]`` or ``bump:H:SIGMA[:MU]`` (SI units, the phase in degrees).
 
         User profiles are built with :meth:`from_points` (the engine does no file I/O).
         """
@@ -152,13 +156,13 @@ class Road:
             raise RoadError(f"road {spec!r}: parameters must be numbers") from None
         if kind == "flat" and not nums:
             return cls("flat")
-        if kind == "sine" and len(nums) == 2:
-            return cls("sine", height=nums[0], wavelength=nums[1])
+        if kind == "sine" and len(nums) in (2, 3):
+            return cls("sine", height=nums[0], wavelength=nums[1], phase_deg=nums[2] if len(nums) == 3 else 0.0)
         if kind == "bump" and len(nums) in (2, 3):
             mu = nums[2] if len(nums) == 3 else DEFAULT_BUMP_CENTRE_M
             return cls("bump", height=nums[0], sigma=nums[1], mu=mu)
         raise RoadError(
-            f"unknown road {spec!r}: expected flat, sine:H:LAMBDA or bump:H:SIGMA[:MU]"
+            f"unknown road {spec!r}: expected flat, sine:H:LAMBDA[:PHASE_DEG] or bump:H:SIGMA[:MU]"
         )
 
     @classmethod

@@ -15,10 +15,10 @@ def road_height(kind: int, rp: np.ndarray, x: float) -> tuple[float, float, floa
     """(h, dh/dx, d2h/dx2) at x for the packed road (Road.packed)."""
     if kind == FLAT:
         return 0.0, 0.0, 0.0
-    if kind == SINE:  # eq. (32a)
+    if kind == SINE:  # eq. (32a), with a phase rp[2] (0 in the paper)
         k = 2.0 * math.pi / rp[1]
-        s = math.sin(k * x)
-        return rp[0] * s, rp[0] * k * math.cos(k * x), -rp[0] * k * k * s
+        s = math.sin(k * x + rp[2])
+        return rp[0] * s, rp[0] * k * math.cos(k * x + rp[2]), -rp[0] * k * k * s
     if kind == BUMP:  # eq. (32b)
         d = x - rp[2]
         s2 = rp[1] * rp[1]

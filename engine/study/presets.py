@@ -160,7 +160,7 @@ def resolve_roads(text: str, profiles: ProfileResolver | None = None) -> list[Na
         else:
             raise ValueError(
                 f"unknown road {item!r}: expected a group ({', '.join(GROUPS)}), a preset "
-                "name (e.g. sine-h4cm-l3m), a spec (flat, sine:H:LAMBDA, bump:H:SIGMA[:MU]) or profile:..."
+                "name (e.g. sine-h4cm-l3m), a spec (flat, sine:H:LAMBDA[:PHASE_DEG], bump:H:SIGMA[:MU]) or profile:..."
             )
         for entry in found:
             if entry.road not in seen:

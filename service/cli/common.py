@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 
     from finaldrive.engine import Design, Road, SimSettings, Vehicle
 
-ROAD_HELP = ("a preset name (finaldrive roads), a spec (flat, sine:H:LAMBDA, bump:H:SIGMA[:MU], metres) "
+ROAD_HELP = ("a preset name (finaldrive roads), a spec (flat, sine:H:LAMBDA[:PHASE_DEG], bump:H:SIGMA[:MU], metres) "
              "or profile:FILE.csv (x, y in metres)")
 
 

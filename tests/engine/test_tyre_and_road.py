@@ -55,7 +55,8 @@ def test_relaxation_length_limits(p):
     assert relaxation_length(0.0, 10.0, fz, p) == pytest.approx(0.02)           # sigma_min floor
 
 
-@pytest.mark.parametrize("spec", ["flat", "sine:0.04:2", "sine:0.01:5", "bump:0.04:0.2", "bump:0.02:1.0:3"])
+@pytest.mark.parametrize("spec", ["flat", "sine:0.04:2", "sine:0.01:5", "sine:0.03:3:90", "sine:0.03:3:-45",
+                                  "bump:0.04:0.2", "bump:0.02:1.0:3"])
 def test_road_derivatives(spec):
     road = Road.parse(spec)
     kind, rp = road.packed()
@@ -83,6 +84,21 @@ def test_bad_road_specs(spec):
         Road.parse(spec)
 
 
+def test_a_sine_road_s_phase() -> None:
+    """sine:H:LAMBDA:PHI is H sin(2 pi x / LAMBDA + PHI) (eq. 32a shifted): its spec round-trips (the paper's
+    phase 0 keeps its spec), and half a period of phase is the road turned upside down, to the run."""
+    assert Road.parse("sine:0.04:3:0").spec == "sine:0.04:3" and Road.parse("sine:0.04:3:90").spec == "sine:0.04:3:90"
+    quarter = Road.parse("sine:0.04:3:90")
+    assert quarter.height_at(0.0) == pytest.approx(0.04) and quarter.height_at(0.75) == pytest.approx(0.0, abs=1e-15)
+    design, settings = Design.from_deg(195.3, 0.037, 0.088), SimSettings(duration=1.0)
+    shifted = simulate(design, Road.parse("sine:0.01:3:180"), settings)
+    flipped = simulate(design, Road.parse("sine:-0.01:3"), settings)
+    assert shifted.ok and flipped.ok
+    assert shifted.distance_m == pytest.approx(flipped.distance_m, rel=1e-9)
+    assert shifted.fz_rear_max_n == pytest.approx(flipped.fz_rear_max_n, rel=1e-6)
+    assert abs(shifted.distance_m - simulate(design, Road.parse("sine:0.01:3"), settings).distance_m) > 1e-4
+
+
 def test_profile_needs_increasing_x():
     with pytest.raises(RoadError, match="increasing"):
         Road.from_points([0, 2, 1], [0, 0, 0])
@@ -95,6 +111,7 @@ def test_profile_needs_increasing_x():
     ("sine:0.01:1e6", "wavelength LAMBDA must be in"),
     ("bump:0.01:1e-6", "width SIGMA must be in"),
     ("bump:0.01:0.2:1e9", "bump centre MU"),
+    ("sine:0.01:3:400", "PHASE_DEG must be within"),
 ])
 def test_roads_beyond_the_limits_are_refused(spec, fragment):
     with pytest.raises(RoadError, match=fragment):
