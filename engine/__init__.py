@@ -38,8 +38,8 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("StaticLoads", "calibration_design", "solve_chassis_cog", "solve_torque", "static_loads"),
                     "finaldrive.engine.calibrate"),
     **dict.fromkeys(("CMAES", "DifferentialEvolution", "OPTIMISERS", "Optimiser"), "finaldrive.engine.optimize"),
-    **dict.fromkeys(("BAND_LIMIT_M", "TIE_CANDIDATES", "TIGHT_FACTOR", "band_of", "band_settings", "numerical_bands",
-                     "tie_flags", "top_designs"), "finaldrive.engine.study.band"),
+    **dict.fromkeys(("BAND_LIMIT_M", "TIE_CANDIDATES", "TIGHT_FACTOR", "band_of", "band_settings", "best_distinct",
+                     "numerical_bands", "tie_flags"), "finaldrive.engine.study.band"),
     **dict.fromkeys(("CONCENTRIC_L2_M", "DEFAULT_TOLERANCE_PCT", "MAX_TOLERANCE_PCT", "SENSITIVITY_STEPS", "angle_arc",
                      "finite_differences", "near_mask", "near_optimal", "near_summary", "sensitivities",
                      "sensitivity_sentences", "sensitivity_stencil", "spread", "upper_limits"),
@@ -133,9 +133,9 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         TIGHT_FACTOR as TIGHT_FACTOR,
         band_of as band_of,
         band_settings as band_settings,
+        best_distinct as best_distinct,
         numerical_bands as numerical_bands,
         tie_flags as tie_flags,
-        top_designs as top_designs,
     )
     from finaldrive.engine.study.plan import (
         PAPER_SWEEP_STEP as PAPER_SWEEP_STEP,

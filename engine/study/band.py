@@ -28,7 +28,7 @@ TIGHT_FACTOR = 100.0
 #: A band wider than this [m] is flagged (``exceeds_limit``): a difference of 1 mm between two
 #: designs is then not decided by the numerics.
 BAND_LIMIT_M = 1.0e-3
-#: Designs of a near-optimal set given a band to look for ties with the best (the best included).
+#: Designs given a band to look for ties with the best (the best included; :func:`best_distinct`).
 TIE_CANDIDATES = 5
 
 
@@ -86,23 +86,28 @@ def tie_flags(bands: list[dict[str, Any]]) -> list[bool]:
             for b in bands]
 
 
-def top_designs(designs: np.ndarray, score: np.ndarray, n: int = TIE_CANDIDATES,
-                decimals: int = 9) -> np.ndarray:
-    """The ``n`` best distinct design rows by ``score`` (NaN last), best first (a design evaluated
-    twice, as DE re-evaluates, counted once)."""
+#: Two designs are distinct when apart by at least this much in one variable: a2 [rad], L2 [m], R_WS [m]
+#: (1 deg, 1 mm, 1 mm: the sensitivities' steps, engine.study.sharpness), so the ties compare other
+#: designs, not a converged DE's copies of the best a micrometre apart.
+DISTINCT = (math.radians(1.0), 1.0e-3, 1.0e-3)
+
+
+def best_distinct(designs: np.ndarray, score: np.ndarray, n: int = TIE_CANDIDATES) -> np.ndarray:
+    """Indices of the ``n`` best design rows by ``score`` (NaN never), best first, each
+    :data:`DISTINCT` from every better one (the first of equals)."""
     order = np.argsort(np.where(np.isfinite(score), -score, np.inf), kind="stable")
-    seen: set[tuple[float, ...]] = set()
-    out = []
+    out: list[int] = []
     for i in order:
-        if not np.isfinite(score[i]):
+        if not np.isfinite(score[i]) or len(out) == n:
             break
-        key = tuple(np.round(designs[i], decimals).tolist())
-        if key not in seen:
-            seen.add(key)
-            out.append(designs[i])
-            if len(out) == n:
-                break
-    return np.array(out).reshape(-1, 3)
+        if all(_apart(designs[i], designs[kept]) for kept in out):
+            out.append(int(i))
+    return np.array(out, dtype=int)
+
+
+def _apart(a: np.ndarray, b: np.ndarray) -> bool:
+    turn = abs((a[0] - b[0] + math.pi) % (2.0 * math.pi) - math.pi)   # a2 on the circle
+    return bool(turn >= DISTINCT[0] or abs(a[1] - b[1]) >= DISTINCT[1] or abs(a[2] - b[2]) >= DISTINCT[2])
 
 
 def _plain(value: float) -> float | None:

@@ -13,10 +13,11 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numpy as np
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from finaldrive.engine import TIE_CANDIDATES, TIGHT_FACTOR, band_of, tie_flags
+from finaldrive.engine import TIGHT_FACTOR, band_of, best_distinct, tie_flags
 from finaldrive.service.api.problems import ApiProblem
 from finaldrive.service.api.sharpness import own_designs_job
 from finaldrive.service.db.models import TERMINAL_STATES, EvalStatus, Evaluation, Job, JobRoad
@@ -26,8 +27,9 @@ from finaldrive.service.services import Services
 
 #: The re-runs of a band (engine.band_settings) as a job's settings: label -> the changes.
 RE_RUNS = ("tight", "reference")
-#: Best rows read a road to find its distinct best designs (a DE evaluates a design more than once).
-_SCAN = 20 * TIE_CANDIDATES
+#: Best evaluations read a road to find its distinct best designs (a converged DE holds many copies of its
+#: best within a micrometre; a study's whole DE on a road is 2,550).
+_SCAN = 3000
 
 Top = list[tuple[float, float, float, float, float]]   # (a2 [deg], L2 [m], R_WS [m], fitness [m], distance [m])
 
@@ -38,7 +40,8 @@ def band_key(job_id: int, label: str) -> str:
 
 
 def top_designs(session: Session, job: Job) -> list[tuple[JobRoad, Top]]:
-    """Each road's best distinct successful designs, best first (ties of fitness: the first stored)."""
+    """Each road's best successful designs, best first, each distinct from the better ones
+    (engine.best_distinct: 1 deg of a2 or 1 mm of L2 or R_WS), among its :data:`_SCAN` best evaluations."""
     out = []
     for road in session.scalars(select(JobRoad).where(JobRoad.job_id == job.id).order_by(JobRoad.road_index)):
         e = Evaluation
@@ -47,12 +50,9 @@ def top_designs(session: Session, job: Job) -> list[tuple[JobRoad, Top]]:
             .where(e.job_id == job.id, e.road_index == road.road_index, e.status == EvalStatus.ok.value,
                    e.fitness_m.is_not(None))
             .order_by(e.fitness_m.desc(), e.id).limit(_SCAN)).all()
-        seen: set[tuple[float, float, float]] = set()
-        top: Top = []
-        for a2, l2, rws, fitness, distance in rows:
-            if (a2, l2, rws) not in seen and len(top) < TIE_CANDIDATES:
-                seen.add((a2, l2, rws))
-                top.append((a2, l2, rws, _number(fitness), _number(distance)))
+        values = np.array([[math.radians(r[0]), r[1], r[2], r[3]] for r in rows]).reshape(-1, 4)
+        top: Top = [(rows[i][0], rows[i][1], rows[i][2], _number(rows[i][3]), _number(rows[i][4]))
+                    for i in best_distinct(values[:, :3], values[:, 3])]
         out.append((road, top))
     return out
 

@@ -201,7 +201,7 @@ def _bands(sharp: dict[str, Any], best: dict[str, Any], per_road: list[dict[str,
     """Numerical bands (engine study.band): on one road, of the best and the next best distinct
     designs, with which of them tie with it (``sharpness.ties``); over several roads, of the best
     design on each road and of its score (each re-run's fitness aggregated as the score is)."""
-    from finaldrive.engine import BAND_LIMIT_M, aggregate, numerical_bands, tie_flags, top_designs
+    from finaldrive.engine import BAND_LIMIT_M, aggregate, best_distinct, numerical_bands, tie_flags
 
     if len(plan.roads) > 1:
         bands = [numerical_bands(best_x[None, :], road.road, settings, vehicle)[0] for road in plan.roads]
@@ -217,7 +217,7 @@ def _bands(sharp: dict[str, Any], best: dict[str, Any], per_road: list[dict[str,
                                       "runs": {label: {"fitness_m": v} for label, v in scores.items()}}
         return
     designs, fitness, _ = tally.arrays()
-    rows = top_designs(designs, fitness[0])
+    rows = designs[best_distinct(designs, fitness[0])]
     bands = numerical_bands(rows, plan.roads[0].road, settings, vehicle)
     best["numerical_band"] = bands[0]
     sharp["ties"] = [{**design_dict(row), **band, "tie": tie}

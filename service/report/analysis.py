@@ -28,11 +28,11 @@ from finaldrive.engine import (
     PRESETS,
     Road,
     aggregate,
+    best_distinct,
     near_optimal,
     numerical_bands,
     regret,
     tie_flags,
-    top_designs,
 )
 from finaldrive.service.report.data import StudyData
 from finaldrive.service.report.table14 import study_settings
@@ -180,7 +180,8 @@ def add_bands(data: StudyData, roads: list[dict[str, Any]]) -> None:
     e = data.evals
     for r in roads:
         mask = (e["road_index"] == r["index"]) & e["ok"]
-        rows = top_designs(np.stack([e["a2"][mask], e["l2_m"][mask], e["rws_m"][mask]], axis=1), e["fitness_m"][mask])
+        designs = np.stack([e["a2"][mask], e["l2_m"][mask], e["rws_m"][mask]], axis=1)
+        rows = designs[best_distinct(designs, e["fitness_m"][mask])]
         bands = numerical_bands(rows, Road.parse(r["spec"]), settings, vehicle) if len(rows) else []
         r["numerical_band"] = _band(bands[0]) if bands else None
         r["ties"] = [{"a2_deg": _r(math.degrees(x[0]) % 360.0, 4), "l2_m": _r(x[1], 6), "rws_m": _r(x[2], 6),

@@ -5,7 +5,6 @@ where the issue measured them not to (Table 14's geometry 2 on sine:0.04:2: 18.2
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from finaldrive.engine import (
     BAND_LIMIT_M,
@@ -13,10 +12,10 @@ from finaldrive.engine import (
     Road,
     SimSettings,
     band_settings,
+    best_distinct,
     numerical_bands,
     simulate,
     tie_flags,
-    top_designs,
 )
 
 TABLE11 = Design.from_deg(195.3, 0.037, 0.088)
@@ -55,23 +54,19 @@ def test_ties_are_fitness_closer_than_the_two_bands() -> None:
     assert tie_flags([]) == []
 
 
-def test_top_designs_are_the_best_distinct_ones() -> None:
-    designs = np.array([[0.1, 0.1, 0.1], [0.2, 0.1, 0.1], [0.1, 0.1, 0.1], [0.3, 0.1, 0.1], [0.4, 0.1, 0.1]])
-    score = np.array([3.0, 2.0, 3.0, np.nan, 1.0])
-    top = top_designs(designs, score, n=3)
-    np.testing.assert_array_equal(top, designs[[0, 1, 4]])
-    assert top_designs(designs, np.full(5, np.nan)).shape == (0, 3)
-
-
-@pytest.mark.parametrize("n", [1, 2])
-def test_top_designs_stops_at_n(n: int) -> None:
-    designs = np.array([[0.1 * i, 0.1, 0.1] for i in range(5)])
-    assert len(top_designs(designs, np.arange(5.0), n=n)) == n
+def test_the_best_distinct_designs_are_a_degree_or_a_millimetre_apart() -> None:
+    """A converged DE's copies of its best (a micrometre apart) count once; a2 is apart on the circle."""
+    designs = np.array([[0.1, 0.1, 0.1], [0.1 + 1e-7, 0.1, 0.1], [0.2, 0.1, 0.1], [0.3, 0.1, 0.1],
+                        [0.2, 0.1005, 0.1], [0.2, 0.1, 0.1011], [2 * np.pi - 0.001, 0.05, 0.1], [0.0045, 0.05, 0.1]])
+    score = np.array([9.0, 8.9, 8.0, np.nan, 7.5, 7.0, 6.0, 5.0])
+    assert best_distinct(designs, score).tolist() == [0, 2, 5, 6]   # 7 is 0.32 deg from 6 across 0
+    assert best_distinct(designs, score, n=2).tolist() == [0, 2]
+    assert best_distinct(designs, np.full(8, np.nan)).tolist() == []
 
 
 def test_a_failed_re_run_is_named_and_left_out() -> None:
-    """The paper study's optimum on sine:0.04:2 at 2 cm (docs/paper-study.json): the reference
-    method's corrector does not converge near the end; the band is the tight re-run's."""
+    """The paper study's optimum on sine:0.02:2 (docs/paper-study.json): the reference method's
+    corrector does not converge near the end; the band is the tight re-run's."""
     design = Design.from_deg(332.45, 0.00671, 0.05011)
     band = numerical_bands(np.array([design.row()]), Road.parse("sine:0.02:2"), SimSettings())[0]
     assert set(band["failed"]) == {"reference"} and "did not converge" in band["failed"]["reference"]
