@@ -40,6 +40,7 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("CMAES", "DifferentialEvolution", "OPTIMISERS", "Optimiser"), "finaldrive.engine.optimize"),
     **dict.fromkeys(("BAND_LIMIT_M", "TIE_CANDIDATES", "TIGHT_FACTOR", "band_of", "band_settings", "best_distinct",
                      "numerical_bands", "tie_flags"), "finaldrive.engine.study.band"),
+    **dict.fromkeys(("ALTERNATIVES", "Alternative", "model_bands"), "finaldrive.engine.study.model_band"),
     **dict.fromkeys(("CONCENTRIC_L2_M", "DEFAULT_TOLERANCE_PCT", "MAX_TOLERANCE_PCT", "SENSITIVITY_STEPS", "angle_arc",
                      "finite_differences", "near_mask", "near_optimal", "near_summary", "sensitivities",
                      "sensitivity_sentences", "sensitivity_stencil", "spread", "upper_limits"),
@@ -136,6 +137,11 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         best_distinct as best_distinct,
         numerical_bands as numerical_bands,
         tie_flags as tie_flags,
+    )
+    from finaldrive.engine.study.model_band import (
+        ALTERNATIVES as ALTERNATIVES,
+        Alternative as Alternative,
+        model_bands as model_bands,
     )
     from finaldrive.engine.study.plan import (
         PAPER_SWEEP_STEP as PAPER_SWEEP_STEP,

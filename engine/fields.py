@@ -124,6 +124,9 @@ _STUDY = [
                  "and with the reference method (engine.study.band)", 4),
     _f("distance_band_m", "numerical band of the distance, as band_m", 4),
     _f("exceeds_limit", "the band is wider than 1 mm: a 1 mm difference is not decided by the numerics"),
+    _f("rank_correlation", "model band: Spearman rank correlation of the designs' fitness under an alternative "
+                           "with the model as given (engine.study.model_band)", 3),
+    _f("largest_change_m", "model band: the largest change of a design's fitness under an alternative", 4),
     _f("tie", "the design's fitness is within the sum of its band and the best's band of the best's: a tie"),
 ]
 

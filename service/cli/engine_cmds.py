@@ -154,16 +154,11 @@ def write_rows_csv(rows: list[dict[str, Any]], stream: Any) -> None:
 
 
 def run_evaluate(args: argparse.Namespace) -> int:
-    from finaldrive.engine import Design, DesignError, evaluate
+    from finaldrive.engine import evaluate
 
     vehicle = load_vehicle_arg(args.vehicle)
     road = road_from_arg(args.road)
-    designs = read_designs_csv(args.designs)
-    for line, (a2, l2, rws) in enumerate(designs.tolist(), start=2):
-        try:
-            vehicle.check_design(Design(a2, l2, rws))
-        except DesignError as exc:
-            raise UsageError(f"designs file {args.designs!r}, line {line}: {exc}") from None
+    designs = _checked_designs(args.designs, vehicle)
     settings = settings_from_args(args)
     batch = evaluate(designs, road, settings, vehicle)
     rows = batch_rows(batch)
@@ -172,6 +167,49 @@ def run_evaluate(args: argparse.Namespace) -> int:
     else:
         write_rows_csv(rows, sys.stdout)
     return 0
+
+
+# --- model-band -----------------------------------------------------------------------------
+
+def run_model_band(args: argparse.Namespace) -> int:
+    from finaldrive.engine import model_bands
+
+    vehicle = load_vehicle_arg(args.vehicle)
+    road = road_from_arg(args.road)
+    designs = _checked_designs(args.designs, vehicle)
+    if len(designs) < 2:
+        raise UsageError(f"designs file {args.designs!r}: a ranking needs at least 2 designs")
+    out = {"road": road.spec, "designs": [{"a2_deg": math.degrees(a2), "l2_m": l2, "rws_m": rws}
+                                          for a2, l2, rws in designs.tolist()],
+           **model_bands(designs, road, settings_from_args(args), vehicle)}
+    if args.json:
+        print_json(out)
+        return 0
+    base = out["baseline"]
+    best = "none" if base["best"] is None else f"design {base['best'] + 1} (line {base['best'] + 2} of the file)"
+    print(f"{len(designs)} designs on {road.spec}; the best with the model as given: {best}")
+    print(f"{'alternative':<22} {'rank corr.':>10} {'same best':>9} {'largest change [mm]':>19} {'failed':>6}  what")
+    for name, alt in out["alternatives"].items():
+        rho = "-" if alt["rank_correlation"] is None else f"{alt['rank_correlation']:.3f}"
+        change = "-" if alt["largest_change_m"] is None else f"{1000 * alt['largest_change_m']:.1f}"
+        failed = sum(f is None for f in alt["fitness_m"])
+        print(f"{name:<22} {rho:>10} {'yes' if alt['same_best'] else 'no':>9} {change:>19} {failed:>6}  {alt['what']}")
+    if out["skipped"]:
+        print(f"not applicable to this road: {', '.join(out['skipped'])}")
+    return 0
+
+
+def _checked_designs(path: str, vehicle: Any) -> Any:
+    """A designs CSV (a2_deg,l2_m,rws_m) as rows (a2 [rad], L2, R_WS), each a design the vehicle allows."""
+    from finaldrive.engine import Design, DesignError
+
+    designs = read_designs_csv(path)
+    for line, (a2, l2, rws) in enumerate(designs.tolist(), start=2):
+        try:
+            vehicle.check_design(Design(a2, l2, rws))
+        except DesignError as exc:
+            raise UsageError(f"designs file {path!r}, line {line}: {exc}") from None
+    return designs
 
 
 # --- calibrate ------------------------------------------------------------------------------
@@ -228,6 +266,16 @@ def register(sub: Any) -> None:
     add_settings_args(p)
     add_json_arg(p, "print a JSON list instead of CSV")
     p.set_defaults(run=run_evaluate)
+
+    p = sub.add_parser("model-band", help="a CSV of designs under the documented modelling alternatives (tyre "
+                       "load range, drive level, road phase): does their ranking survive them?", **parser_options())
+    p.add_argument("--designs", required=True, metavar="FILE.csv", help="CSV with the header a2_deg,l2_m,rws_m "
+                   "(at least 2 designs)")
+    p.add_argument("--road", required=True, help=ROAD_HELP)
+    add_vehicle_arg(p)
+    add_settings_args(p)
+    add_json_arg(p, "print JSON: every design's fitness and distance under each alternative")
+    p.set_defaults(run=run_model_band)
 
     p = sub.add_parser("calibrate", help="solve the chassis centre of mass and the drive torque of a vehicle file",
                        **parser_options())

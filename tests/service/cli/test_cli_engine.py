@@ -55,6 +55,24 @@ def test_evaluate_keeps_input_order(tmp_path, capsys):
     assert code == 2 and "line 3: rws = 0.3 m: must be <= 0.2 m" in err
 
 
+def test_model_band_ranks_the_designs_under_each_alternative(tmp_path, capsys):
+    designs = tmp_path / "d.csv"
+    designs.write_text("a2_deg,l2_m,rws_m\n0,0,0.093\n270,0.15,0.05\n195.3,0.037,0.088\n")
+    argv = ["model-band", "--designs", str(designs), "--road", "sine:0.02:3", "--duration", "0.3"]
+    code, out, _ = run([*argv, "--json"], capsys)
+    r = json.loads(out)
+    assert code == 0 and r["road"] == "sine:0.02:3" and len(r["designs"]) == 3 and r["skipped"] == []
+    assert set(r["alternatives"]) == {"tyre_load_range_4800", "drive_half", "drive_double", "road_phase_90",
+                                      "road_phase_180"}
+    for alt in r["alternatives"].values():
+        assert len(alt["fitness_m"]) == 3 and -1 <= alt["rank_correlation"] <= 1 and alt["what"]
+    code, out, _ = run(argv, capsys)
+    assert code == 0 and "drive_double" in out and "rank corr." in out
+    designs.write_text("a2_deg,l2_m,rws_m\n0,0,0.093\n")
+    code, _, err = run(["model-band", "--designs", str(designs), "--road", "flat"], capsys)
+    assert code == 2 and "at least 2 designs" in err
+
+
 @pytest.mark.parametrize("argv, fragment", [
     (["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0.09", "--road", "cobbles"], "cobbles"),
     (["simulate", "--a2-deg", "0", "--l2", "-0.1", "--rws", "0.09", "--road", "flat"], "l2"),

@@ -1,0 +1,123 @@
+"""Whether a ranking of designs survives the modelling choices: the same designs under documented
+alternatives to the model, with the rank correlation of each against the vehicle as given.
+
+The differences between good designs (millimetres) are smaller than some modelling choices move a
+run (the issue measured up to 155 mm from the Magic Formula's load range, and a reversed ranking from
+a harder drive). :data:`ALTERNATIVES` are those choices, each a named change of the vehicle or the
+road; a road it does not apply to (a phase of a road that is not a sine) is skipped. Road enveloping
+(a rigid-ring tyre over the road) is not modelled by the engine, so it is not among them.
+See docs/optimisation.md#model-bands.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from scipy.stats import spearmanr
+
+from finaldrive.engine.api import STATUS_OK, SimSettings
+from finaldrive.engine.simulation import evaluate
+from finaldrive.engine.vehicle import default_vehicle
+
+if TYPE_CHECKING:
+    from finaldrive.engine.model.road import Road
+    from finaldrive.engine.vehicle import Vehicle
+
+Change = Callable[["Road", "Vehicle"], "tuple[Road, Vehicle] | None"]
+
+
+@dataclass(frozen=True)
+class Alternative:
+    """A documented alternative to the model: its name, what it changes, and the change (None where
+    it does not apply)."""
+
+    name: str
+    what: str
+    change: Change
+
+
+def _vehicle(**scale: float) -> Change:
+    def change(road: Road, vehicle: Vehicle) -> tuple[Road, Vehicle]:
+        return road, vehicle.replace(**{key: vehicle[key] * factor for key, factor in scale.items()})
+    return change
+
+
+def _load_range(fz_max_n: float) -> Change:
+    def change(road: Road, vehicle: Vehicle) -> tuple[Road, Vehicle]:
+        return road, vehicle.replace(Fz_max=fz_max_n)
+    return change
+
+
+def _phase(degrees: float) -> Change:
+    def change(road: Road, vehicle: Vehicle) -> tuple[Road, Vehicle] | None:
+        if road.kind != "sine":
+            return None
+        return dataclasses.replace(road, phase_deg=(road.phase_deg + degrees) % 360.0), vehicle
+    return change
+
+
+#: The Magic Formula's upper load bound the issue compared (vehicle file: Fz_max 6,400 N, 4 Fz0).
+LOW_LOAD_RANGE_N = 4800.0
+
+ALTERNATIVES: tuple[Alternative, ...] = (
+    Alternative("tyre_load_range_4800", f"the Magic Formula's loads held within {LOW_LOAD_RANGE_N:g} N (the vehicle "
+                "file's Fz_max: 6,400 N; docs/engine.md#magic-formula-load-range)", _load_range(LOW_LOAD_RANGE_N)),
+    Alternative("drive_half", "the drive torque halved (a gentler launch than the paper's constant 150 N m)",
+                _vehicle(torque=0.5)),
+    Alternative("drive_double", "the drive torque doubled (300 N m: a harder launch)", _vehicle(torque=2.0)),
+    Alternative("road_phase_90", "a sine road started a quarter period later (sine roads only)", _phase(90.0)),
+    Alternative("road_phase_180", "a sine road started half a period later (sine roads only)", _phase(180.0)),
+)
+
+
+def model_bands(designs: np.ndarray, road: Road, settings: SimSettings = SimSettings(),
+                vehicle: Vehicle | None = None) -> dict[str, Any]:
+    """Design rows (a2 [rad], L2 [m], R_WS [m]) simulated with the vehicle and road as given
+    (``baseline``) and under each applicable alternative: per alternative each design's fitness and
+    distance, the Spearman rank correlation of its fitness with the baseline's over the designs that
+    succeeded in both (``rank_correlation``; None below 3 of them), the best design's index and
+    whether it is the baseline's, and the largest change of a fitness."""
+    rows = np.asarray(designs, dtype=float).reshape(-1, 3)
+    vehicle = vehicle or default_vehicle()
+    base = evaluate(rows, road, settings, vehicle)
+    base_f = _fitness(base)
+    out: dict[str, Any] = {"baseline": _runs(base, base_f, base_f), "alternatives": {}, "skipped": []}
+    for alt in ALTERNATIVES:
+        changed = alt.change(road, vehicle)
+        if changed is None:
+            out["skipped"].append(alt.name)
+            continue
+        batch = evaluate(rows, changed[0], settings, changed[1])
+        out["alternatives"][alt.name] = {"what": alt.what, "road": changed[0].spec,
+                                         **_runs(batch, _fitness(batch), base_f)}
+    return out
+
+
+def _fitness(batch: Any) -> np.ndarray:
+    ok = np.array([s == STATUS_OK for s in batch.status])
+    return np.where(ok, batch.fitness_m, np.nan)
+
+
+def _runs(batch: Any, fitness: np.ndarray, base: np.ndarray) -> dict[str, Any]:
+    both = np.isfinite(fitness) & np.isfinite(base)
+    rho = None
+    if both.sum() >= 3:
+        value = float(spearmanr(base[both], fitness[both]).statistic)
+        rho = value if math.isfinite(value) else None
+    best = int(np.nanargmax(fitness)) if np.isfinite(fitness).any() else None
+    base_best = int(np.nanargmax(base)) if np.isfinite(base).any() else None
+    return {
+        "fitness_m": [_plain(v) for v in fitness], "distance_m": [_plain(v) for v in batch.distance_m],
+        "failed": list(batch.reason), "rank_correlation": rho, "best": best,
+        "same_best": best is not None and best == base_best,
+        "largest_change_m": _plain(float(np.max(np.abs(fitness[both] - base[both])))) if both.any() else None,
+    }
+
+
+def _plain(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
