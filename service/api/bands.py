@@ -17,7 +17,7 @@ import numpy as np
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from finaldrive.engine import TIGHT_FACTOR, band_of, best_distinct, tie_flags
+from finaldrive.engine import SimSettings, band_of, band_settings, best_distinct, tie_flags
 from finaldrive.service.api.problems import ApiProblem
 from finaldrive.service.api.sharpness import own_designs_job
 from finaldrive.service.db.models import TERMINAL_STATES, EvalStatus, Evaluation, Job, JobRoad
@@ -25,8 +25,8 @@ from finaldrive.service.db.repository import job_by_idempotency_key
 from finaldrive.service.schemas import JobSpec, SimulationSpec
 from finaldrive.service.services import Services
 
-#: The re-runs of a band (engine.band_settings) as a job's settings: label -> the changes.
-RE_RUNS = ("tight", "reference")
+#: The labels of a band's re-runs (engine.band_settings): tight, reference.
+RE_RUNS = tuple(band_settings(SimSettings()))
 #: Best evaluations read a road to find its distinct best designs (a converged DE holds many copies of its
 #: best within a micrometre; a study's whole DE on a road is 2,550).
 _SCAN = 3000
@@ -78,10 +78,10 @@ def band_jobs(services: Services, job: Job) -> dict[str, Job]:
 
 
 def re_run(settings: SimulationSpec, label: str) -> SimulationSpec:
-    """A job's settings for the band's re-run ``label`` (as engine.band_settings)."""
-    if label == "tight":
-        return settings.model_copy(update={"method": "fast", "fast_tolerance": settings.fast_tolerance / TIGHT_FACTOR})
-    return settings.model_copy(update={"method": "reference"})
+    """A job's settings for the band's re-run ``label``: engine.band_settings's, in the spec's fields."""
+    engine = band_settings(SimSettings(duration=settings.duration, dt=settings.dt, method=settings.method,
+                                       fast_tolerance=settings.fast_tolerance))[label]
+    return settings.model_copy(update={"method": engine.method, "fast_tolerance": engine.fast_tolerance})
 
 
 def stored_bands(session: Session, job: Job, jobs: dict[str, Job]) -> dict[int, dict[str, Any]]:
