@@ -29,6 +29,7 @@ from finaldrive.engine.model import diagnostics as D, params as P
 from finaldrive.engine.model.coordinates import N_CONSTRAINTS, N_COORDS, X1, X14, X15, Y14
 from finaldrive.engine.model.elements import N_AUX
 from finaldrive.engine.model.kinematics import GeometryError, assemble, pose_from_minimal, squat_ratio_at
+from finaldrive.engine.model.linalg import dot, matvec
 from finaldrive.engine.model.mass import gravity_forces, mass_matrix, potential_energy
 from finaldrive.engine.model.road import Road
 from finaldrive.engine.record import DIAGNOSTICS
@@ -174,7 +175,9 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
     else:
         x1_end = float(y[X1])
         qd = y[N_COORDS:2 * N_COORDS]
-        kinetic = float(0.5 * qd @ M @ qd)
+        Mqd = np.empty(N_COORDS)
+        matvec(M, qd, Mqd)
+        kinetic = 0.5 * dot(qd, Mqd)   # engine.model.linalg: not BLAS's CPU-chosen kernels
         q_end = y[:N_COORDS]
         rows = int(st[reference.S_ROW])
     off_road = road.uncovered(float(setup.q0[X14]), float(q_end[X15]))

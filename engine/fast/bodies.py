@@ -23,11 +23,9 @@ allocated: the entries and factors live in the caller's workspace ``ws``.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from finaldrive.engine.model import params as P
+from finaldrive.engine.model import libm, params as P
 from finaldrive.engine.model.jit import jit
 
 N_DOF = 6
@@ -57,12 +55,12 @@ def design_constants(p: np.ndarray) -> np.ndarray:
     vector of the fork axis r_4->5, eqs. 1-8, 14-15) and the mass moments of the bodies."""
     g = np.empty(N_GEO)
     g[G_COG_X], g[G_COG_Y] = p[P.CHASSIS_COG_X], p[P.CHASSIS_COG_Y]
-    g[G_P2_X], g[G_P2_Y] = p[P.L2] * math.cos(p[P.A2]), p[P.L2] * math.sin(p[P.A2])
-    g[G_P3_X], g[G_P3_Y] = p[P.L3] * math.cos(p[P.A3]), p[P.L3] * math.sin(p[P.A3])
-    g[G_P4_X], g[G_P4_Y] = p[P.L4] * math.cos(p[P.A4]), p[P.L4] * math.sin(p[P.A4])
-    ux = p[P.L5] * math.cos(p[P.A5]) - g[G_P4_X]
-    uy = p[P.L5] * math.sin(p[P.A5]) - g[G_P4_Y]
-    n = math.hypot(ux, uy)
+    g[G_P2_X], g[G_P2_Y] = p[P.L2] * libm.cos(p[P.A2]), p[P.L2] * libm.sin(p[P.A2])
+    g[G_P3_X], g[G_P3_Y] = p[P.L3] * libm.cos(p[P.A3]), p[P.L3] * libm.sin(p[P.A3])
+    g[G_P4_X], g[G_P4_Y] = p[P.L4] * libm.cos(p[P.A4]), p[P.L4] * libm.sin(p[P.A4])
+    ux = p[P.L5] * libm.cos(p[P.A5]) - g[G_P4_X]
+    uy = p[P.L5] * libm.sin(p[P.A5]) - g[G_P4_Y]
+    n = libm.hypot(ux, uy)
     ux, uy = ux / n, uy / n
     g[G_AXIS_X], g[G_AXIS_Y] = ux, uy
     m_c, m_sp, m_f, m_fw = p[P.M_CHASSIS], p[P.M_SPROCKET], p[P.M_FORK], p[P.M_FRONT_WHEEL]

@@ -16,15 +16,14 @@ constraint: the impulse that stops the gap's rate, momentum conserved, the kinet
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from finaldrive.engine.fast.bodies import G_P2_X, G_P2_Y, N_DOF, ZBETA, ZPHI, ZTHETA, mass_solve
 from finaldrive.engine.fast.minimal import FREE, LOWER, UPPER, ZALPHA_DOT, ZPLAY, chain_terms
-from finaldrive.engine.model import params as P
+from finaldrive.engine.model import libm, params as P
 from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.kinematics import loop_length
+from finaldrive.engine.model.linalg import dot
 
 #: A run's gap may close by this much at the end of the step that locates its re-engagement [m].
 GAP_TOL = 1.0e-7
@@ -36,16 +35,17 @@ TENSION_TOL = 1.0
 @jit
 def sprocket_centres(y: np.ndarray, p: np.ndarray, geo: np.ndarray) -> tuple[float, float, float, float]:
     """World offsets of points 2 and 6 from point 1 (eqs. 1-2, 9-10)."""
-    ct, st = math.cos(y[ZTHETA]), math.sin(y[ZTHETA])
+    st, ct = libm.sincos(y[ZTHETA])
     w2x, w2y = ct * geo[G_P2_X] - st * geo[G_P2_Y], st * geo[G_P2_X] + ct * geo[G_P2_Y]
-    return w2x, w2y, p[P.L_SA] * math.cos(y[ZPHI]), p[P.L_SA] * math.sin(y[ZPHI])
+    sp, cp = libm.sincos(y[ZPHI])
+    return w2x, w2y, p[P.L_SA] * cp, p[P.L_SA] * sp
 
 
 @jit
 def slack(y: np.ndarray, p: np.ndarray, geo: np.ndarray) -> float:
     """s = g_u + g_l: the chain's length beyond the loop of its two taut runs at the state y [m]."""
     w2x, w2y, w6x, w6y = sprocket_centres(y, p, geo)
-    return float(p[P.L_LOOP] - loop_length(math.hypot(w6x - w2x, w6y - w2y), p[P.R_ES], p[P.R_WS]))
+    return float(p[P.L_LOOP] - loop_length(libm.hypot(w6x - w2x, w6y - w2y), p[P.R_ES], p[P.R_WS]))
 
 
 @jit
@@ -94,7 +94,7 @@ def engage(y: np.ndarray, run: int, p: np.ndarray, geo: np.ndarray, ws: np.ndarr
     x = np.zeros(N_DOF)
     mass_solve(geo, ws, ja, x)
     closing = y[ZALPHA_DOT] - alpha_rate                       # G v
-    compliance = np.dot(ja, x) + 1.0 / p[P.I_SPROCKET]         # G M7^-1 G
+    compliance = dot(ja, x) + 1.0 / p[P.I_SPROCKET]         # G M7^-1 G
     impulse = -closing / compliance
     for i in range(N_DOF):
         y[N_DOF + i] -= x[i] * impulse

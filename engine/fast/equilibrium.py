@@ -18,7 +18,7 @@ import numpy as np
 
 from finaldrive.engine.fast.bodies import N_WS, W_Q, ZFS, ZPHI, ZTHETA, ZX1, ZY1, design_constants
 from finaldrive.engine.fast.minimal import N_STATE, fast_rhs
-from finaldrive.engine.model import params as P
+from finaldrive.engine.model import libm, params as P
 from finaldrive.engine.model.coordinates import FT, GAMMA, RT
 from finaldrive.engine.model.elements import N_AUX
 from finaldrive.engine.model.jit import jit
@@ -42,7 +42,7 @@ def _rest_forces(free, p0, geo, kind, rp, out):
     """Generalized forces at rest on (y1, theta, phi + x1 with it, fs), over the chassis weight."""
     y = np.zeros(N_STATE)
     y[ZY1], y[ZTHETA], y[ZPHI], y[ZFS] = free[0], free[1], free[2], free[3]
-    y[ZX1] = -p0[P.L_SA] * math.cos(free[2])
+    y[ZX1] = -p0[P.L_SA] * libm.cos(free[2])
     ydot = np.zeros(N_STATE)
     aux = np.zeros(N_AUX)
     ws = np.zeros(N_WS)
@@ -51,7 +51,7 @@ def _rest_forces(free, p0, geo, kind, rp, out):
     w = p0[P.M_CHASSIS] * p0[P.GRAVITY]
     out[0] = F[ZY1] / w
     out[1] = F[ZTHETA] / w
-    out[2] = (F[ZPHI] + p0[P.L_SA] * math.sin(free[2]) * F[ZX1]) / w
+    out[2] = (F[ZPHI] + p0[P.L_SA] * libm.sin(free[2]) * F[ZX1]) / w
     out[3] = F[ZFS] / w
 
 
@@ -97,7 +97,7 @@ def static_equilibrium(p: np.ndarray, road: Road, pose: np.ndarray | None = None
     if not ok:
         raise EquilibriumError("static equilibrium not found: Newton did not converge")
     y1, theta, phi, fs = (float(v) for v in free)
-    x1 = -p[P.L_SA] * math.cos(phi)
+    x1 = -p[P.L_SA] * libm.cos(phi)
     q = assemble(p, road, x1, y1, theta, phi, fs, 0.0, 0.0)
     if q[RT] >= p[P.RT0] or q[FT] >= p[P.FT0]:
         raise EquilibriumError("static equilibrium has a wheel off the road")

@@ -48,7 +48,7 @@ from finaldrive.engine.fast.bodies import (
     mass_product,
     mass_solve,
 )
-from finaldrive.engine.model import params as P
+from finaldrive.engine.model import libm, params as P
 from finaldrive.engine.model.elements import (
     AUX_ALPHA_DOT,
     AUX_DUDT,
@@ -65,6 +65,7 @@ from finaldrive.engine.model.elements import (
     sprocket_chain_tension,
 )
 from finaldrive.engine.model.jit import jit
+from finaldrive.engine.model.linalg import dot
 from finaldrive.engine.model.road_height import road_height
 
 N_STATE = 2 * N_DOF + 1
@@ -141,8 +142,8 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
     xd, yd, wt, wp, fsd, wb = y[6], y[7], y[8], y[9], y[10], y[11]
     u = y[ZU]
     aux[AUX_P_DAMP] = 0.0
-    ct, st = math.cos(theta), math.sin(theta)
-    cp, sp = math.cos(phi), math.sin(phi)
+    st, ct = libm.sincos(theta)
+    sp, cp = libm.sincos(phi)
     w2x, w2y = ct * geo[G_P2_X] - st * geo[G_P2_Y], st * geo[G_P2_X] + ct * geo[G_P2_Y]
     w6x, w6y = p[P.L_SA] * cp, p[P.L_SA] * sp
     ja_t, ja_p, alpha_c, taut, taut_rate, alpha_dot = chain_terms(
@@ -237,4 +238,4 @@ def kinetic_energy(y, p, kind, rp, run=UPPER):
     mz = np.zeros(N_DOF)
     mass_product(geo, ws, y[N_DOF:ZU], mz)
     free = 0.5 * p[P.I_SPROCKET] * y[ZALPHA_DOT] ** 2 if run == FREE else 0.0
-    return 0.5 * np.dot(y[N_DOF:ZU], mz) + free
+    return 0.5 * dot(y[N_DOF:ZU], mz) + free

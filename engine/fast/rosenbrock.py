@@ -43,6 +43,7 @@ from finaldrive.engine.fast.chain_runs import (
 )
 from finaldrive.engine.fast.minimal import FREE, N_STATE, N_STATE_TWO_RUNS, UPPER, ZALPHA_DOT, ZPLAY, ZU, fast_rhs
 from finaldrive.engine.fast.wstep import ERROR_ORDER, N_STAGES, attempt, w_solve
+from finaldrive.engine.model import libm
 from finaldrive.engine.model.diagnostics import (
     E_CHAIN_COMPRESSION,
     E_TAUT_MAX,
@@ -299,7 +300,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only,
                     st[S_T] = t
                     return NONFINITE
                 e = _error_norm(err, scale, n_err)
-                factor = 0.9 * max(e, 1e-10) ** (-1.0 / ERROR_ORDER)
+                factor = 0.9 * libm.pow_positive(max(e, 1e-10), -1.0 / ERROR_ORDER)
             else:
                 gh = GAMMA * h
                 w_solve(f1, gh, v, c_row, a_uu, k1)

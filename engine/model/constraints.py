@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from finaldrive.engine.model import params as P
+from finaldrive.engine.model import libm, params as P
 from finaldrive.engine.model.coordinates import (
     ALPHA,
     BETA,
@@ -59,8 +59,8 @@ from finaldrive.engine.model.road_height import road_height
 def _rotating_point(q, p, r, base_x, base_y, pt_x, pt_y, ang, length, offset, out):
     """Rows r, r+1: base + length * e(q[ang] + offset) - point = 0."""
     a = q[ang] + offset
-    out[r] = q[base_x] + length * math.cos(a) - q[pt_x]
-    out[r + 1] = q[base_y] + length * math.sin(a) - q[pt_y]
+    out[r] = q[base_x] + length * libm.cos(a) - q[pt_x]
+    out[r + 1] = q[base_y] + length * libm.sin(a) - q[pt_y]
 
 
 @jit
@@ -100,10 +100,10 @@ def _rotating_point_jac(q, r, base_x, base_y, pt_x, pt_y, ang, length, offset, J
     a = q[ang] + offset
     J[r, base_x] = 1.0
     J[r, pt_x] = -1.0
-    J[r, ang] = -length * math.sin(a)
+    J[r, ang] = -length * libm.sin(a)
     J[r + 1, base_y] = 1.0
     J[r + 1, pt_y] = -1.0
-    J[r + 1, ang] = length * math.cos(a)
+    J[r + 1, ang] = length * libm.cos(a)
 
 
 @jit
@@ -194,12 +194,12 @@ def phiq_dot_qdot(q: np.ndarray, qd: np.ndarray, p: np.ndarray, kind: int, rp: n
     w2 = qd[THETA] * qd[THETA]
     for r, length, offset in ((0, p[P.L2], p[P.A2]), (2, p[P.L3], p[P.A3]),
                               (4, p[P.L4], p[P.A4]), (6, p[P.L5], p[P.A5])):    # (1)-(8)
-        out[r] = -length * math.cos(th + offset) * w2
-        out[r + 1] = -length * math.sin(th + offset) * w2
+        out[r] = -length * libm.cos(th + offset) * w2
+        out[r + 1] = -length * libm.sin(th + offset) * w2
     w2 = qd[PHI] * qd[PHI]
     for r, length in ((8, p[P.L_SA]), (10, p[P.L7])):                             # (9)-(12)
-        out[r] = -length * math.cos(q[PHI]) * w2
-        out[r + 1] = -length * math.sin(q[PHI]) * w2
+        out[r] = -length * libm.cos(q[PHI]) * w2
+        out[r + 1] = -length * libm.sin(q[PHI]) * w2
     out[12] = 2.0 * ((qd[X3] - qd[X7]) ** 2 + (qd[Y3] - qd[Y7]) ** 2 - qd[RS] ** 2)  # (13)
     adx, ady = qd[X5] - qd[X4], qd[Y5] - qd[Y4]
     out[13] = 2.0 * (adx * (qd[Y13] - qd[Y12]) - ady * (qd[X13] - qd[X12]))          # (14)
@@ -209,8 +209,8 @@ def phiq_dot_qdot(q: np.ndarray, qd: np.ndarray, p: np.ndarray, kind: int, rp: n
     for r, ang, length in ((21, ALPHA, p[P.R_ES]), (23, GAMMA, p[P.R_ES]),
                            (25, BETA, p[P.R_WS]), (27, GAMMA, p[P.R_WS])):        # (22)-(29)
         w2 = qd[ang] * qd[ang]
-        out[r] = -length * math.cos(q[ang]) * w2
-        out[r + 1] = -length * math.sin(q[ang]) * w2
+        out[r] = -length * libm.cos(q[ang]) * w2
+        out[r + 1] = -length * libm.sin(q[ang]) * w2
     ex, ey = q[X10] - q[X11], q[Y10] - q[Y11]                                         # (30)
     edx, edy = qd[X10] - qd[X11], qd[Y10] - qd[Y11]
     d = math.sqrt(ex * ex + ey * ey)

@@ -208,11 +208,13 @@ class Kernel:
     """
 
     def __init__(self, fn: Callable[..., Any], prepare: Callable[[], None] | None = None,
-                 python: Callable[..., Any] | None = None, *, allocates: bool = False, one_form: bool = False) -> None:
+                 python: Callable[..., Any] | None = None, *, allocates: bool = False, one_form: bool = False,
+                 plain_from_python: bool = False) -> None:
         functools.update_wrapper(self, fn)
         self.py_func = fn
         self._allocates = allocates
         self._one_form = one_form
+        self._plain_from_python = plain_from_python
         self._prepare = prepare
         self._python = python or fn
         self._dispatcher: Any = None
@@ -265,25 +267,32 @@ class Kernel:
     def __call__(self, *args: Any) -> Any:
         if getattr(_local, "interpreted", False):
             trace = getattr(_local, "trace", None)
-            if trace is not None:
+            if trace is not None and (trace.inside or not self._plain_from_python):
                 return trace.call(self, args)
-            if self._dispatcher is None:
+            if self._dispatcher is None or self._plain_from_python:
                 return self._python(*args)
+        elif self._plain_from_python:
+            return self._python(*args)
         return self.dispatcher(*args)
 
 
 @overload
-def jit(fn: Callable[..., Any], *, allocates: bool = False, one_form: bool = False) -> Kernel: ...
+def jit(fn: Callable[..., Any], *, allocates: bool = False, one_form: bool = False,
+        plain_from_python: bool = False) -> Kernel: ...
 @overload
-def jit(*, allocates: bool = False, one_form: bool = False) -> Callable[[Callable[..., Any]], Kernel]: ...
-def jit(fn: Callable[..., Any] | None = None, *, allocates: bool = False, one_form: bool = False) -> Any:
+def jit(*, allocates: bool = False, one_form: bool = False,
+        plain_from_python: bool = False) -> Callable[[Callable[..., Any]], Kernel]: ...
+def jit(fn: Callable[..., Any] | None = None, *, allocates: bool = False, one_form: bool = False,
+        plain_from_python: bool = False) -> Any:
     """Decorator for compiled model and solver functions (see the module's docstring):
     ``@jit``; ``allocates=True`` for a function that makes arrays or slices (it needs numba's
     runtime); ``one_form=True`` for one that Python and compiled code both call on a method's
-    path (one form, with Python's wrapper, serves both)."""
+    path (one form, with Python's wrapper, serves both); ``plain_from_python=True`` for a scalar
+    function that Python's calls run as plain Python (a few microseconds, and no numba for code
+    that needs none: engine.model.libm)."""
     if fn is None:
-        return functools.partial(Kernel, allocates=allocates, one_form=one_form)
-    return Kernel(fn, allocates=allocates, one_form=one_form)
+        return functools.partial(Kernel, allocates=allocates, one_form=one_form, plain_from_python=plain_from_python)
+    return Kernel(fn, allocates=allocates, one_form=one_form, plain_from_python=plain_from_python)
 
 
 @contextlib.contextmanager
@@ -322,6 +331,11 @@ class Trace:
         self._omitted = types.Omitted
         self.callees: dict[Call, list[Call]] = {}
         self._stack: list[Call] = []
+
+    @property
+    def inside(self) -> bool:
+        """Whether a kernel's plain-Python run is in progress (a call now is compiled code's)."""
+        return bool(self._stack)
 
     @property
     def calls(self) -> list[Call]:

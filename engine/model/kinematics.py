@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from finaldrive.engine.model import params as P
+from finaldrive.engine.model import libm, params as P
 from finaldrive.engine.model.coordinates import (
     ALPHA,
     BETA,
@@ -80,11 +80,11 @@ def tangent_angle(x2: float, y2: float, x6: float, y6: float, res: float, rws: f
     run the other root, delta + acos(.).
     """
     dx, dy = x6 - x2, y6 - y2
-    dist = math.hypot(dx, dy)
+    dist = libm.hypot(dx, dy)
     if dist <= abs(rws - res):
         return math.nan
-    gamma = math.atan2(dy, dx) - run * math.acos((res - rws) / dist)
-    return math.atan2(math.sin(gamma), math.cos(gamma))
+    gamma = libm.atan2(dy, dx) - run * libm.acos((res - rws) / dist)
+    return float(libm.atan2(libm.sin(gamma), libm.cos(gamma)))
 
 
 @jit(one_form=True)   # the two-run chain's setup (whole_chain_length) and its runs (chain_runs.slack) call it
@@ -93,7 +93,7 @@ def loop_length(dist: float, res: float, rws: float) -> float:
     straight runs (eqs. 24-29 and their mirror, sqrt(dist^2 - k^2) each) and both wraps,
     pi (R_ES + R_WS) + 2 k asin(k / dist), k = R_ES - R_WS (the open-belt length)."""
     k = res - rws
-    return math.pi * (res + rws) + 2.0 * k * math.asin(k / dist) + 2.0 * math.sqrt(dist * dist - k * k)
+    return float(math.pi * (res + rws) + 2.0 * k * libm.asin(k / dist) + 2.0 * math.sqrt(dist * dist - k * k))
 
 
 def free_play_slack(taut: float, free_play: float) -> float:
@@ -106,7 +106,7 @@ def free_play_slack(taut: float, free_play: float) -> float:
 def whole_chain_length(q: np.ndarray, p: np.ndarray) -> float:
     """The two-run chain's whole length at pose q: the loop of both taut runs and the slack of the
     vehicle's chain_free_play measured at that pose."""
-    dist = math.hypot(q[X6] - q[X2], q[Y6] - q[Y2])
+    dist = libm.hypot(q[X6] - q[X2], q[Y6] - q[Y2])
     return float(loop_length(dist, p[P.R_ES], p[P.R_WS])) + free_play_slack(taut_length(q), p[P.CHAIN_FREE_PLAY])
 
 
@@ -115,16 +115,16 @@ def fill_pose(p: np.ndarray, kind: int, rp: np.ndarray, x1: float, y1: float, th
               fs: float, beta: float, alpha: float, q: np.ndarray) -> bool:
     """assemble's body, compiled (the road packed); False if no chain fits between the sprockets."""
     q[X1], q[Y1], q[THETA], q[PHI], q[FS], q[BETA], q[ALPHA] = x1, y1, theta, phi, fs, beta, alpha
-    q[X2], q[Y2] = x1 + p[P.L2] * math.cos(theta + p[P.A2]), y1 + p[P.L2] * math.sin(theta + p[P.A2])  # (1)-(8)
-    q[X3], q[Y3] = x1 + p[P.L3] * math.cos(theta + p[P.A3]), y1 + p[P.L3] * math.sin(theta + p[P.A3])
-    q[X4], q[Y4] = x1 + p[P.L4] * math.cos(theta + p[P.A4]), y1 + p[P.L4] * math.sin(theta + p[P.A4])
-    q[X5], q[Y5] = x1 + p[P.L5] * math.cos(theta + p[P.A5]), y1 + p[P.L5] * math.sin(theta + p[P.A5])
-    cp, sp = math.cos(phi), math.sin(phi)
+    q[X2], q[Y2] = x1 + p[P.L2] * libm.cos(theta + p[P.A2]), y1 + p[P.L2] * libm.sin(theta + p[P.A2])  # (1)-(8)
+    q[X3], q[Y3] = x1 + p[P.L3] * libm.cos(theta + p[P.A3]), y1 + p[P.L3] * libm.sin(theta + p[P.A3])
+    q[X4], q[Y4] = x1 + p[P.L4] * libm.cos(theta + p[P.A4]), y1 + p[P.L4] * libm.sin(theta + p[P.A4])
+    q[X5], q[Y5] = x1 + p[P.L5] * libm.cos(theta + p[P.A5]), y1 + p[P.L5] * libm.sin(theta + p[P.A5])
+    cp, sp = libm.cos(phi), libm.sin(phi)
     q[X6], q[Y6] = x1 + p[P.L_SA] * cp, y1 + p[P.L_SA] * sp            # (9)-(12)
     q[X7], q[Y7] = x1 + p[P.L7] * cp, y1 + p[P.L7] * sp
-    q[RS] = math.hypot(q[X3] - q[X7], q[Y3] - q[Y7])                    # (13)
+    q[RS] = libm.hypot(q[X3] - q[X7], q[Y3] - q[Y7])                    # (13)
     ux, uy = q[X5] - q[X4], q[Y5] - q[Y4]
-    n = math.hypot(ux, uy)
+    n = libm.hypot(ux, uy)
     ux, uy = ux / n, uy / n
     q[X12], q[Y12] = q[X4] + fs * ux, q[Y4] + fs * uy                   # (14), (17)
     q[X13], q[Y13] = q[X12] + p[P.L8] * ux, q[Y12] + p[P.L8] * uy       # (15), (16)
@@ -135,10 +135,10 @@ def fill_pose(p: np.ndarray, kind: int, rp: np.ndarray, x1: float, y1: float, th
     gamma = tangent_angle(q[X2], q[Y2], q[X6], q[Y6], p[P.R_ES], p[P.R_WS])
     q[GAMMA] = gamma
     res, rws = p[P.R_ES], p[P.R_WS]
-    q[X8], q[Y8] = q[X2] + res * math.cos(alpha), q[Y2] + res * math.sin(alpha)    # (22)-(29)
-    q[X10], q[Y10] = q[X2] + res * math.cos(gamma), q[Y2] + res * math.sin(gamma)
-    q[X9], q[Y9] = q[X6] + rws * math.cos(beta), q[Y6] + rws * math.sin(beta)
-    q[X11], q[Y11] = q[X6] + rws * math.cos(gamma), q[Y6] + rws * math.sin(gamma)
+    q[X8], q[Y8] = q[X2] + res * libm.cos(alpha), q[Y2] + res * libm.sin(alpha)    # (22)-(29)
+    q[X10], q[Y10] = q[X2] + res * libm.cos(gamma), q[Y2] + res * libm.sin(gamma)
+    q[X9], q[Y9] = q[X6] + rws * libm.cos(beta), q[Y6] + rws * libm.sin(beta)
+    q[X11], q[Y11] = q[X6] + rws * libm.cos(gamma), q[Y6] + rws * libm.sin(gamma)
     return not math.isnan(gamma)
 
 
@@ -151,7 +151,7 @@ def assemble(p: np.ndarray, road: Road, x1: float, y1: float, theta: float, phi:
     if not fill_pose(p, kind, rp, float(x1), float(y1), float(theta), float(phi), float(fs), float(beta),
                      float(alpha), q):
         raise GeometryError(
-            f"sprocket centres {math.hypot(q[X6] - q[X2], q[Y6] - q[Y2]):.4f} m apart cannot carry a chain "
+            f"sprocket centres {libm.hypot(q[X6] - q[X2], q[Y6] - q[Y2]):.4f} m apart cannot carry a chain "
             f"between radii {p[P.R_ES]:.4f} m and {p[P.R_WS]:.4f} m")
     return q
 
@@ -169,7 +169,7 @@ def pose_from_minimal(z: np.ndarray, p: np.ndarray, road: Road, play: float = 0.
 
 def taut_length(q: np.ndarray) -> float:
     """L_taut: the straight upper run between points 10 and 11 (eq. 68)."""
-    return math.hypot(q[X10] - q[X11], q[Y10] - q[Y11])
+    return float(libm.hypot(q[X10] - q[X11], q[Y10] - q[Y11]))
 
 
 def chain_length(q: np.ndarray, p: np.ndarray) -> float:
@@ -182,14 +182,14 @@ def design_pose(p: np.ndarray) -> np.ndarray:
     """The design pose on flat ground: theta = theta0, phi = phi0, both tyres unloaded (rt0, ft0),
     rear contact point at x = 0, sprocket reference points opposite the tangent points."""
     phi0, theta0 = p[P.PHI0], p[P.THETA0]
-    x1 = -p[P.L_SA] * math.cos(phi0)
-    y1 = p[P.RT0] - p[P.L_SA] * math.sin(phi0)
+    x1 = -p[P.L_SA] * libm.cos(phi0)
+    y1 = p[P.RT0] - p[P.L_SA] * libm.sin(phi0)
     # fork slide fs so that the front axle is ft0 above the ground
-    y4 = y1 + p[P.L4] * math.sin(theta0 + p[P.A4])
-    y5 = y1 + p[P.L5] * math.sin(theta0 + p[P.A5])
-    x4 = x1 + p[P.L4] * math.cos(theta0 + p[P.A4])
-    x5 = x1 + p[P.L5] * math.cos(theta0 + p[P.A5])
-    uy = (y5 - y4) / math.hypot(x5 - x4, y5 - y4)
+    y4 = y1 + p[P.L4] * libm.sin(theta0 + p[P.A4])
+    y5 = y1 + p[P.L5] * libm.sin(theta0 + p[P.A5])
+    x4 = x1 + p[P.L4] * libm.cos(theta0 + p[P.A4])
+    x5 = x1 + p[P.L5] * libm.cos(theta0 + p[P.A5])
+    uy = (y5 - y4) / libm.hypot(x5 - x4, y5 - y4)
     fs = (p[P.FT0] - y4) / uy - p[P.L8]
     flat = Road()
     q = assemble(p, flat, x1, y1, theta0, phi0, fs, 0.0, 0.0)
@@ -204,7 +204,7 @@ def squat_line(q: np.ndarray, contact_x: float, contact_y: float) -> tuple[float
     bx, by = q[X1], q[Y1]
     ex, ey = q[X6] - bx, q[Y6] - by                   # swingarm line direction
     det = dx * (-ey) - dy * (-ex)
-    if abs(det) < 1e-12 * math.hypot(dx, dy) * math.hypot(ex, ey):
+    if abs(det) < 1e-12 * libm.hypot(dx, dy) * libm.hypot(ex, ey):
         return float(ex), float(ey)
     s = ((bx - ax) * (-ey) - (by - ay) * (-ex)) / det
     return float(ax + s * dx - contact_x), float(ay + s * dy - contact_y)
@@ -233,6 +233,6 @@ def first_guess(p: np.ndarray, road: Road, pose: np.ndarray | None = None) -> np
     q0 = design_pose(p) if pose is None else pose
     wheelbase = q0[X15] - q0[X14]
     h_rear, h_front = float(road.height_at(0.0)), float(road.height_at(wheelbase))
-    pitch = math.atan2(h_front - h_rear, wheelbase)
-    y1 = q0[X1] * math.sin(pitch) + q0[Y1] * math.cos(pitch) + h_rear - GUESS_PRELOAD
+    pitch = libm.atan2(h_front - h_rear, wheelbase)
+    y1 = q0[X1] * libm.sin(pitch) + q0[Y1] * libm.cos(pitch) + h_rear - GUESS_PRELOAD
     return np.array([y1, q0[THETA] + pitch, q0[PHI] + pitch, q0[FS]])

@@ -1,8 +1,9 @@
 """SciPy's BLAS and LAPACK for numba, without the scipy.linalg package around them.
 
 numba imports ``scipy.linalg.cython_blas`` when it sets up its compiler (numba.np.arraymath checks
-for BLAS on import), and the compiled ``np.linalg.solve`` (engine.model.linalg) finds LAPACK's dgesv
-in ``scipy.linalg.cython_lapack``. Importing either runs ``scipy.linalg``'s ``__init__`` first:
+for BLAS on import), though no kernel calls BLAS or LAPACK (engine.model.linalg solves in loops of
+its own, the same bits on every CPU), and numba's compiled ``np.linalg`` finds LAPACK in
+``scipy.linalg.cython_lapack``. Importing either runs ``scipy.linalg``'s ``__init__`` first:
 about 0.3 s (most of SciPy's linear algebra, and numpy.f2py through SciPy's array-API layer), a
 third of what a fresh process needs to load the compiled engine, for code it never calls. The two
 are self-contained extension modules (the same functions whoever loads them): :func:`load` loads

@@ -13,9 +13,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from finaldrive.engine.model import params as P
+from finaldrive.engine.model import libm, params as P
 from finaldrive.engine.model.coordinates import FS, FT, N_COORDS, RS, RT, X1, X2, X5, X6, X8, X9, X12, X13, Y13
 from finaldrive.engine.model.elements import spring_energy
+from finaldrive.engine.model.linalg import dot
 from finaldrive.engine.model.tyre import radial_energy
 
 _ROT = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -40,8 +41,8 @@ def bodies(p: np.ndarray) -> list[Body]:
     a5 = p[P.A5]
     cx, cy = p[P.CHASSIS_COG_X], p[P.CHASSIS_COG_Y]
     # chassis centre of mass from the chassis frame to the frame along 1 -> 5
-    xl = cx * math.cos(a5) + cy * math.sin(a5)
-    yl = -cx * math.sin(a5) + cy * math.cos(a5)
+    xl = cx * libm.cos(a5) + cy * libm.sin(a5)
+    yl = -cx * libm.sin(a5) + cy * libm.cos(a5)
     return [
         Body("chassis", X1, X5, p[P.L5], xl / p[P.L5], yl / p[P.L5], p[P.M_CHASSIS], p[P.I_CHASSIS]),
         Body("swingarm", X1, X6, p[P.L_SA], p[P.SWINGARM_COG_FRACTION], 0.0, p[P.M_SWINGARM], p[P.I_SWINGARM]),
@@ -85,7 +86,8 @@ def centre_of_mass(q: np.ndarray, p: np.ndarray) -> tuple[float, float, float]:
     total, sx, sy = p[P.M_FRONT_WHEEL], p[P.M_FRONT_WHEEL] * q[X13], p[P.M_FRONT_WHEEL] * q[Y13]
     for b in bodies(p):
         ri, rj = q[b.i:b.i + 2], q[b.j:b.j + 2]
-        g = ri + b.a_g * (rj - ri) + b.b_g * (_ROT @ (rj - ri))
+        d = rj - ri
+        g = ri + b.a_g * d + b.b_g * np.array([-d[1], d[0]])   # the normal: d turned by +90 deg
         total += b.mass
         sx += b.mass * g[0]
         sy += b.mass * g[1]
@@ -104,4 +106,4 @@ def potential_energy(q: np.ndarray, p: np.ndarray, qg: np.ndarray | None = None)
                + spring_energy(q[FS], p[P.K_FS], p[P.S_FS], p[P.FS_BUMP], p))
     springs += radial_energy(q[RT], p[P.RT0], p[P.K_RT], p[P.RT_BOTTOMING], p[P.K_RT_BOTTOMING])
     springs += radial_energy(q[FT], p[P.FT0], p[P.K_FT], math.inf, 0.0)
-    return float(-qg @ q + springs)
+    return float(-dot(qg, q) + springs)

@@ -7,6 +7,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from finaldrive.engine.model import libm
+
 if TYPE_CHECKING:
     from finaldrive.engine.vehicle import Vehicle
 
@@ -23,16 +25,16 @@ def extension_angle(v: Vehicle) -> float:
     if abs(c) > 1.0:
         raise TravelError(f"the rear spring (s_rs = {s} m) cannot reach its unloaded length between points 3 and 7")
     design = v["phi0"] - v["theta0"]
-    roots = (v["a3"] + math.acos(c), v["a3"] - math.acos(c))
+    roots = (v["a3"] + libm.acos(c), v["a3"] - libm.acos(c))
     return min((design + math.remainder(r - design, math.tau) for r in roots), key=lambda r: abs(r - design))
 
 
 def angle_at(travel: float, extended: float, v: Vehicle) -> float:
     """Swingarm angle in the chassis frame whose axle is ``travel`` above full extension."""
-    y = v["L_SA"] * math.sin(extended) + travel
+    y = v["L_SA"] * libm.sin(extended) + travel
     if abs(y) > v["L_SA"]:
         raise TravelError(f"a swingarm of {v['L_SA']} m cannot lift its axle {travel} m above full extension")
-    angle = math.pi - math.asin(y / v["L_SA"]) if math.cos(extended) < 0 else math.asin(y / v["L_SA"])
+    angle = math.pi - libm.asin(y / v["L_SA"]) if libm.cos(extended) < 0 else libm.asin(y / v["L_SA"])
     return extended + math.remainder(angle - extended, math.tau)
 
 
@@ -40,4 +42,4 @@ def compressed_spring_length(v: Vehicle) -> float:
     """The rear spring's length (points 3-7, eq. 13) at full compression, ``rear_wheel_travel`` above
     full extension [m]: where the travel stops' bump stop engages (vehicle ``suspension_stops``)."""
     compressed = angle_at(v["rear_wheel_travel"], extension_angle(v), v)
-    return math.sqrt(v["L3"] ** 2 + v["L7"] ** 2 - 2.0 * v["L3"] * v["L7"] * math.cos(v["a3"] - compressed))
+    return math.sqrt(v["L3"] ** 2 + v["L7"] ** 2 - 2.0 * v["L3"] * v["L7"] * libm.cos(v["a3"] - compressed))

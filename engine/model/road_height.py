@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from finaldrive.engine.model import libm
 from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.road import BUMP, FLAT, PROFILE, SINE
 
@@ -17,12 +18,12 @@ def road_height(kind: int, rp: np.ndarray, x: float) -> tuple[float, float, floa
         return 0.0, 0.0, 0.0
     if kind == SINE:  # eq. (32a), with a phase rp[2] (0 in the paper)
         k = 2.0 * math.pi / rp[1]
-        s = math.sin(k * x + rp[2])
-        return rp[0] * s, rp[0] * k * math.cos(k * x + rp[2]), -rp[0] * k * k * s
+        s, c = libm.sincos(k * x + rp[2])
+        return rp[0] * s, rp[0] * k * c, -rp[0] * k * k * s
     if kind == BUMP:  # eq. (32b)
         d = x - rp[2]
         s2 = rp[1] * rp[1]
-        g = rp[0] * math.exp(-d * d / (2.0 * s2))
+        g = rp[0] * libm.exp(-d * d / (2.0 * s2))
         return g, -d / s2 * g, (d * d / (s2 * s2) - 1.0 / s2) * g
     if kind == PROFILE:  # piecewise linear, constant beyond the ends
         n = int(rp[0])

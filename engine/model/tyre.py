@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from finaldrive.engine.model import params as P
+from finaldrive.engine.model import libm, params as P
 from finaldrive.engine.model.jit import jit
 
 #: Below this vertical load [N] the tyre is off the road: no longitudinal force.
@@ -91,7 +91,7 @@ def slip_stiffness(fz: float, p: np.ndarray) -> float:
     """K_xk, eq. (50), at the load held in the range (df_z from eq. 52)."""
     fzr = range_load(fz, p)
     dfz = (fzr - p[P.FZ0]) / p[P.FZ0]
-    return fzr * (p[P.PKX1] + p[P.PKX2] * dfz) * math.exp(p[P.PKX3] * dfz)
+    return fzr * (p[P.PKX1] + p[P.PKX2] * dfz) * libm.exp(p[P.PKX3] * dfz)
 
 
 @jit
@@ -108,10 +108,11 @@ def magic_formula_slope(fz: float, kappa: float, p: np.ndarray) -> tuple[float, 
     ex = (p[P.PEX1] + p[P.PEX2] * dfz + p[P.PEX3] * dfz * dfz) * (1.0 - p[P.PEX4] * sgn)  # (49)
     bx = slip_stiffness(fz, p) / (cx * dx)                                    # (50)-(51)
     bk = bx * kappa
-    arg = bk - ex * (bk - math.atan(bk))
-    angle = cx * math.atan(arg)
+    arg = bk - ex * (bk - libm.atan(bk))
+    angle = cx * libm.atan(arg)
     darg = bx - ex * (bx - bx / (1.0 + bk * bk))
-    return dx * math.sin(angle), dx * math.cos(angle) * cx / (1.0 + arg * arg) * darg   # (45)
+    s, c = libm.sincos(angle)
+    return dx * s, dx * c * cx / (1.0 + arg * arg) * darg   # (45)
 
 
 @jit
@@ -126,7 +127,7 @@ def low_speed_damping(vx: float, p: np.ndarray) -> float:
     avx = abs(vx)
     if avx > p[P.V_LOW]:
         return 0.0
-    return 0.5 * p[P.K_VLOW0] * (1.0 + math.cos(math.pi * avx / p[P.V_LOW]))
+    return 0.5 * p[P.K_VLOW0] * (1.0 + libm.cos(math.pi * avx / p[P.V_LOW]))
 
 
 @jit

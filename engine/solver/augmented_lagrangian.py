@@ -15,7 +15,7 @@ from finaldrive.engine.model import params as P
 from finaldrive.engine.model.constraints import jacobian, phi, phiq_dot_qdot
 from finaldrive.engine.model.coordinates import N_CONSTRAINTS, N_COORDS
 from finaldrive.engine.model.jit import jit
-from finaldrive.engine.model.linalg import cholesky_solve
+from finaldrive.engine.model.linalg import cholesky, cholesky_solve, matvec, rmatvec
 
 
 @jit(allocates=True)
@@ -30,16 +30,37 @@ def accelerations(q: np.ndarray, qd: np.ndarray, Q: np.ndarray, p: np.ndarray, k
     jacobian(q, p, kind, rp, J)
     phiq_dot_qdot(q, qd, p, kind, rp, pdq)
     alpha, xi, omega = p[P.AL_ALPHA], p[P.AL_XI], p[P.AL_OMEGA]
-    stab = pdq + 2.0 * xi * omega * (J @ qd) + omega * omega * res  # Phi_q' q' + 2 xi w Phi' + w^2 Phi
-    A = M + alpha * (J.T @ J)                                          # (57) leading matrix
-    L = np.linalg.cholesky(A)
-    base = Q - alpha * (J.T @ stab)
+    # products by loops in a fixed order (engine.model.linalg), not BLAS's CPU-chosen kernels
+    stab = np.empty(N_CONSTRAINTS)
+    matvec(J, qd, stab)
+    for i in range(N_CONSTRAINTS):            # Phi_q' q' + 2 xi w Phi' + w^2 Phi
+        stab[i] = pdq[i] + 2.0 * xi * omega * stab[i] + omega * omega * res[i]
+    A = np.empty((N_COORDS, N_COORDS))        # (57) leading matrix M + alpha Phi_q^T Phi_q
+    for i in range(N_COORDS):
+        for j in range(i + 1):
+            s = 0.0
+            for k in range(N_CONSTRAINTS):
+                s += J[k, i] * J[k, j]
+            A[i, j] = M[i, j] + alpha * s
+    L = np.empty((N_COORDS, N_COORDS))
+    cholesky(A, L)
+    base = np.empty(N_COORDS)
+    rmatvec(J, stab, base)
+    for i in range(N_COORDS):
+        base[i] = Q[i] - alpha * base[i]
+    rhs = np.empty(N_COORDS)
+    jq = np.empty(N_CONSTRAINTS)
     old = np.empty(N_COORDS)
     iters = -1
     for it in range(max_iter):
         old[:] = qdd
-        cholesky_solve(L, base - J.T @ lam, qdd)                       # (57)
-        lam += alpha * (J @ qdd + stab)                                # (58)
+        rmatvec(J, lam, rhs)
+        for i in range(N_COORDS):
+            rhs[i] = base[i] - rhs[i]
+        cholesky_solve(L, rhs, qdd)                                    # (57)
+        matvec(J, qdd, jq)
+        for i in range(N_CONSTRAINTS):
+            lam[i] += alpha * (jq[i] + stab[i])                        # (58)
         change = 0.0
         scale = 1.0
         for i in range(N_COORDS):

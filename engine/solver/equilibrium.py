@@ -15,12 +15,13 @@ import math
 
 import numpy as np
 
-from finaldrive.engine.model import params as P
+from finaldrive.engine.model import libm, params as P
 from finaldrive.engine.model.constraints import jacobian
 from finaldrive.engine.model.coordinates import BETA, FS, FT, GAMMA, N_CONSTRAINTS, N_COORDS, PHI, RT, THETA, X1, Y1
 from finaldrive.engine.model.elements import N_AUX
 from finaldrive.engine.model.forces import applied_forces
 from finaldrive.engine.model.kinematics import assemble, first_guess
+from finaldrive.engine.model.linalg import matmul, rmatvec, solve
 from finaldrive.engine.model.mass import gravity_forces
 from finaldrive.engine.model.road import Road
 
@@ -40,7 +41,7 @@ class ReferenceEquilibriumError(RuntimeError):
 
 def _pose(free: np.ndarray, p: np.ndarray, road: Road) -> np.ndarray:
     y1, theta, phi, fs = (float(v) for v in free)
-    x1 = -p[P.L_SA] * math.cos(phi)
+    x1 = -p[P.L_SA] * libm.cos(phi)
     q = assemble(p, road, x1, y1, theta, phi, fs, 0.0, 0.0)
     return assemble(p, road, x1, y1, theta, phi, fs, q[GAMMA] + math.pi, q[GAMMA] - math.pi)
 
@@ -60,13 +61,20 @@ def rest_forces(free: np.ndarray, p: np.ndarray, road: Road) -> np.ndarray:
     ind[1, 0] = 1.0                                     # y1
     ind[2, 1] = 1.0                                     # theta
     ind[3, 2] = 1.0                                     # phi ...
-    ind[0, 2] = p[P.L_SA] * math.sin(float(free[2]))    # ... with x1 = -L_SA cos(phi)
+    ind[0, 2] = p[P.L_SA] * libm.sin(float(free[2]))    # ... with x1 = -L_SA cos(phi)
     ind[4, 3] = 1.0                                     # fs
-    dep = np.linalg.solve(J[:, list(_DEPENDENT)], -J[:, list(_INDEPENDENT)] @ ind)
+    # Phi_q,dep q'_dep = -Phi_q,ind q'_ind, by engine.model.linalg (the same bits on every CPU)
     V = np.zeros((N_COORDS, 4))
     V[list(_INDEPENDENT)] = ind
-    V[list(_DEPENDENT)] = dep
-    return np.asarray(Q @ V / (p[P.M_CHASSIS] * p[P.GRAVITY]))
+    moved = np.empty((len(_DEPENDENT), 4))
+    matmul(J[:, list(_INDEPENDENT)], ind, moved)
+    dep = np.empty(len(_DEPENDENT))
+    for k in range(4):
+        solve(J[:, list(_DEPENDENT)], -moved[:, k], dep)
+        V[list(_DEPENDENT), k] = dep
+    work = np.empty(4)
+    rmatvec(V, Q, work)
+    return np.asarray(work / (p[P.M_CHASSIS] * p[P.GRAVITY]))
 
 
 def reference_equilibrium(p: np.ndarray, road: Road, pose: np.ndarray | None = None) -> np.ndarray:
@@ -80,8 +88,9 @@ def reference_equilibrium(p: np.ndarray, road: Road, pose: np.ndarray | None = N
             e = np.zeros(4)
             e[k] = _FD_STEP
             K[:, k] = (rest_forces(free + e, p, road) - rest_forces(free - e, p, road)) / (2.0 * _FD_STEP)
+        step = np.empty(4)
         try:
-            step = np.linalg.solve(K, g)
+            solve(K, g, step)
         except np.linalg.LinAlgError:
             raise ReferenceEquilibriumError("static equilibrium not found: singular stiffness") from None
         free = free - step

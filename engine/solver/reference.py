@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from finaldrive.engine.model import libm
 from finaldrive.engine.model.constraints import phi
 from finaldrive.engine.model.coordinates import ALPHA, BETA, N_CONSTRAINTS, N_COORDS, THETA, X1, X10, X11, Y10, Y11
 from finaldrive.engine.model.diagnostics import (
@@ -70,7 +71,7 @@ def motorcycle_rhs(t, y, ctx, out) -> int:
     resid, _ = accelerations(q, qd, Q, p, kind, rp, M, lam, lam_tol, lam_max, qdd)
     aux[AUX_RESID] = resid
     aux[AUX_TENSION] = lam[CHAIN_ROW]
-    aux[AUX_TAUT] = math.hypot(q[X10] - q[X11], q[Y10] - q[Y11])
+    aux[AUX_TAUT] = libm.hypot(q[X10] - q[X11], q[Y10] - q[Y11])
     out[:N_COORDS] = qd
     out[N_COORDS:U] = qdd
     out[U] = aux[AUX_DUDT]
