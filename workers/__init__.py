@@ -20,12 +20,13 @@ from finaldrive.workers.base import (
     Shared,
     cancel_unseen,
 )
+from finaldrive.workers.cluster import NotOnCluster
 from finaldrive.workers.process import ProcessExecutor
 from finaldrive.workers.serial import SerialExecutor
 
 ExecutorKind = Literal["serial", "process", "ray"]
 
-__all__ = ["Done", "Executor", "ExecutorKind", "Shared", "make_executor"]
+__all__ = ["Done", "Executor", "ExecutorKind", "NotOnCluster", "Shared", "make_executor"]
 
 #: How long ``make_executor`` waits for the workers' first task (numba's import and runtime, ~0.4 s a
 #: worker), from its start [s]; what is left then is cancelled.

@@ -65,6 +65,7 @@ from ray.exceptions import (
 )
 
 from finaldrive.workers.base import IN_FLIGHT_PER_WORKER, Done, ExecutorMixin, Shared
+from finaldrive.workers.cluster import check_on_cluster
 
 #: How often ``poll`` reads the cluster's CPUs again (``capacity``) [s].
 CAPACITY_REFRESH_S = 10.0
@@ -240,6 +241,7 @@ class RayExecutor(ExecutorMixin):
             self._signals = _Signals()
             try:
                 if address:
+                    check_on_cluster(address)   # at once, not Ray's ConnectionError after 60 s
                     ray.init(address=address, **options)
                 else:
                     self._use_own_token()

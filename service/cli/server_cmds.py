@@ -193,7 +193,12 @@ def run_scheduler_command(args: argparse.Namespace) -> int:
     if args.exit_with_parent:
         threading.Thread(target=_stop_with_parent, args=(os.getppid(), stop), daemon=True,
                          name="finaldrive-parent-watch").start()
-    run_scheduler(settings, stop, scheduler_id=args.scheduler_id, handle_signals=True)
+    from finaldrive.workers import NotOnCluster
+
+    try:
+        run_scheduler(settings, stop, scheduler_id=args.scheduler_id, handle_signals=True)
+    except NotOnCluster as exc:
+        raise UsageError(str(exc)) from None
     return 0
 
 
