@@ -32,7 +32,7 @@ def local_gcs_addresses() -> set[str] | None:
             args = (entry / "cmdline").read_bytes().split(b"\0")
         except OSError:   # gone, or not ours to read
             continue
-        if not args[0].endswith(b"/raylet"):
+        if args[0].rsplit(b"/", 1)[-1] != b"raylet":
             continue
         for arg in args:
             if arg.startswith(b"--gcs-address="):

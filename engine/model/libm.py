@@ -211,9 +211,8 @@ _LG5 = _f(0x3FC7466496CB03DE)
 _LG6 = _f(0x3FC39A09D078C69F)
 _LG7 = _f(0x3FC2F112DF3E5244)
 _SQRT2_HALF = _f(0x3FE6A09E667F3BCD)
-#: 2^k for k = -1021 ... 1024 (2^1024 is inf: e^x near the overflow threshold has k = 1024 and y < 1,
-#: so y 2^1024 is y 2 2^1023, done as fdlibm does below).
-_POW2 = np.array([math.ldexp(1.0, k) if k < 1024 else math.inf for k in range(-1021, 1025)])
+#: 2^k for k = -1021 ... 1023 (exp's k = 1024, near the overflow threshold, scales by 2 2^1023 as fdlibm does).
+_POW2 = np.array([math.ldexp(1.0, k) for k in range(-1021, 1024)])
 
 
 @jit(plain_from_python=True)
