@@ -39,8 +39,8 @@ pytestmark = pytest.mark.slow
 
 REPO = Path(__file__).resolve().parents[2]
 SIM = {"duration": 1.5}
-SWEEP = {"kind": "sweep", "roads": ["sine:0.04:3"], "grid": "a2_deg=0:355:5,l2_m=0.04|0.07|0.1|0.13,rws_m=0.05|0.07|0.09|0.11",
-         "settings": SIM}
+SWEEP = {"kind": "sweep", "roads": ["sine:0.04:3"],
+         "grid": "a2_deg=0:355:5,l2_m=0.04|0.07|0.1|0.13,rws_m=0.05|0.07|0.09|0.11", "settings": SIM}
 DE = {"kind": "de", "roads": ["sine:0.04:2"], "de": {"np": 8, "iters": 5}, "seed": 13, "settings": SIM}
 
 
