@@ -389,6 +389,15 @@ class SchedulerOut(BaseModel):
     alive: bool = Field(description="its heartbeat is younger than a lease")
     store_error: str | None = Field(None, description="why its last write of results failed (null once one passes "
                                     "again): the store takes small writes but not its results, e.g. a full disk")
+    tasks_per_s: float | None = Field(None, description="simulation tasks that came back a second, over its last "
+                                      "heartbeat interval (null before its first)")
+    evaluations_per_s: float | None = Field(None, description="designs simulated a second, over its last heartbeat "
+                                            "interval")
+    busy_share: float | None = Field(None, description="share of its executor's workers with a task in flight, "
+                                     "time-weighted over its last heartbeat interval (0-1)")
+    in_flight_tasks: int | None = Field(None, description="simulation tasks in flight at its last heartbeat")
+    backlog_designs: int | None = Field(None, description="designs of its jobs ready and waiting to be dispatched at "
+                                        "its last heartbeat")
 
 
 class HealthOut(BaseModel):

@@ -51,3 +51,33 @@ def test_the_wheel_carries_the_data_and_the_migrations(tmp_path: Path) -> None:
             "finaldrive/migrations/alembic.ini", "finaldrive/migrations/env.py"} <= names
     assert any(n.startswith("finaldrive/migrations/versions/") for n in names)
     assert not any(n.split("/")[0] in FOLDERS for n in names)
+
+
+def _locked(path: Path) -> dict[str, str]:
+    """A pip-compile lock file's pins: {normalised name: version}."""
+    import re
+
+    pins = {}
+    for line in path.read_text().splitlines():
+        found = re.match(r"^([A-Za-z0-9._-]+)==([^ \\]+)", line)
+        if found:
+            pins[re.sub(r"[-_.]+", "-", found[1]).lower()] = found[2]
+    return pins
+
+
+@pytest.mark.parametrize(("lock", "extras"), [("requirements.lock", ()), ("requirements-test.lock", ("test",))])
+def test_the_lock_files_pin_every_dependency_within_pyproject(lock: str, extras: tuple[str, ...]) -> None:
+    """deploy/*.lock (what .ci/locked and the container image install) in step with pyproject.toml:
+    every direct dependency pinned, inside its declared range, and the runtime pins the same in both."""
+    from packaging.requirements import Requirement
+
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
+    pins = _locked(REPO / "deploy" / lock)
+    wanted = [*project["dependencies"], *(d for extra in extras for d in project["optional-dependencies"][extra])]
+    for text in wanted:
+        requirement = Requirement(text)
+        name = requirement.name.lower().replace("_", "-")
+        assert name in pins, f"{lock} does not pin {name} (re-run pip-compile: deploy/requirements.lock's header)"
+        assert requirement.specifier.contains(pins[name], prereleases=True), f"{lock}: {name}=={pins[name]} {text}"
+    runtime = _locked(REPO / "deploy" / "requirements.lock")
+    assert {name: pins[name] for name in runtime} == runtime

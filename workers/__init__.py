@@ -10,6 +10,7 @@ from __future__ import annotations
 if __name__ != "finaldrive.workers":  # never importable as a top-level `workers` (it would shadow others)
     raise ImportError(f"this is finaldrive.workers; import it by that name, not as {__name__!r}")
 
+import threading
 import time
 from typing import Literal
 
@@ -20,13 +21,13 @@ from finaldrive.workers.base import (
     Shared,
     cancel_unseen,
 )
-from finaldrive.workers.cluster import NotOnCluster
+from finaldrive.workers.cluster import ClusterTaken, NotOnCluster
 from finaldrive.workers.process import ProcessExecutor
 from finaldrive.workers.serial import SerialExecutor
 
 ExecutorKind = Literal["serial", "process", "ray"]
 
-__all__ = ["Done", "Executor", "ExecutorKind", "NotOnCluster", "Shared", "make_executor"]
+__all__ = ["ClusterTaken", "Done", "Executor", "ExecutorKind", "NotOnCluster", "Shared", "make_executor"]
 
 #: How long ``make_executor`` waits for the workers' first task (numba's import and runtime, ~0.4 s a
 #: worker), from its start [s]; what is left then is cancelled.
@@ -40,6 +41,7 @@ def make_executor(
     max_retries: int = 3,
     address: str | None = None,
     niceness: int = 0,
+    standby: threading.Event | None = None,
 ) -> Executor:
     """Build an executor.
 
@@ -49,6 +51,8 @@ def make_executor(
     simulations. ``address``: Ray cluster to join (else ``RAY_ADDRESS``, else a local Ray);
     ignored by serial and process. ``niceness``: added to the worker processes' OS niceness
     (``os.nice``, once per process), so the calling process keeps its core; ignored by serial.
+    ``standby`` (ray, joining a cluster): be the cluster's one finaldrive driver, waiting as a
+    standby while another holds it, until it is free or ``standby`` is set (``ClusterTaken``).
 
     For a process or Ray pool, the engine's compiled code is built once on this machine if it is
     not yet (``engine.compile_engine``, while the pool starts), so the workers only load it. While
@@ -76,7 +80,7 @@ def make_executor(
                 f"(import failed: {error})"
             ) from error
         ray_executor = RayExecutor(num_workers=num_workers, max_retries=max_retries, address=address,
-                                   niceness=niceness)
+                                   niceness=niceness, exclusive=standby is not None, standby=standby)
         executor, warm_up = ray_executor, warm_up and ray_executor.local
     try:
         deadline = time.monotonic() + WARM_UP_WAIT_S

@@ -6,6 +6,12 @@ rule (issue 30). :func:`check_on_cluster` refuses such a start at once, reading 
 command lines from /proc as Ray itself finds them (``ray._private.services.find_node_ids``).
 Ray Client addresses (``ray://``) are refused too: the executor relies on object references'
 completion callbacks, which a Ray Client does not give; run the scheduler on a node instead.
+
+One scheduler drives a Ray cluster: Ray keeps a pool of worker processes per driver, so two drivers
+that fill the same CPUs make Ray kill one's idle workers to start the other's (13 worker restarts
+in 3.4 min, two DEs 3-3.5x slower: issue 30). A scheduler that finds the cluster taken
+(:class:`ClusterTaken`, ``workers/ray_executor.py``) waits as a standby and takes over when the
+first one stops or dies.
 """
 
 from __future__ import annotations
@@ -17,6 +23,10 @@ _PROC = Path("/proc")
 
 class NotOnCluster(RuntimeError):
     """This machine runs no node of the Ray cluster to join (the message says what to do)."""
+
+
+class ClusterTaken(RuntimeError):
+    """Another finaldrive scheduler drives this Ray cluster (the message names it)."""
 
 
 def local_gcs_addresses() -> set[str] | None:

@@ -21,6 +21,12 @@ generations in one task rather than a task each).
 
 A batch whose task raised, or whose worker was lost for good, is tried again one design a
 task, so only the design at fault fails (``on_failure``), never its neighbours in the batch.
+
+A task that runs far longer than its designs should take (:data:`HEDGE_AFTER` times the source's
+measured time, at least :data:`HEDGE_MIN_S`) while tasks started after it have come back is run
+again, once, as a twin: whichever returns first is delivered, the other's result is dropped.
+A node that died (SIGKILLed: Ray takes ~15 s to declare it dead and retry its tasks) or one
+still compiling the engine then holds no DE generation for longer than that (issue 30).
 """
 
 from __future__ import annotations
@@ -87,6 +93,11 @@ class Work:
         return min(range(len(self.queue)), key=lambda i: len(self.queue[i]))
 
 
+#: A task is run again (a twin) once it has run this many times its designs' expected time ...
+HEDGE_AFTER = 4.0
+#: ... and at least this long [s] (a loaded machine's pauses stay below it), looked at this often [s].
+HEDGE_MIN_S, HEDGE_CHECK_S = 1.0, 0.25
+
 #: Work queued in the executor beyond one task a worker, in seconds of the cluster's time.
 QUEUE_S = 0.05
 
@@ -101,6 +112,19 @@ def in_flight_limit(num_workers: int, capacity: int, task_s: float | None = None
     queued work, since executors start tasks first in, first out."""
     queued = math.ceil(num_workers / 8) if not task_s else math.ceil(num_workers * QUEUE_S / task_s)
     return max(1, min(capacity, num_workers + max(2, queued)))
+
+
+@dataclass(frozen=True)
+class Load:
+    """What the dispatcher did over an interval (:meth:`Dispatcher.load`): tasks and designs finished a
+    second, the time-weighted share of the executor's workers with a task in flight (0-1), and now:
+    tasks in flight and designs waiting to be started."""
+
+    tasks_per_s: float
+    evaluations_per_s: float
+    busy_share: float
+    in_flight_tasks: int
+    backlog_designs: int
 
 
 @dataclass(frozen=True)
@@ -131,6 +155,15 @@ class Dispatcher:
         self._window_start = time.perf_counter()
         self._window_busy_s = 0.0
         self._window_tasks = 0
+        # since the last load(): its start, tasks and designs finished, and the integral of the busy share
+        self._load_start = self._busy_at = time.perf_counter()
+        self._load_tasks = self._load_designs = 0
+        self._busy_integral = 0.0
+        self._twins: dict[int, int] = {}   # a hedged task and its twin, both ways
+        self._newest_back = 0.0            # the latest start (handed_at) of a task that has come back
+        self._next_hedge = 0.0
+        #: tasks run again as twins (HEDGE_AFTER), since the start
+        self.hedged = 0
 
     # ------------------------------------------------------------------ sources
     def add(self, work: Work) -> None:
@@ -155,6 +188,7 @@ class Dispatcher:
         self.executor.cancel(ids)
         for task_id in ids:
             del self._tasks[task_id]
+            self._twins.pop(task_id, None)   # its twin is the same source's, so cancelled here too
         work.in_flight = 0
         work.waited_in_flight = 0
         for handle in handles:
@@ -176,9 +210,47 @@ class Dispatcher:
         """Start what fits, then wait up to ``timeout`` s for results and deliver them; returns
         how many tasks finished."""
         self.fill()
+        self._busy()
         finished = self.collect(timeout)
+        self._busy()
+        self._hedge()
         self.fill()
         return finished
+
+    def _hedge(self) -> None:
+        """Start a twin of each task overdue (module doc) while a later-started task has come back."""
+        now = time.perf_counter()
+        if now < self._next_hedge:
+            return
+        self._next_hedge = now + HEDGE_CHECK_S
+        for task_id, task in list(self._tasks.items()):
+            sizer = task.work.sizer
+            if task_id in self._twins or task.handed_at >= self._newest_back or sizer is None or not sizer.designs_done:
+                continue
+            designs = sum(len(part) for part in task.parts)
+            overhead = sizer.overhead_s if math.isfinite(sizer.overhead_s) else 0.0
+            expected = designs * sizer.compute_s / sizer.designs_done + overhead
+            if now - task.handed_at > max(HEDGE_MIN_S, HEDGE_AFTER * expected):
+                twin = self._submit(task.work, self._works[task.work.key][1], list(task.parts))
+                self._twins[task_id], self._twins[twin] = twin, task_id
+                self.hedged += 1
+
+    def _busy(self) -> None:
+        """Add the time since the last call at the share of workers the tasks in flight then kept busy."""
+        now = time.perf_counter()
+        self._busy_integral += (now - self._busy_at) * min(1.0, len(self._tasks) / max(1, self.executor.num_workers))
+        self._busy_at = now
+
+    def load(self) -> Load:
+        """The :class:`Load` since the last call (or the start); starts the next interval."""
+        self._busy()
+        elapsed = max(1e-9, self._busy_at - self._load_start)
+        backlog = sum(len(q) for work, _ in self._works.values() for q in (*work.queue, *work.alone))
+        out = Load(tasks_per_s=self._load_tasks / elapsed, evaluations_per_s=self._load_designs / elapsed,
+                   busy_share=min(1.0, self._busy_integral / elapsed), in_flight_tasks=len(self._tasks),
+                   backlog_designs=backlog)
+        self._load_start, self._load_tasks, self._load_designs, self._busy_integral = self._busy_at, 0, 0, 0.0
+        return out
 
     def fill(self) -> int:
         """Start batches, one source at a time in turn, until :attr:`limit` are in flight; returns how many."""
@@ -199,13 +271,24 @@ class Dispatcher:
         return started
 
     def _start(self, work: Work, handles: tuple[Any, ...]) -> None:
-        parts = [work.alone.popleft()] if work.alone else self._take(work)
+        self._submit(work, handles, [work.alone.popleft()] if work.alone else self._take(work))
+
+    def _submit(self, work: Work, handles: tuple[Any, ...], parts: list[Request]) -> int:
         rows = np.concatenate([np.column_stack([np.full(len(part), float(part.road)), part.designs])
                                for part in parts])
         task_id = self.executor.submit(_apply, rows, self._fn, *handles)
         self._tasks[task_id] = _Task(work, tuple(parts), time.perf_counter())
         work.in_flight += 1
         work.waited_in_flight += sum(len(part) for part in parts if part.waited)
+        return task_id
+
+    def _forget(self, task_id: int) -> _Task | None:
+        """A task that came back, or is no longer wanted, out of the books (None: not there)."""
+        task = self._tasks.pop(task_id, None)
+        if task is not None:
+            task.work.in_flight -= 1
+            task.work.waited_in_flight -= sum(len(part) for part in task.parts if part.waited)
+        return task
 
     def _take(self, work: Work) -> list[Request]:
         """A task's requests: the smallest, cut to the batch size; then, while the size leaves room,
@@ -240,11 +323,16 @@ class Dispatcher:
             done = self.executor.poll(timeout)  # waiting for results is not
             begun = time.perf_counter()
         for d in done:
-            task = self._tasks.pop(d.task, None)
+            task = self._forget(d.task)
             if task is None:
-                continue  # its source was removed
-            task.work.in_flight -= 1
-            task.work.waited_in_flight -= sum(len(part) for part in task.parts if part.waited)
+                continue  # its source was removed, or its twin came back first
+            self._newest_back = max(self._newest_back, task.handed_at)
+            twin = self._twins.pop(d.task, None)
+            if twin is not None:
+                del self._twins[twin]
+                if not d.ok:
+                    continue  # the twin carries on alone
+                self._forget(twin)  # left to run (Ray's cancel would kill its worker); its result is dropped
             if d.cancelled:
                 continue
             work, parts = task.work, task.parts
@@ -262,6 +350,8 @@ class Dispatcher:
                                    timed.idle_s)
                 self._measured = work.sizer
                 self._task_s += 0.02 * (timed.busy_s - self._task_s) if self._task_s else timed.busy_s
+                self._load_tasks += 1
+                self._load_designs += designs
                 _deliver(work, parts, timed.result)
         now = time.perf_counter()
         self._window_busy_s += now - begun

@@ -43,9 +43,11 @@ import concurrent.futures
 import contextlib
 import ctypes
 import importlib
+import logging
 import os
 import secrets
 import signal
+import socket
 import sys
 import threading
 import time
@@ -65,12 +67,18 @@ from ray.exceptions import (
 )
 
 from finaldrive.workers.base import IN_FLIGHT_PER_WORKER, Done, ExecutorMixin, Shared
-from finaldrive.workers.cluster import check_on_cluster
+from finaldrive.workers.cluster import ClusterTaken, check_on_cluster
 
 #: How often ``poll`` reads the cluster's CPUs again (``capacity``) [s].
 CAPACITY_REFRESH_S = 10.0
 #: The longest single wait in ``poll`` [s] (a cancel from another thread also wakes it).
 POLL_SLICE_S = 0.2
+
+#: The named actor that marks a cluster's one finaldrive driver (``exclusive``): name, namespace.
+DRIVER_ACTOR = ("finaldrive-driver", "finaldrive")
+#: How often a standby looks whether the cluster's driver has gone [s] (Ray frees the name ~1-2 s
+#: after the driver's process dies, measured with SIGKILL on Ray 2.60).
+STANDBY_POLL_S = 1.0
 
 #: Environment variables ``ray.init`` reads or sets for token authentication; restored on close.
 _AUTH_ENV = ("RAY_AUTH_MODE", "RAY_AUTH_TOKEN")
@@ -198,6 +206,47 @@ def _outcome(future: concurrent.futures.Future[Any]) -> dict[str, Any]:
     return {"error": error}                    # fn raised: a RayTaskError, also an instance of fn's error
 
 
+class _Driver:
+    """Held by a cluster's one finaldrive driver; not detached, so Ray ends it with its driver."""
+
+    def __init__(self, who: str) -> None:
+        self.who = who
+
+    def describe(self) -> str:
+        return self.who
+
+
+_DRIVER: Any = ray.remote(num_cpus=0, max_restarts=0)(_Driver)
+
+
+def _take_cluster(standby: threading.Event | None) -> Any:
+    """The cluster's driver actor, created here; if another driver holds it: ``ClusterTaken`` at once
+    (``standby`` None), else wait as a standby, logging once, until it is free (or ``standby`` is set:
+    then ``ClusterTaken``)."""
+    who = f"host {socket.gethostname()}, pid {os.getpid()}, since {time.strftime('%Y-%m-%d %H:%M:%S %Z')}"
+    name, namespace = DRIVER_ACTOR
+    told = False
+    while True:
+        try:
+            return _DRIVER.options(name=name, namespace=namespace).remote(who)
+        except ValueError:   # the name is taken (ActorAlreadyExistsError on Ray 2.60)
+            pass
+        try:
+            actor: Any = ray.get_actor(name, namespace=namespace)
+            holder = str(ray.get(actor.describe.remote(), timeout=10))
+        except Exception:    # it ended meanwhile: try again
+            continue
+        message = (f"another finaldrive scheduler drives this Ray cluster ({holder}): one scheduler per Ray "
+                   "cluster, as two evict each other's Ray workers; run more schedulers on other Ray clusters")
+        if standby is None or standby.is_set():
+            raise ClusterTaken(message)
+        if not told:
+            logging.getLogger(__name__).warning("%s; waiting as a standby, to take over when it stops", message)
+            told = True
+        if standby.wait(STANDBY_POLL_S):
+            raise ClusterTaken(message)
+
+
 @ray.remote
 def _run_task(niceness: int, fn: Callable[..., Any], batch: Any, *shared: Any) -> Any:
     """The one remote function: lower this worker's priority to ``niceness`` (once), run ``fn``."""
@@ -217,8 +266,12 @@ class RayExecutor(ExecutorMixin):
     """
 
     def __init__(
-        self, num_workers: int | None = None, max_retries: int = 3, address: str | None = None, niceness: int = 0
+        self, num_workers: int | None = None, max_retries: int = 3, address: str | None = None, niceness: int = 0,
+        exclusive: bool = False, standby: threading.Event | None = None,
     ) -> None:
+        """``exclusive``: when joining a cluster, be its one finaldrive driver (:func:`_take_cluster`):
+        raise ``ClusterTaken`` if another holds it, or with ``standby``, wait until it is free or
+        ``standby`` is set."""
         super().__init__()
         if max_retries < 0:
             raise ValueError("max_retries must be >= 0")
@@ -233,6 +286,7 @@ class RayExecutor(ExecutorMixin):
         self.local = False
         self._env_before = {name: os.environ.get(name) for name in _AUTH_ENV}
         self._signals: _Signals | None = None
+        self._driver: Any = None   # the cluster's driver actor, while this executor holds it
         if self._started:
             address = address or os.environ.get("RAY_ADDRESS") or None
             options: dict[str, Any] = {
@@ -254,6 +308,13 @@ class RayExecutor(ExecutorMixin):
             self._signals.after_init()
             with contextlib.suppress(ImportError):   # ray.shutdown() imports it: take the 0.1 s now, not in close()
                 importlib.import_module("ray.dag.compiled_dag_node")
+            if exclusive and not self.local:
+                try:
+                    self._driver = _take_cluster(standby)   # after after_init: a SIGTERM meanwhile stops it cleanly
+                except BaseException:
+                    self._undo_init()
+                    self._started = False
+                    raise
         self._fixed_workers = num_workers
         cpus = self._cluster_cpus()
         self.num_workers = num_workers or cpus

@@ -193,12 +193,16 @@ def run_scheduler_command(args: argparse.Namespace) -> int:
     if args.exit_with_parent:
         threading.Thread(target=_stop_with_parent, args=(os.getppid(), stop), daemon=True,
                          name="finaldrive-parent-watch").start()
-    from finaldrive.workers import NotOnCluster
+    from finaldrive.workers import ClusterTaken, NotOnCluster
 
     try:
         run_scheduler(settings, stop, scheduler_id=args.scheduler_id, handle_signals=True)
     except NotOnCluster as exc:
         raise UsageError(str(exc)) from None
+    except ClusterTaken:
+        if not stop.is_set():
+            raise
+        logging.getLogger(__name__).info("the standby scheduler stopped before it took the Ray cluster over")
     return 0
 
 

@@ -11,7 +11,7 @@ what is stored.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from datetime import datetime, timedelta
 
 from sqlalchemy import ColumnElement, and_, func, or_, select, text, update
@@ -63,8 +63,10 @@ def register_scheduler(session: Session, scheduler_id: str, *, host: str, pid: i
     return scheduler_id
 
 
-def beat(session: Session, scheduler_id: str, *, lease_s: float, capacity: int) -> set[int]:
-    """Renew this scheduler's heartbeat and the leases of its running jobs and recordings.
+def beat(session: Session, scheduler_id: str, *, lease_s: float, capacity: int,
+         load: Mapping[str, float | int] | None = None) -> set[int]:
+    """Renew this scheduler's heartbeat (with its ``load``: the schedulers table's load columns, if
+    given) and the leases of its running jobs and recordings.
 
     Returns the ids of the jobs it still owns and that are still running: a job missing from the
     set was cancelled, finished elsewhere, or claimed by another scheduler after the lease lapsed.
@@ -72,7 +74,7 @@ def beat(session: Session, scheduler_id: str, *, lease_s: float, capacity: int) 
     now = db_now(session)
     until = now + timedelta(seconds=lease_s)
     session.execute(update(SchedulerRow).where(SchedulerRow.id == scheduler_id)
-                    .values(heartbeat_at=now, capacity=capacity, stopped_at=None))
+                    .values(heartbeat_at=now, capacity=capacity, stopped_at=None, **(load or {})))
     session.execute(update(Job).where(Job.owner == scheduler_id, Job.state == JobState.running.value)
                     .values(lease_until=until))
     session.execute(update(Recording).where(Recording.owner == scheduler_id, Recording.status == "running")
@@ -103,6 +105,13 @@ def schedulers(session: Session) -> list[tuple[SchedulerRow, float]]:
     rows = session.scalars(select(SchedulerRow).where(SchedulerRow.stopped_at.is_(None))
                            .order_by(SchedulerRow.started_at))
     return [(row, (now - row.heartbeat_at).total_seconds()) for row in rows]
+
+
+def others_alive(session: Session, scheduler_id: str, *, within_s: float) -> int:
+    """How many other schedulers have not stopped and beat within ``within_s`` (database clock)."""
+    since = db_now(session) - timedelta(seconds=within_s)
+    return session.scalar(select(func.count()).select_from(SchedulerRow).where(
+        SchedulerRow.id != scheduler_id, SchedulerRow.stopped_at.is_(None), SchedulerRow.heartbeat_at >= since)) or 0
 
 
 # ---------------------------------------------------------------------- jobs

@@ -247,3 +247,9 @@ class Scheduler(Base):
     heartbeat_at: Mapped[datetime] = mapped_column(DateTime)
     stopped_at: Mapped[datetime | None] = mapped_column(DateTime)
     store_error: Mapped[str | None] = mapped_column(String(500))   # why its last result write failed, if it did
+    # its load (workers/dispatch.py, Load): over its last heartbeat interval, and in flight / waiting at it
+    tasks_per_s: Mapped[float | None] = mapped_column(Float)
+    evaluations_per_s: Mapped[float | None] = mapped_column(Float)
+    busy_share: Mapped[float | None] = mapped_column(Float)
+    in_flight_tasks: Mapped[int | None] = mapped_column(Integer)
+    backlog_designs: Mapped[int | None] = mapped_column(Integer)

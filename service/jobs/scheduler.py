@@ -29,7 +29,7 @@ import time
 import uuid
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from functools import partial
 from typing import Any
 
@@ -54,6 +54,7 @@ from finaldrive.service.db.leases import (
     claim_jobs,
     finish_job,
     newest_queued,
+    others_alive,
     register_scheduler,
     scheduler_id as fit_id,
     stop_scheduler,
@@ -97,6 +98,10 @@ _LOOK_S = 0.2
 _STUCK_S = 600.0
 #: Times a job found with a hole in the store is given back to resume, by one scheduler, before it is failed.
 _MAX_REOPEN = 2
+#: Beside other live schedulers, one whose workers were busier than this over its last heartbeat
+#: interval claims no job (they are left to schedulers with room), and one with room claims one job a
+#: heartbeat, so a job's load shows before the next claim. Alone, a scheduler claims up to max_jobs.
+CLAIM_BELOW_BUSY = 0.9
 
 
 @dataclass(frozen=True)
@@ -171,6 +176,7 @@ class Scheduler:
         self._next_flush = 0.0
         self._reopened: dict[int, int] = {}   # job -> times re-opened for a hole in the store
         self._beaten = 0.0                    # when the last heartbeat was stored (monotonic)
+        self._load: dict[str, float | int] | None = None   # the dispatcher's Load at the last heartbeat
         self._turned = time.monotonic()       # when the loop last began a turn
 
     @property
@@ -212,8 +218,8 @@ class Scheduler:
             if now - self._turned > _STUCK_S:  # a loop silent this long is stuck: its leases lapse, others resume
                 continue
             late = self._registered and now > self._beaten + 1.5 * self.config.heartbeat_s
-            if late and guard(lambda s: beat(s, self.id, lease_s=self.config.lease_s,
-                                             capacity=self.executor.capacity), "heartbeat") is not None:
+            if late and guard(lambda s: beat(s, self.id, lease_s=self.config.lease_s, capacity=self.executor.capacity,
+                                             load=self._load), "heartbeat") is not None:
                 self._beaten = time.monotonic()
 
     def turn(self, timeout: float) -> int:
@@ -258,15 +264,24 @@ class Scheduler:
             self._registered = done is not None
             if not self._registered:
                 return
-        owned = self._db(lambda s: beat(s, self.id, lease_s=self.config.lease_s, capacity=self.executor.capacity),
-                         "heartbeat")
-        if owned is None:
+        load = self.dispatcher.load()
+        self._load = {name: round(value, 4) if isinstance(value, float) else value
+                      for name, value in asdict(load).items()}
+        beaten = self._db(lambda s: (beat(s, self.id, lease_s=self.config.lease_s, capacity=self.executor.capacity,
+                                          load=self._load),
+                                     others_alive(s, self.id, within_s=self.config.lease_s) if self.jobs else 0),
+                          "heartbeat")
+        if beaten is None:
             return
+        owned, others = beaten
         self._beaten = time.monotonic()
         for job_id in [j for j in self.jobs if j not in owned]:
             log.info("scheduler %s: job %s is no longer ours (cancelled or taken over); stopping it", self.id, job_id)
             self._drop(job_id)
         room = self.config.max_jobs - len(owned)
+        if others and self.jobs and room > 0:   # claim by free capacity (CLAIM_BELOW_BUSY)
+            room = 1 if load.busy_share < CLAIM_BELOW_BUSY else 0
+            self._newest_seen = seen   # the next heartbeat claims again, not the next look: the load shows first
         claimed = self._db(lambda s: claim_jobs(s, self.id, lease_s=self.config.lease_s, limit=room), "claim jobs")
         if claimed is not None and len(claimed) < room:
             self._newest_seen = seen   # every claimable job was taken, by us or by others
@@ -541,8 +556,9 @@ def run_scheduler(settings: Settings, stop: threading.Event, *, scheduler_id: st
     db.lock_timeout_s = SCHEDULER_LOCK_TIMEOUT_S
     if not in_memory(db.url):
         start_fork_server()   # the writer's, while Ray starts and the engine compiles
+    # on a Ray cluster, one scheduler drives it; another waits as its standby until ``stop``
     executor = make_executor(settings.executor, num_workers=settings.num_workers, address=settings.ray_address,
-                             niceness=settings.niceness)
+                             niceness=settings.niceness, standby=stop)
     config = SchedulerConfig(lease_s=settings.lease_seconds, heartbeat_s=settings.heartbeat_seconds,
                              max_jobs=settings.max_jobs, batch_size=settings.batch_size,
                              max_simulation_s=settings.max_simulation_seconds,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
@@ -168,3 +169,49 @@ def test_a_source_added_after_results_skips_the_probe() -> None:
     assert second.sizer is not None and second.sizer.designs_done > 0
     dispatcher.fill()
     assert 40 - sum(len(q) for q in second.queue) > dispatcher.in_flight("b") > 0
+
+
+def stall_once(rows: np.ndarray, roads: Any, marker: str) -> list[tuple[int, BatchResult]]:
+    """``task``, but the first task holding the design with l2 = 0.12 hangs for a minute (a node that
+    died: its task never comes back), once: the marker file says it did."""
+    import os
+    import time
+
+    if (rows[:, 2] == 0.12).any() and not os.path.exists(marker):
+        open(marker, "w").close()
+        time.sleep(60.0)
+    return task(rows, roads)
+
+
+def test_a_task_far_overdue_is_run_again_and_delivered_once(tmp_path: Any) -> None:
+    from functools import partial
+
+    sink = Sink()
+    slow = request(1, l2=0.12)
+    with ProcessExecutor(num_workers=2) as executor:
+        dispatcher = Dispatcher(executor, partial(stall_once, marker=str(tmp_path / "stalled")), batch_size=1)
+        work = sink.work("a", request(40), slow)
+        dispatcher.add(work)
+        start = time.perf_counter()
+        drain(dispatcher, work)
+        took = time.perf_counter() - start
+        load = dispatcher.load()
+    assert dispatcher.hedged == 1 and took < 20.0, (dispatcher.hedged, took)
+    got = sorted((p.road, float(p.designs[0, 1]), int(c)) for p, _ in sink.results for c in p.candidates)
+    assert len(got) == 41 == len(set(got)) and not sink.failures
+    stalled = next(b for p, b in sink.results if p.designs[0, 1] == 0.12)
+    expected = toy_batch(slow.designs, Road())
+    np.testing.assert_array_equal(stalled.values, expected.values)
+    assert load.evaluations_per_s > 0 and load.tasks_per_s > 0 and load.in_flight_tasks == 0
+    assert load.backlog_designs == 0 and 0.0 < load.busy_share <= 1.0
+
+
+def test_load_counts_the_backlog_and_the_busy_share() -> None:
+    dispatcher = Dispatcher(SerialExecutor(), task, batch_size=2)
+    work = Sink().work("a", request(10))
+    dispatcher.add(work)
+    assert dispatcher.load().backlog_designs == 10
+    dispatcher.step(1.0)
+    load = dispatcher.load()
+    assert load.tasks_per_s > 0 and load.evaluations_per_s == 2 * load.tasks_per_s   # tasks of 2 designs came back
+    assert load.backlog_designs + 2 * load.in_flight_tasks < 10 and 0.0 < load.busy_share <= 1.0

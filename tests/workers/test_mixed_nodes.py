@@ -44,7 +44,7 @@ SWEEP = {"kind": "sweep", "roads": ["sine:0.04:3"],
 DE = {"kind": "de", "roads": ["sine:0.04:2"], "de": {"np": 8, "iters": 5}, "seed": 13, "settings": SIM}
 
 
-def _start_node(args: list[str], env: dict[str, str], temp_dir: str, name: str) -> subprocess.Popen[bytes]:
+def start_node(args: list[str], env: dict[str, str], temp_dir: str, name: str) -> subprocess.Popen[bytes]:
     log = Path(temp_dir) / f"{name}.log"
     ports = [f"--node-manager-port={free_port()}", f"--object-manager-port={free_port()}",
              f"--metrics-export-port={free_port()}", f"--dashboard-agent-listen-port={free_port()}",
@@ -62,7 +62,7 @@ def _start_node(args: list[str], env: dict[str, str], temp_dir: str, name: str) 
     return node
 
 
-def _stop(node: subprocess.Popen[bytes], temp_dir: str) -> None:
+def stop_node(node: subprocess.Popen[bytes], temp_dir: str) -> None:
     node.send_signal(signal.SIGTERM)
     try:
         node.wait(30)
@@ -84,16 +84,16 @@ def mixed_cluster() -> Iterator[tuple[str, dict[str, str]]]:
     head_dir = tempfile.mkdtemp(prefix="fdh", dir="/tmp")
     other_dir = tempfile.mkdtemp(prefix="fdo", dir="/tmp")
     address = f"127.0.0.1:{free_port()}"
-    head = _start_node(["--head", f"--port={address.rsplit(':', 1)[1]}", "--include-dashboard=false"], env,
+    head = start_node(["--head", f"--port={address.rsplit(':', 1)[1]}", "--include-dashboard=false"], env,
                        head_dir, "head")
     other = None
     try:
-        other = _start_node([f"--address={address}"], {**env, **OTHER_CPU}, other_dir, "other")
+        other = start_node([f"--address={address}"], {**env, **OTHER_CPU}, other_dir, "other")
         yield address, env
     finally:
         if other is not None:
-            _stop(other, other_dir)
-        _stop(head, head_dir)
+            stop_node(other, other_dir)
+        stop_node(head, head_dir)
 
 
 def _workers() -> list[Any]:

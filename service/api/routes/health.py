@@ -36,7 +36,10 @@ def _check(services: Services) -> HealthOut:
         store = StoreOut(writable=False, latency_s=round(time.perf_counter() - start, 4))
         active, rows = None, []
     found = [SchedulerOut(id=row.id, host=row.host, pid=row.pid, executor=row.executor, capacity=row.capacity,
-                          heartbeat_age_s=round(age, 3), alive=age <= alive_within, store_error=row.store_error)
+                          heartbeat_age_s=round(age, 3), alive=age <= alive_within, store_error=row.store_error,
+                          tasks_per_s=row.tasks_per_s, evaluations_per_s=row.evaluations_per_s,
+                          busy_share=row.busy_share, in_flight_tasks=row.in_flight_tasks,
+                          backlog_designs=row.backlog_designs)
              for row, age in rows]
     if any(s.alive and s.store_error for s in found):  # results cannot be stored, though the probe passed
         store = StoreOut(writable=False, latency_s=store.latency_s)
