@@ -188,7 +188,7 @@ class VirtualCluster(ExecutorMixin):
     def release(self, shared: Shared) -> None:
         pass
 
-    def submit(self, fn: Any, batch: Any, *shared: Shared) -> int:
+    def submit(self, fn: Any, batch: Any, *shared: Shared, again: int = 0) -> int:
         values = [handle.ref for handle in shared]
         begun = time.perf_counter()
         timed = fn(batch, *values)

@@ -23,13 +23,14 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import fcntl
 import os
 import signal
 import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -86,6 +87,21 @@ def _compiling_elsewhere(method: str) -> bool:
     return False
 
 
+@contextlib.contextmanager
+def _deciding() -> Iterator[None]:
+    """The machine's lock on deciding who compiles (an exclusive ``flock`` on ``<cache>/compile.lock``,
+    held while a process looks for a compilation under way and, if none is, starts one): of the
+    workers of a fresh Ray node, which all call :func:`compile_engine` at once (workers/evaluate.py),
+    one compiles and the others wait for it, rather than each compiling for itself."""
+    cache_dir().mkdir(parents=True, exist_ok=True)
+    fd = os.open(cache_dir() / "compile.lock", os.O_CREAT | os.O_RDWR)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)   # releases the lock
+
+
 def _start(method: str, nice: bool = False) -> subprocess.Popen[bytes]:
     """Lock the method and compile it in a child process (which removes the lock when it ends);
     ``nice``: in the background, in a session of its own (a terminal's Ctrl-C is not its), ended
@@ -124,10 +140,11 @@ def compile_engine(now: tuple[str, ...] = ("fast",),
     for it. A reference run that starts before its background compilation has finished compiles
     for itself."""
     start = time.perf_counter()
-    children = {m: None if _compiling_elsewhere(m) else _start(m) for m in now if not is_compiled(m)}
-    for method in later:
-        if not is_compiled(method) and not _compiling_elsewhere(method):
-            _start(method, nice=True)
+    with _deciding():
+        children = {m: None if _compiling_elsewhere(m) else _start(m) for m in now if not is_compiled(m)}
+        for method in later:
+            if not is_compiled(method) and not _compiling_elsewhere(method):
+                _start(method, nice=True)
 
     def wait() -> float:
         for method, child in children.items():

@@ -96,8 +96,10 @@ class Executor(Protocol):
         once the tasks already submitted with it have finished. Idempotent."""
         ...
 
-    def submit(self, fn: Callable[..., Any], batch: Any, *shared: Shared) -> int:
-        """Queue ``fn(batch, *values of shared)``; return its task id. Never blocks."""
+    def submit(self, fn: Callable[..., Any], batch: Any, *shared: Shared, again: int = 0) -> int:
+        """Queue ``fn(batch, *values of shared)``; return its task id. Never blocks. ``again``: 0, or
+        ``k`` for the k-th copy of a task still in flight, submitted because it is overdue (the
+        dispatcher's hedging): an executor that places tasks (Ray) places copies apart."""
         ...
 
     def poll(self, timeout: float) -> list[Done]:

@@ -23,14 +23,17 @@ A batch whose task raised, or whose worker was lost for good, is tried again one
 task, so only the design at fault fails (``on_failure``), never its neighbours in the batch.
 
 A task that runs far longer than its designs should take (:data:`HEDGE_AFTER` times the source's
-measured time, at least :data:`HEDGE_MIN_S`) while tasks started after it have come back is run
-again, once, as a twin: whichever returns first is delivered, the other's result is dropped.
-A node that died (SIGKILLed: Ray takes ~15 s to declare it dead and retry its tasks) or one
-still compiling the engine then holds no DE generation for longer than that (issue 30).
+measured time a design, at least :data:`HEDGE_MIN_S`) is run again as a copy, and again if that
+copy is overdue too, up to :data:`MAX_COPIES` copies and one copy a worker in flight: whichever
+returns first is delivered, the others' results are dropped. A node that died (SIGKILLed: Ray
+takes ~15 s to declare it dead and retry its tasks) or one still compiling the engine then holds no
+DE generation for longer than that (issue 30). A cluster slowed down as a whole is not doubled:
+the measured time a design (the workers' own clock) slows with it.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections import deque
@@ -93,10 +96,14 @@ class Work:
         return min(range(len(self.queue)), key=lambda i: len(self.queue[i]))
 
 
-#: A task is run again (a twin) once it has run this many times its designs' expected time ...
+log = logging.getLogger(__name__)
+
+#: A task is run again (a copy) once its latest copy has run this many times its designs' expected time ...
 HEDGE_AFTER = 4.0
-#: ... and at least this long [s] (a loaded machine's pauses stay below it), looked at this often [s].
-HEDGE_MIN_S, HEDGE_CHECK_S = 1.0, 0.25
+#: ... and at least this long [s] (a loaded machine's pauses stay below it), looked at this often [s] ...
+HEDGE_MIN_S, HEDGE_CHECK_S = 0.5, 0.1
+#: ... up to this many copies besides the first.
+MAX_COPIES = 2
 
 #: Work queued in the executor beyond one task a worker, in seconds of the cluster's time.
 QUEUE_S = 0.05
@@ -159,10 +166,9 @@ class Dispatcher:
         self._load_start = self._busy_at = time.perf_counter()
         self._load_tasks = self._load_designs = 0
         self._busy_integral = 0.0
-        self._twins: dict[int, int] = {}   # a hedged task and its twin, both ways
-        self._newest_back = 0.0            # the latest start (handed_at) of a task that has come back
+        self._copies: dict[int, list[int]] = {}   # a hedged task's id (and each copy's) -> all copies, in order
         self._next_hedge = 0.0
-        #: tasks run again as twins (HEDGE_AFTER), since the start
+        #: copies of overdue tasks started (HEDGE_AFTER), since the start
         self.hedged = 0
 
     # ------------------------------------------------------------------ sources
@@ -188,7 +194,7 @@ class Dispatcher:
         self.executor.cancel(ids)
         for task_id in ids:
             del self._tasks[task_id]
-            self._twins.pop(task_id, None)   # its twin is the same source's, so cancelled here too
+            self._copies.pop(task_id, None)   # its copies are the same source's, so cancelled here too
         work.in_flight = 0
         work.waited_in_flight = 0
         for handle in handles:
@@ -218,21 +224,29 @@ class Dispatcher:
         return finished
 
     def _hedge(self) -> None:
-        """Start a twin of each task overdue (module doc) while a later-started task has come back."""
+        """Start a copy of each task whose latest copy is overdue (module doc), up to ``MAX_COPIES``
+        a task and one copy a worker in flight."""
         now = time.perf_counter()
         if now < self._next_hedge:
             return
         self._next_hedge = now + HEDGE_CHECK_S
         for task_id, task in list(self._tasks.items()):
             sizer = task.work.sizer
-            if task_id in self._twins or task.handed_at >= self._newest_back or sizer is None or not sizer.designs_done:
+            copies = self._copies.get(task_id, [task_id])
+            if copies[-1] != task_id or len(copies) > MAX_COPIES or sizer is None or not sizer.designs_done:
                 continue
+            if len(self._copies) - len({id(c) for c in self._copies.values()}) >= self.executor.num_workers:
+                return   # as many copies in flight as workers
             designs = sum(len(part) for part in task.parts)
             overhead = sizer.overhead_s if math.isfinite(sizer.overhead_s) else 0.0
             expected = designs * sizer.compute_s / sizer.designs_done + overhead
             if now - task.handed_at > max(HEDGE_MIN_S, HEDGE_AFTER * expected):
-                twin = self._submit(task.work, self._works[task.work.key][1], list(task.parts))
-                self._twins[task_id], self._twins[twin] = twin, task_id
+                log.info("a task of %d designs has run %.1f s (expected %.3f s): running it again", designs,
+                         now - task.handed_at, expected)
+                copy = self._submit(task.work, self._works[task.work.key][1], list(task.parts), again=len(copies))
+                copies = [*copies, copy]
+                for member in copies:
+                    self._copies[member] = copies
                 self.hedged += 1
 
     def _busy(self) -> None:
@@ -273,10 +287,10 @@ class Dispatcher:
     def _start(self, work: Work, handles: tuple[Any, ...]) -> None:
         self._submit(work, handles, [work.alone.popleft()] if work.alone else self._take(work))
 
-    def _submit(self, work: Work, handles: tuple[Any, ...], parts: list[Request]) -> int:
+    def _submit(self, work: Work, handles: tuple[Any, ...], parts: list[Request], again: int = 0) -> int:
         rows = np.concatenate([np.column_stack([np.full(len(part), float(part.road)), part.designs])
                                for part in parts])
-        task_id = self.executor.submit(_apply, rows, self._fn, *handles)
+        task_id = self.executor.submit(_apply, rows, self._fn, *handles, again=again)
         self._tasks[task_id] = _Task(work, tuple(parts), time.perf_counter())
         work.in_flight += 1
         work.waited_in_flight += sum(len(part) for part in parts if part.waited)
@@ -325,14 +339,15 @@ class Dispatcher:
         for d in done:
             task = self._forget(d.task)
             if task is None:
-                continue  # its source was removed, or its twin came back first
-            self._newest_back = max(self._newest_back, task.handed_at)
-            twin = self._twins.pop(d.task, None)
-            if twin is not None:
-                del self._twins[twin]
-                if not d.ok:
-                    continue  # the twin carries on alone
-                self._forget(twin)  # left to run (Ray's cancel would kill its worker); its result is dropped
+                continue  # its source was removed, or a copy of it came back first
+            copies = self._copies.pop(d.task, None)
+            if copies is not None:
+                copies.remove(d.task)
+                if not d.ok and any(c in self._tasks for c in copies):
+                    continue  # the other copies carry on
+                for other in copies:   # left to run (Ray's cancel would kill its worker); their results dropped
+                    self._copies.pop(other, None)
+                    self._forget(other)
             if d.cancelled:
                 continue
             work, parts = task.work, task.parts

@@ -42,6 +42,12 @@ def by_road(rows: np.ndarray) -> list[tuple[int, np.ndarray]]:
 
 
 def warm_up_engine(roads: tuple[Road, ...], settings: SimSettings, vehicle: Vehicle | None) -> None:
-    """Simulate one design for ``WARM_UP_DURATION_S`` so Numba's cached code is loaded before timing."""
+    """Make sure this machine's cache holds the engine's compiled code (``compile_engine``: on a node
+    that never ran finaldrive, one process compiles and the node's other workers wait for it, instead
+    of each compiling for itself; the dispatcher meanwhile runs their tasks again elsewhere), then
+    simulate one design for ``WARM_UP_DURATION_S`` so Numba's cached code is loaded before timing."""
+    from finaldrive.engine import compile_engine
+
+    compile_engine((settings.method,), later=())()
     settings = settings.with_(duration=WARM_UP_DURATION_S)
     run_engine(np.array([WARM_UP_DESIGN]), roads[0], settings, vehicle)

@@ -210,7 +210,7 @@ class ProcessExecutor(ExecutorMixin):
                 if value.users == 0:
                     self._free(shared.key)
 
-    def submit(self, fn: Callable[..., Any], batch: Any, *shared: Shared) -> int:
+    def submit(self, fn: Callable[..., Any], batch: Any, *shared: Shared, again: int = 0) -> int:
         """Queue ``fn(batch, *shared values)``; start it on an idle worker if there is one. Never blocks
         (``fn`` and ``batch`` are pickled here: an unpicklable one raises here)."""
         keys = tuple(handle.key for handle in shared)

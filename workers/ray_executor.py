@@ -65,12 +65,13 @@ from ray.exceptions import (
     TaskCancelledError,
     WorkerCrashedError,
 )
+from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
 from finaldrive.workers.base import IN_FLIGHT_PER_WORKER, Done, ExecutorMixin, Shared
 from finaldrive.workers.cluster import ClusterTaken, check_on_cluster
 
 #: How often ``poll`` reads the cluster's CPUs again (``capacity``) [s].
-CAPACITY_REFRESH_S = 10.0
+CAPACITY_REFRESH_S = 5.0
 #: The longest single wait in ``poll`` [s] (a cancel from another thread also wakes it).
 POLL_SLICE_S = 0.2
 
@@ -79,6 +80,13 @@ DRIVER_ACTOR = ("finaldrive-driver", "finaldrive")
 #: How often a standby looks whether the cluster's driver has gone [s] (Ray frees the name ~1-2 s
 #: after the driver's process dies, measured with SIGKILL on Ray 2.60).
 STANDBY_POLL_S = 1.0
+
+#: Copies of overdue tasks (``submit(again=k)``) go to nodes that returned a result within this long [s]
+#: (if any did), in order of their last result: a dead node's last is older.
+ANSWERED_S = 3.0
+#: For this long after a copy, every task goes to such nodes in turn [s] (Ray's death detection of
+#: a node takes ~15 s: health checks every 3 s, 5 failures).
+SUSPECT_S = 20.0
 
 #: Environment variables ``ray.init`` reads or sets for token authentication; restored on close.
 _AUTH_ENV = ("RAY_AUTH_MODE", "RAY_AUTH_TOKEN")
@@ -195,10 +203,11 @@ _nice_added = 0
 
 
 def _outcome(future: concurrent.futures.Future[Any]) -> dict[str, Any]:
-    """A finished task's outcome (``Done``'s fields): its result, or how it ended."""
+    """A finished task's outcome (``Done``'s fields): its result, or how it ended (a result comes with
+    its node's id, ``_run_task``)."""
     error = future.exception()
     if error is None:
-        return {"result": future.result()}
+        return {"result": future.result()[1]}
     if isinstance(error, TaskCancelledError):
         return {"cancelled": True}
     if isinstance(error, _WORKER_LOSS):
@@ -247,14 +256,21 @@ def _take_cluster(standby: threading.Event | None) -> Any:
             raise ClusterTaken(message)
 
 
-@ray.remote
-def _run_task(niceness: int, fn: Callable[..., Any], batch: Any, *shared: Any) -> Any:
-    """The one remote function: lower this worker's priority to ``niceness`` (once), run ``fn``."""
+def _run_task(niceness: int, fn: Callable[..., Any], batch: Any, *shared: Any) -> tuple[str, Any]:
+    """The one remote function: lower this worker's priority to ``niceness`` (once), run ``fn``;
+    returns (this node's id, ``fn``'s result)."""
     global _nice_added
     if niceness > _nice_added:
         os.nice(niceness - _nice_added)
         _nice_added = niceness
-    return fn(batch, *shared)
+    return ray.get_runtime_context().get_node_id(), fn(batch, *shared)
+
+
+_RUN: Any = ray.remote(_run_task)
+#: The same, for the copies of overdue tasks (``submit(again=k)``, placed by ``RayExecutor._place``): a
+#: function of its own is a scheduling class of its own, so Ray leases a copy a worker afresh rather
+#: than queueing it on the worker of the task it stands in for (which may be on a dead node).
+_RUN_AGAIN: Any = ray.remote(_run_task)
 
 
 class RayExecutor(ExecutorMixin):
@@ -320,7 +336,11 @@ class RayExecutor(ExecutorMixin):
         self.num_workers = num_workers or cpus
         self.capacity = IN_FLIGHT_PER_WORKER * cpus
         self._capacity_at = time.monotonic()
-        self._task = _run_task.options(max_retries=max_retries, retry_exceptions=False)
+        self._task = _RUN.options(max_retries=max_retries, retry_exceptions=False)
+        self._answered: dict[str, float] = {}   # node id -> when a task of it last returned a result
+        self._suspect_until = 0.0                # placing every task on answering nodes until then (_place)
+        self._nodes: set[str] = set()            # the cluster's nodes with CPUs, read while suspecting
+        self._turn = 0
         self._lock = threading.RLock()
         self._ids = 0
         self._refs: dict[ray.ObjectRef[Any], int] = {}     # in flight: result ref -> task id
@@ -347,7 +367,7 @@ class RayExecutor(ExecutorMixin):
         with self._lock:
             self._shared.pop(shared.key, None)   # tasks in flight keep their own references
 
-    def submit(self, fn: Callable[..., Any], batch: Any, *shared: Shared) -> int:
+    def submit(self, fn: Callable[..., Any], batch: Any, *shared: Shared, again: int = 0) -> int:
         with self._lock:
             if self._closed:
                 raise RuntimeError("the executor is closed")
@@ -355,12 +375,35 @@ class RayExecutor(ExecutorMixin):
                 refs = [self._shared[handle.key] for handle in shared]
             except KeyError:
                 raise ValueError("unknown or released shared handle") from None
-            ref = self._task.remote(self.niceness, fn, batch, *refs)
+            task = self._place(again)
+            ref = task.remote(self.niceness, fn, batch, *refs)
             self._ids += 1
             self._refs[ref] = self._ids
             self._by_task[self._ids] = ref
             ref.future().add_done_callback(partial(self._arrive, self._ids))
             return self._ids
+
+    def _place(self, again: int) -> Any:
+        """The remote function to call, placed. The k-th copy of an overdue task (``again``) goes to the
+        node that returned a result k-th most recently among those that did within ``ANSWERED_S``;
+        for ``SUSPECT_S`` after a copy (a node may be dead: Ray still places tasks there until it
+        declares it dead) every task goes to those nodes, and to those that joined and have not
+        answered yet, in turn."""
+        now = time.monotonic()
+        if again:
+            self._suspect_until = now + SUSPECT_S
+        elif now >= self._suspect_until:
+            return self._task
+        nodes = sorted(self._answered, key=self._answered.__getitem__, reverse=True)
+        nodes = [node for node in nodes if self._answered[node] >= now - ANSWERED_S] or nodes
+        nodes += sorted(self._nodes.difference(self._answered))   # joined, and not yet answered
+        if not nodes:
+            return _RUN_AGAIN.options(max_retries=self.max_retries, retry_exceptions=False) if again else self._task
+        self._turn += 1
+        node = nodes[(again - 1) % len(nodes)] if again else nodes[self._turn % len(nodes)]
+        return (_RUN_AGAIN if again else _RUN).options(
+            max_retries=self.max_retries, retry_exceptions=False,
+            scheduling_strategy=NodeAffinitySchedulingStrategy(node_id=node, soft=True))
 
     def _arrive(self, task: int, future: concurrent.futures.Future[Any]) -> None:
         """Ray's completion callback (its own thread, or ``submit``'s if already done): queue the task."""
@@ -391,6 +434,8 @@ class RayExecutor(ExecutorMixin):
                     if ref is not None:               # else: cancelled meanwhile, and reported so
                         del self._refs[ref]
                         self._done.append(Done(task, **_outcome(future)))
+                        if future.exception() is None:
+                            self._answered[future.result()[0]] = time.monotonic()
                 if self._done or not self._refs or time.monotonic() >= deadline:
                     done, self._done = self._done, []
                     return done
@@ -403,6 +448,10 @@ class RayExecutor(ExecutorMixin):
         self.capacity = IN_FLIGHT_PER_WORKER * cpus
         if self._fixed_workers is None:
             self.num_workers = cpus
+        if self._suspect_until > self._capacity_at:   # which nodes joined, for _place
+            with contextlib.suppress(Exception):
+                self._nodes = {node["NodeID"] for node in ray.nodes()  # type: ignore[no-untyped-call]
+                               if node["Alive"] and node["Resources"].get("CPU", 0) > 0}
 
     def cancel(self, tasks: Iterable[int]) -> None:
         """``ray.cancel(force=True)``: a queued task is dropped, a running one's worker killed."""

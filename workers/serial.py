@@ -43,7 +43,7 @@ class SerialExecutor(ExecutorMixin):
         with self._lock:
             self._shared.discard(shared.key)
 
-    def submit(self, fn: Callable[..., Any], batch: Any, *shared: Shared) -> int:
+    def submit(self, fn: Callable[..., Any], batch: Any, *shared: Shared, again: int = 0) -> int:
         with self._lock:
             if self._closed:
                 raise RuntimeError("the executor is closed")

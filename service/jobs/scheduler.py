@@ -98,9 +98,10 @@ _LOOK_S = 0.2
 _STUCK_S = 600.0
 #: Times a job found with a hole in the store is given back to resume, by one scheduler, before it is failed.
 _MAX_REOPEN = 2
-#: Beside other live schedulers, one whose workers were busier than this over its last heartbeat
-#: interval claims no job (they are left to schedulers with room), and one with room claims one job a
-#: heartbeat, so a job's load shows before the next claim. Alone, a scheduler claims up to max_jobs.
+#: Beside other live schedulers, a scheduler claims one job a heartbeat (so a job's load shows before
+#: the next claim, and the others get their share), and none while its workers were busier than this
+#: over its last heartbeat interval (they are left to schedulers with room). Alone, a scheduler
+#: claims up to max_jobs at once.
 CLAIM_BELOW_BUSY = 0.9
 
 
@@ -269,7 +270,7 @@ class Scheduler:
                       for name, value in asdict(load).items()}
         beaten = self._db(lambda s: (beat(s, self.id, lease_s=self.config.lease_s, capacity=self.executor.capacity,
                                           load=self._load),
-                                     others_alive(s, self.id, within_s=self.config.lease_s) if self.jobs else 0),
+                                     others_alive(s, self.id, within_s=self.config.lease_s)),
                           "heartbeat")
         if beaten is None:
             return
@@ -279,8 +280,8 @@ class Scheduler:
             log.info("scheduler %s: job %s is no longer ours (cancelled or taken over); stopping it", self.id, job_id)
             self._drop(job_id)
         room = self.config.max_jobs - len(owned)
-        if others and self.jobs and room > 0:   # claim by free capacity (CLAIM_BELOW_BUSY)
-            room = 1 if load.busy_share < CLAIM_BELOW_BUSY else 0
+        if others and room > 0:   # claim by free capacity (CLAIM_BELOW_BUSY)
+            room = 1 if not self.jobs or load.busy_share < CLAIM_BELOW_BUSY else 0
             self._newest_seen = seen   # the next heartbeat claims again, not the next look: the load shows first
         claimed = self._db(lambda s: claim_jobs(s, self.id, lease_s=self.config.lease_s, limit=room), "claim jobs")
         if claimed is not None and len(claimed) < room:

@@ -8,7 +8,9 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -288,6 +290,31 @@ def test_compile_engine_compiles_if_the_other_process_failed(cache: list[str], t
     (tmp_path / "compiling-fast").unlink()    # the other process ended without the marker
     wait()
     assert cache == ["fast"]
+
+
+def test_of_many_callers_at_once_one_compiles(cache: list[str], tmp_path: Path,
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """The workers of a fresh Ray node call compile_engine at once (workers/evaluate.py): one
+    compiles, the others wait for it. Each caller opens the lock file itself, so the callers'
+    flocks exclude each other here as across processes; a slow start widens the race."""
+    started = precompile._start
+
+    def slow_start(method: str, nice: bool = False) -> subprocess.Popen[bytes]:
+        time.sleep(0.05)      # between looking for a compilation under way and marking its own
+        return started(method, nice)
+
+    monkeypatch.setattr(precompile, "_start", slow_start)
+    waits: list[Callable[[], float]] = []
+    callers = [threading.Thread(target=lambda: waits.append(precompile.compile_engine(later=())))
+               for _ in range(8)]
+    for caller in callers:
+        caller.start()
+    for caller in callers:
+        caller.join()
+    assert cache == ["fast"]
+    (tmp_path / "compiled-fast").touch()
+    for wait in waits:
+        wait()
 
 
 @pytest.mark.skipif(not Path("/proc/self/autogroup").exists(), reason="no Linux autogroups on this machine")

@@ -116,7 +116,8 @@ def test_small_requests_share_a_task_up_to_the_batch_size() -> None:
     executor = SerialExecutor()
     submitted: list[int] = []
     submit = executor.submit
-    executor.submit = lambda fn, rows, *shared: submitted.append(len(rows)) or submit(fn, rows, *shared)  # type: ignore[method-assign]
+    executor.submit = lambda fn, rows, *shared, again=0: (  # type: ignore[method-assign]
+        submitted.append(len(rows)) or submit(fn, rows, *shared, again=again))
     dispatcher = Dispatcher(executor, task, batch_size=10)
     work = sink.work("a", request(4, road=0, run=1), request(3, road=1, run=2), request(5, road=0, run=3))
     dispatcher.add(work)

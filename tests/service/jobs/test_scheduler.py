@@ -295,6 +295,38 @@ def test_a_new_job_is_claimed_before_the_next_heartbeat(settings: Settings) -> N
         full.db.dispose()
 
 
+def test_beside_another_scheduler_each_claims_one_job_a_heartbeat_and_none_when_busy(settings: Settings) -> None:
+    """Claiming by free capacity: alone, a scheduler takes every queued job it has room for; beside a
+    live one, one a heartbeat, and none while its workers were busy (CLAIM_BELOW_BUSY)."""
+    config = SchedulerConfig(heartbeat_s=60.0, lease_s=120.0, flush_s=0.02, recordings=False)
+    a, b = (Scheduler(open_database(settings), SerialExecutor(), config=config, task=ToyTask(delay=0.05),
+                      warmup=None, scheduler_id=name) for name in ("a", "b"))
+    try:
+        a.turn(0.0)
+        b.turn(0.0)   # both registered, nothing queued
+        jobs = [_submit(settings, {**DE, "seed": seed}) for seed in range(5)]
+        a._maintain()
+        b._maintain()
+        assert len(a.jobs) == len(b.jobs) == 1 and set(a.jobs) | set(b.jobs) == set(jobs[:2])
+        _drive(a, lambda: a.dispatcher.in_flight() > 0, timeout=5.0)
+        a.dispatcher.load()
+        a.turn(0.5)   # its serial worker busy through the interval: above CLAIM_BELOW_BUSY
+        held = set(a.jobs)
+        a._maintain()
+        assert set(a.jobs) == held and a._load is not None and a._load["busy_share"] >= 0.9, a._load
+        held = set(b.jobs)
+        b.dispatcher.load()   # a fresh interval, idle: b claims one more
+        b._maintain()
+        assert len(b.jobs) == len(held) + 1
+        b.shutdown()          # alone again: a takes what is left that it has room for
+        a._maintain()
+        assert set(a.jobs) | set(b.jobs) >= set(jobs)
+    finally:
+        for scheduler in (a, b):
+            scheduler.shutdown()
+            scheduler.db.dispose()
+
+
 def test_a_job_that_cannot_be_planned_fails_with_a_clean_message(settings: Settings) -> None:
     job_id = _submit(settings, DE)
     db = open_database(settings)
