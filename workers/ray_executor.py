@@ -84,7 +84,7 @@ STANDBY_POLL_S = 1.0
 #: Copies of overdue tasks (``submit(again=k)``) go to nodes that returned a result within this long [s]
 #: (if any did), in order of their last result: a dead node's last is older.
 ANSWERED_S = 3.0
-#: For this long after a copy, every task goes to such nodes in turn [s] (Ray's death detection of
+#: For this long after a copy or a lost task, every task goes to such nodes in turn [s] (Ray's death detection of
 #: a node takes ~15 s: health checks every 3 s, 5 failures).
 SUSPECT_S = 20.0
 
@@ -386,9 +386,9 @@ class RayExecutor(ExecutorMixin):
     def _place(self, again: int) -> Any:
         """The remote function to call, placed. The k-th copy of an overdue task (``again``) goes to the
         node that returned a result k-th most recently among those that did within ``ANSWERED_S``;
-        for ``SUSPECT_S`` after a copy (a node may be dead: Ray still places tasks there until it
-        declares it dead) every task goes to those nodes, and to those that joined and have not
-        answered yet, in turn."""
+        for ``SUSPECT_S`` after a copy or a task lost with its worker (a node may be dead: Ray still
+        places tasks there until it declares it dead) every task goes to those nodes, and to those
+        that joined and have not answered yet, in turn."""
         now = time.monotonic()
         if again:
             self._suspect_until = now + SUSPECT_S
@@ -433,9 +433,12 @@ class RayExecutor(ExecutorMixin):
                     ref = self._by_task.pop(task, None)
                     if ref is not None:               # else: cancelled meanwhile, and reported so
                         del self._refs[ref]
-                        self._done.append(Done(task, **_outcome(future)))
-                        if future.exception() is None:
+                        outcome = _outcome(future)
+                        self._done.append(Done(task, **outcome))
+                        if "result" in outcome:
                             self._answered[future.result()[0]] = time.monotonic()
+                        elif outcome.get("lost"):   # a node may be dead (Ray 2.40 spends the retries there at once)
+                            self._suspect_until = time.monotonic() + SUSPECT_S
                 if self._done or not self._refs or time.monotonic() >= deadline:
                     done, self._done = self._done, []
                     return done
