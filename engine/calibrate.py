@@ -23,7 +23,7 @@ from finaldrive.engine.model.mass import centre_of_mass
 from finaldrive.engine.model.road import Road
 from finaldrive.engine.setup import pack_parameters
 from finaldrive.engine.simulation import simulate
-from finaldrive.engine.vehicle import Vehicle
+from finaldrive.engine.vehicle import Vehicle, VehicleError
 
 
 @dataclass(frozen=True)
@@ -79,7 +79,11 @@ def solve_chassis_cog(vehicle: Vehicle, tol: float = 1e-10, max_iter: int = 50) 
 def solve_torque(vehicle: Vehicle, settings: SimSettings = SimSettings(),
                  bracket: tuple[float, float] = (100.0, 200.0), xtol: float = 1e-4) -> Vehicle:
     """The vehicle with the drive torque that makes the calibration design travel
-    target_distance on the flat road in settings.duration."""
+    target_distance on the flat road in settings.duration. The paper's drive only: the launch drive
+    (drive_model = 1) does not read the torque (VehicleError)."""
+    if vehicle["drive_model"] != 0.0:
+        raise VehicleError("vehicle parameter 'drive_model': the torque is calibrated for the paper's drive (0); "
+                           "the launch drive does not use it")
     design = calibration_design(vehicle)
     target = vehicle["target_distance"]
 

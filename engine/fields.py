@@ -80,6 +80,8 @@ _SERIES = [
     _f("tyre_u_m", "rear tyre's longitudinal carcass deflection u (relaxation state)", 6),
     _f("sigma_m", "rear tyre's relaxation length sigma*", 5),
     _f("residual_m", "largest constraint residual (reference method only)", 9),
+    _f("drive_torque_nm", "torque on the engine sprocket: the paper's constant, or the launch drive's after its "
+       "limits", 1),
 ]
 _TRAVEL = [
     _f("travel_m", "rear wheel travel: rear axle height above full extension, chassis frame (engine.travel)", 4),

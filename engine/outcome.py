@@ -10,5 +10,5 @@ OK, NONFINITE, RESIDUAL, CORRECTOR, REAR_AIRBORNE, FRONT_AIRBORNE, PAUSED = 0, 1
 # theta_rad into pitch_deg; docs/fields.md).
 SERIES_COLUMNS = ("t_s", "x1_m", "theta_rad", "chain_tension_n", "fz_rear_n", "fz_front_n", "kappa",
                   "fx_n", "effective_radius_m", "wheel_speed_rad_s", "sprocket_speed_rad_s", "taut_length_m",
-                  "tyre_u_m", "sigma_m", "residual_m")
+                  "tyre_u_m", "sigma_m", "residual_m", "drive_torque_nm")
 N_SERIES = len(SERIES_COLUMNS)

@@ -9,6 +9,7 @@ naming the key. The file also bounds the designs it can carry (group ``design_li
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from dataclasses import dataclass
@@ -55,6 +56,20 @@ PARAMETERS: tuple[tuple[str, Rule], ...] = (
     ("chain_runs", (1.0, True, 2.0)), ("chain_free_play", _POSITIVE),
     ("suspension_stops", (0.0, True, 1.0)), ("k_stop", _NON_NEGATIVE), ("fork_travel", _POSITIVE),
     ("tyre_airborne_relax", (0.0, True, 1.0)),
+    ("drive_model", (0.0, True, 1.0)), ("primary_ratio", _POSITIVE), ("first_gear_ratio", _POSITIVE),
+    ("engine_speed_1", _POSITIVE), ("engine_speed_2", _POSITIVE), ("engine_speed_3", _POSITIVE),
+    ("engine_speed_4", _POSITIVE), ("engine_torque_1", _NON_NEGATIVE), ("engine_torque_2", _NON_NEGATIVE),
+    ("engine_torque_3", _NON_NEGATIVE), ("engine_torque_4", _NON_NEGATIVE), ("launch_speed", _POSITIVE),
+    ("tc_friction", _POSITIVE), ("wheelie_force", _POSITIVE),
+)
+#: The launch drive (docs/engine.md#the-launch-drive), added after files were written: (key, value, unit). A
+#: file without them has the paper's constant torque (drive_model 0) and these values, engine/data/vehicle.json's.
+LAUNCH_DEFAULTS: tuple[tuple[str, float, str], ...] = (
+    ("drive_model", 0.0, "-"), ("primary_ratio", 1.596, "-"), ("first_gear_ratio", 2.615, "-"),
+    ("engine_speed_1", 3000.0, "rpm"), ("engine_speed_2", 7200.0, "rpm"), ("engine_speed_3", 9500.0, "rpm"),
+    ("engine_speed_4", 11000.0, "rpm"), ("engine_torque_1", 100.0, "N m"), ("engine_torque_2", 146.0, "N m"),
+    ("engine_torque_3", 137.0, "N m"), ("engine_torque_4", 110.0, "N m"), ("launch_speed", 6000.0, "rpm"),
+    ("tc_friction", 1.0, "-"), ("wheelie_force", 2400.0, "N"),
 )
 #: Parameters added after files were written: a file without one takes this (group, value, unit), the
 #: model as it was before (the paper's springs and tyre, Table 8's smallest R_WS allowed), and says so
@@ -64,6 +79,7 @@ ADDED_LATER: dict[str, tuple[str, float, str]] = {
     "k_stop": ("suspension", 2.0e6, "N/m"),
     "fork_travel": ("suspension", 0.120, "m"),
     "tyre_airborne_relax": ("tyre", 0.0, "-"),
+    **{key: ("drive", value, unit) for key, value, unit in LAUNCH_DEFAULTS},
     "chain_pitch": ("design_limits", 0.015875, "m"),
     "min_sprocket_teeth": ("design_limits", 9.0, "-"),
 }
@@ -257,6 +273,12 @@ def load_vehicle_dict(data: Any) -> Vehicle:
     if v["tyre_airborne_relax"] not in (0.0, 1.0):
         raise VehicleError("vehicle parameter 'tyre_airborne_relax': must be 0 (eq. 42 as printed) or 1 (relaxed "
                            "while airborne)")
+    if v["drive_model"] not in (0.0, 1.0):
+        raise VehicleError("vehicle parameter 'drive_model': must be 0 (the paper's constant torque) or 1 (the launch "
+                           "drive)")
+    speeds = [v[f"engine_speed_{i}"] for i in range(1, 5)]
+    if any(b <= a for a, b in itertools.pairwise(speeds)):
+        raise VehicleError("vehicle parameter 'engine_speed_4': engine_speed_1 < ... < engine_speed_4 is required")
     if v["fork_travel"] >= v["s_fs"]:
         raise VehicleError("vehicle parameter 'fork_travel': must be less than the fork's unloaded length s_fs")
     if v["chain_runs"] not in (1.0, 2.0):

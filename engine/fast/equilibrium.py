@@ -89,6 +89,7 @@ def static_equilibrium(p: np.ndarray, road: Road, pose: np.ndarray | None = None
     design pose (kinematics.design_pose) if known."""
     p0 = p.copy()
     p0[P.TORQUE] = 0.0
+    p0[P.DRIVE_MODEL] = 0.0  # no drive at rest, whichever the vehicle's
     kind, rp = road.packed()
     try:
         free, ok = _newton(first_guess(p, road, pose), p0, kind, rp, _XTOL, _MAX_NEWTON, _FD_STEP)

@@ -153,14 +153,6 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
     if run == FREE:                                                    # no run engaged: alpha is free
         ja_t, ja_p, alpha_c, rho, alpha_dot = 0.0, 0.0, 0.0, 0.0, y[ZALPHA_DOT]
     ux, uy = inertia(geo, p, ct, st, cp, sp, fs, wt, wp, fsd, ja_t, ja_p, alpha_c, rho, ws)
-    # drive torque on the sprocket (alpha decreasing) and its reaction on the chassis
-    torque = drive_torque(wt, alpha_dot, p, aux)
-    q_x = ws[W_Q + ZX1]
-    q_y = ws[W_Q + ZY1]
-    q_t = ws[W_Q + ZTHETA] + torque * (1.0 - ja_t)
-    q_p = ws[W_Q + ZPHI] - torque * ja_p
-    q_s = ws[W_Q + ZFS]
-    q_b = ws[W_Q + ZBETA] - torque * rho
     # rear tyre: radial (36) and longitudinal (38)-(52) forces at point 14, below point 6
     hr, dhr, _ = road_height(kind, rp, x1 + w6x)
     rt = y1 + w6y - hr                                                 # (20), (32)
@@ -168,6 +160,15 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
     rt_dot = yd - dhr * xd + drt_phi * wp
     vx = xd - w6y * wp                                                 # (39)
     fz_rear, fx, lever = rear_tyre(rt, rt_dot, vx, -wb, u, sigma, p, longitudinal, aux)  # (36), (38)-(52)
+    # drive torque on the sprocket (alpha decreasing) and its reaction on the chassis (after the rear
+    # tyre: the launch drive reads its load)
+    torque = drive_torque(wt, alpha_dot, p, aux)
+    q_x = ws[W_Q + ZX1]
+    q_y = ws[W_Q + ZY1]
+    q_t = ws[W_Q + ZTHETA] + torque * (1.0 - ja_t)
+    q_p = ws[W_Q + ZPHI] - torque * ja_p
+    q_s = ws[W_Q + ZFS]
+    q_b = ws[W_Q + ZBETA] - torque * rho
     q_x += fx - fz_rear * dhr
     q_y += fz_rear
     q_p += fz_rear * drt_phi - fx * w6y
@@ -213,7 +214,7 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
     alpha_dd = alpha_c + ja_t * out[N_DOF + ZTHETA] + ja_p * out[N_DOF + ZPHI] + rho * out[N_DOF + ZBETA]
     if run == FREE:
         alpha_dd = -torque / p[P.I_SPROCKET]                           # the free sprocket: I alpha'' = -T
-    aux[AUX_TENSION] = sprocket_chain_tension(alpha_dd, p)
+    aux[AUX_TENSION] = sprocket_chain_tension(torque, alpha_dd, p)
     aux[AUX_TAUT] = taut
     aux[AUX_TAUT_RATE] = taut_rate
     aux[AUX_ALPHA_DOT] = alpha_dot

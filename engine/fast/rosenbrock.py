@@ -52,6 +52,7 @@ from finaldrive.engine.model.diagnostics import (
     N_POWERS,
     integrate_powers,
     powers,
+    record_series,
     retune_sigma,
     start_records,
     track_interval,
@@ -64,7 +65,6 @@ from finaldrive.engine.model.elements import (
     AUX_FZ_FRONT,
     AUX_FZ_REAR,
     AUX_KAPPA,
-    AUX_RE,
     AUX_SLOPE,
     AUX_TAUT,
     AUX_TAUT_RATE,
@@ -99,25 +99,6 @@ def high_order(kind: int, two_runs: bool) -> bool:
     """Whether run_fast steps with ROS34PW2 (else ROS2, with half its largest step h_max): on a
     smooth road (not a piecewise-linear profile) with the paper's single chain run."""
     return kind != PROFILE and not two_runs
-
-
-@jit
-def _record(row, t, y, aux, sigma, out):
-    out[row, 0] = t
-    out[row, 1] = y[ZX1]
-    out[row, 2] = y[ZTHETA]
-    out[row, 3] = aux[AUX_TENSION]
-    out[row, 4] = aux[AUX_FZ_REAR]
-    out[row, 5] = aux[AUX_FZ_FRONT]
-    out[row, 6] = aux[AUX_KAPPA]
-    out[row, 7] = aux[AUX_FX]
-    out[row, 8] = aux[AUX_RE]
-    out[row, 9] = -y[N_DOF + ZBETA]
-    out[row, 10] = -aux[AUX_ALPHA_DOT]
-    out[row, 11] = aux[AUX_TAUT]
-    out[row, 12] = y[ZU]
-    out[row, 13] = sigma
-    out[row, 14] = 0.0  # no constraint residual in minimal coordinates
 
 
 @jit
@@ -254,7 +235,8 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only,
         track_state(ext, aux, p)
         st[S_PREV_TAUT], st[S_PREV_RATE] = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
         if n_rows > 0:
-            _record(0, 0.0, y, aux, st[S_SIGMA], series)
+            record_series(series, 0, 0.0, y[ZX1], y[ZTHETA], -y[N_DOF + ZBETA], -aux[AUX_ALPHA_DOT], y[ZU],
+                          st[S_SIGMA], 0.0, aux)  # no constraint residual in minimal coordinates
             _store(states, 0, y)
             st[S_ROW] = 1.0
         st[S_STARTED] = 1.0
@@ -351,12 +333,14 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only,
         while row < n_rows and (row * dt_out <= t + 1e-9 * dt_out or (row == n_rows - 1 and t >= t_end)):
             t_row = min(row * dt_out, t_end)
             if t - t_row <= 1e-9 * dt_out:
-                _record(row, t_row, y, aux, sigma, series)
+                record_series(series, row, t_row, y[ZX1], y[ZTHETA], -y[N_DOF + ZBETA], -aux[AUX_ALPHA_DOT],
+                              y[ZU], sigma, 0.0, aux)
                 _store(states, row, y)
             else:
                 _hermite(y_old, f_old, y, f1, h_done, (t_row - t_old) / h_done, yi)
                 fast_rhs(yi, p, geo, kind, rp, sigma, longitudinal, fi, auxi, wsi, mode)
-                _record(row, t_row, yi, auxi, sigma, series)
+                record_series(series, row, t_row, yi[ZX1], yi[ZTHETA], -yi[N_DOF + ZBETA], -auxi[AUX_ALPHA_DOT],
+                              yi[ZU], sigma, 0.0, auxi)
                 _store(states, row, yi)
             row += 1
         if two_runs:

@@ -1,4 +1,5 @@
-"""What both solvers record at every accepted step: the extremes of a run and its energy ledger.
+"""What both solvers record at every accepted step: the extremes of a run and its energy ledger; and a
+row of the output series (record_series), written here once for both.
 
 Both integrator loops call these on their own steps (never on the output series), so a peak is
 the same whatever the series stride. ``ext`` holds the extremes and durations, ``led`` the
@@ -36,6 +37,7 @@ from finaldrive.engine.model.elements import (
     AUX_SLOPE,
     AUX_TAUT,
     AUX_TENSION,
+    AUX_TORQUE,
     AUX_VSX,
     AUX_VX,
 )
@@ -138,3 +140,26 @@ def retune_sigma(aux: np.ndarray, u: float, old_sigma: float, new_sigma: float, 
     aux[AUX_SLOPE] = slope
     aux[AUX_DUDT] -= abs(aux[AUX_VX]) * u * (1.0 / new_sigma - 1.0 / old_sigma)
     return dfx
+
+
+@jit
+def record_series(out: np.ndarray, row: int, t: float, x1: float, theta: float, wheel_speed: float,
+                  sprocket_speed: float, u: float, sigma: float, residual: float, aux: np.ndarray) -> None:
+    """Row ``row`` of the time series (engine.outcome.SERIES_COLUMNS, in its order): the state's values
+    the solver passes (its own coordinates) and the force elements' outputs in aux."""
+    out[row, 0] = t
+    out[row, 1] = x1
+    out[row, 2] = theta
+    out[row, 3] = aux[AUX_TENSION]
+    out[row, 4] = aux[AUX_FZ_REAR]
+    out[row, 5] = aux[AUX_FZ_FRONT]
+    out[row, 6] = aux[AUX_KAPPA]
+    out[row, 7] = aux[AUX_FX]
+    out[row, 8] = aux[AUX_RE]
+    out[row, 9] = wheel_speed
+    out[row, 10] = sprocket_speed
+    out[row, 11] = aux[AUX_TAUT]
+    out[row, 12] = u
+    out[row, 13] = sigma
+    out[row, 14] = residual
+    out[row, 15] = aux[AUX_TORQUE]

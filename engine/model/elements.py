@@ -10,7 +10,8 @@ the fast path onto its 6 minimal coordinates (engine.fast.minimal), by virtual w
   lever arm on the wheel (engine.model.tyre);
 - front tyre: radial spring-damper (37);
 - suspensions: linear spring-dampers (34)-(35);
-- drive: a constant torque between chassis and engine sprocket (the reference choice);
+- drive: a torque between chassis and engine sprocket: constant (the paper's, the reference choice) or
+  the launch drive (an engine curve through the gearbox with its limits, vehicle drive_model = 1);
 - chain: the tension of the upper run from the engine sprocket's moment balance.
 
 Gravity and inertia of the bodies (Table 2) are in engine.model.mass (natural coordinates) and
@@ -18,6 +19,8 @@ engine.fast.minimal (the same centres of mass and inertias as kinetic energy in 
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -37,8 +40,8 @@ from finaldrive.engine.model.tyre import (
 # Slots of the auxiliary vector both solvers fill at every right-hand side evaluation.
 (AUX_FX, AUX_FZ_REAR, AUX_FZ_FRONT, AUX_KAPPA, AUX_VX, AUX_VSX, AUX_RE, AUX_LEVER, AUX_OMEGA, AUX_DUDT,
  AUX_SLOPE, AUX_RT, AUX_FT, AUX_P_DAMP, AUX_P_DRIVE, AUX_TENSION, AUX_TAUT, AUX_TAUT_RATE, AUX_ALPHA_DOT,
- AUX_RESID) = range(20)
-N_AUX = 20
+ AUX_RESID, AUX_TORQUE) = range(21)
+N_AUX = 21
 
 
 @jit
@@ -123,15 +126,56 @@ def spring_damper(length: float, rate: float, k: float, c: float, free_length: f
 
 
 @jit
+def engine_torque(speed_rpm: float, p: np.ndarray) -> float:
+    """The launch drive's engine torque [N m] at speed_rpm: the vehicle's four-point curve, linear between
+    its points, held at the first point below it, none above the last (the rev limit)."""
+    if speed_rpm > p[P.ENGINE_SPEED_4]:
+        return 0.0
+    if speed_rpm <= p[P.ENGINE_SPEED_1]:
+        return p[P.ENGINE_TORQUE_1]
+    for i in range(3):
+        n0, n1 = p[P.ENGINE_SPEED_1 + i], p[P.ENGINE_SPEED_1 + i + 1]
+        if speed_rpm <= n1:
+            t0, t1 = p[P.ENGINE_TORQUE_1 + i], p[P.ENGINE_TORQUE_1 + i + 1]
+            return t0 + (t1 - t0) * (speed_rpm - n0) / (n1 - n0)
+    return p[P.ENGINE_TORQUE_4]
+
+
+@jit
+def launch_torque(sprocket_speed: float, fz_rear: float, re: float, p: np.ndarray) -> float:
+    """The launch drive's torque on the engine sprocket [N m] (vehicle drive_model = 1).
+
+    The engine turns at the sprocket's speed relative to the chassis times the primary and first-gear
+    ratios, or at launch_speed while the clutch slips below it (the clutch then passes the engine's
+    torque at that speed). Its torque through the ratios is capped so that the drive force it asks of the
+    rear tyre, T R_WS / (R_ES R_e), stays below two limits: the wheelie limit wheelie_force (a constant,
+    from the quasi-static load transfer) and the traction limit tc_friction F_z (eq. 36's load, so the
+    throttle is cut while the rear tyre is off the road). Both limits are feed-forward (no slip or pitch
+    feedback: such feedback, tried, rocked the bike on its suspension and left the distance undecided to
+    metres between tolerances; docs/engine.md#the-launch-drive).
+    """
+    ratio = p[P.PRIMARY_RATIO] * p[P.FIRST_GEAR_RATIO]
+    speed_rpm = max(sprocket_speed * ratio * 30.0 / math.pi, p[P.LAUNCH_SPEED])
+    force_cap = min(p[P.WHEELIE_FORCE], p[P.TC_FRICTION] * max(fz_rear, 0.0))
+    return min(ratio * engine_torque(speed_rpm, p), force_cap * re / p[P.SPROCKET_RATIO])
+
+
+@jit
 def drive_torque(theta_dot: float, alpha_dot: float, p: np.ndarray, aux: np.ndarray) -> float:
     """The engine's torque T on the sprocket (turning it forward, alpha decreasing), its reaction on
-    the chassis; the drive's power T (theta' - alpha') into aux[AUX_P_DRIVE]."""
-    t = p[P.TORQUE]
+    the chassis: the paper's constant torque, or the launch drive (reads the rear tyre's load and
+    effective radius from aux: call it after rear_tyre); the drive's power T (theta' - alpha') into
+    aux[AUX_P_DRIVE]."""
+    if p[P.DRIVE_MODEL] == 0.0:
+        t = p[P.TORQUE]
+    else:
+        t = launch_torque(theta_dot - alpha_dot, aux[AUX_FZ_REAR], aux[AUX_RE], p)
     aux[AUX_P_DRIVE] = t * (theta_dot - alpha_dot)
+    aux[AUX_TORQUE] = t
     return t
 
 
 @jit
-def sprocket_chain_tension(alpha_dd: float, p: np.ndarray) -> float:
+def sprocket_chain_tension(torque: float, alpha_dd: float, p: np.ndarray) -> float:
     """Tension of the upper run from the engine sprocket's moment balance: T_c R_ES = T + I alpha''."""
-    return (p[P.TORQUE] + p[P.I_SPROCKET] * alpha_dd) / p[P.R_ES]
+    return (torque + p[P.I_SPROCKET] * alpha_dd) / p[P.R_ES]

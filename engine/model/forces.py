@@ -37,7 +37,7 @@ def applied_forces(q: np.ndarray, qd: np.ndarray, u: float, sigma: float, p: np.
     fz_rear, fx, lever = rear_tyre(q[RT], qd[RT], qd[X6], omega, u, sigma, p, longitudinal, aux)  # (36), (38)-(52)
     out[RT] += fz_rear
     out[FT] += front_tyre(q[FT], qd[FT], p, aux)                                               # (37)
-    torque = drive_torque(qd[THETA], qd[ALPHA], p, aux)
+    torque = drive_torque(qd[THETA], qd[ALPHA], p, aux)  # after rear_tyre: the launch drive reads its load
     out[ALPHA] -= torque  # drive torque turns the engine sprocket forward (alpha decreasing) ...
     out[THETA] += torque  # ... and its reaction acts on the chassis
     aux[AUX_ALPHA_DOT] = qd[ALPHA]

@@ -81,17 +81,31 @@ SUSPENSION_STOPS = 69
 K_STOP = 70
 FORK_TRAVEL = 71
 TYRE_AIRBORNE_RELAX = 72
-A2 = 73  # design: angle a2 of r_1->2 in the chassis frame [rad]
-L2 = 74  # design: pivot to engine sprocket axis [m]
-R_WS = 75  # design: wheel sprocket pitch radius [m]
-R_ES = 76  # design: engine sprocket pitch radius R_WS / sprocket_ratio [m]
-L_CHAIN = 77  # chain length L of eq. (69), set at t = 0 [m]
-L_LOOP = 78  # two chain runs: the whole chain's length, both runs and both wraps, set at t = 0 [m]
-AL_ALPHA = 79  # augmented Lagrangian penalty alpha, eqs. (57)-(58)
-AL_XI = 80  # Baumgarte xi, eq. (57)
-AL_OMEGA = 81  # Baumgarte omega, eq. (57)
-RS_BUMP = 82  # travel stops: the rear spring's length at full compression (rear_wheel_travel) [m]
-FS_BUMP = 83  # travel stops: the fork's length at full compression, s_fs - fork_travel [m]
+DRIVE_MODEL = 73
+PRIMARY_RATIO = 74
+FIRST_GEAR_RATIO = 75
+ENGINE_SPEED_1 = 76
+ENGINE_SPEED_2 = 77
+ENGINE_SPEED_3 = 78
+ENGINE_SPEED_4 = 79
+ENGINE_TORQUE_1 = 80
+ENGINE_TORQUE_2 = 81
+ENGINE_TORQUE_3 = 82
+ENGINE_TORQUE_4 = 83
+LAUNCH_SPEED = 84
+TC_FRICTION = 85
+WHEELIE_FORCE = 86
+A2 = 87  # design: angle a2 of r_1->2 in the chassis frame [rad]
+L2 = 88  # design: pivot to engine sprocket axis [m]
+R_WS = 89  # design: wheel sprocket pitch radius [m]
+R_ES = 90  # design: engine sprocket pitch radius R_WS / sprocket_ratio [m]
+L_CHAIN = 91  # chain length L of eq. (69), set at t = 0 [m]
+L_LOOP = 92  # two chain runs: the whole chain's length, both runs and both wraps, set at t = 0 [m]
+AL_ALPHA = 93  # augmented Lagrangian penalty alpha, eqs. (57)-(58)
+AL_XI = 94  # Baumgarte xi, eq. (57)
+AL_OMEGA = 95  # Baumgarte omega, eq. (57)
+RS_BUMP = 96  # travel stops: the rear spring's length at full compression (rear_wheel_travel) [m]
+FS_BUMP = 97  # travel stops: the fork's length at full compression, s_fs - fork_travel [m]
 
 VEHICLE_KEYS: tuple[str, ...] = (
     'L3',
@@ -167,6 +181,20 @@ VEHICLE_KEYS: tuple[str, ...] = (
     'k_stop',
     'fork_travel',
     'tyre_airborne_relax',
+    'drive_model',
+    'primary_ratio',
+    'first_gear_ratio',
+    'engine_speed_1',
+    'engine_speed_2',
+    'engine_speed_3',
+    'engine_speed_4',
+    'engine_torque_1',
+    'engine_torque_2',
+    'engine_torque_3',
+    'engine_torque_4',
+    'launch_speed',
+    'tc_friction',
+    'wheelie_force',
 )
-N_VEHICLE = 73
-N_PARAMS = 84
+N_VEHICLE = 87
+N_PARAMS = 98

@@ -54,6 +54,7 @@ def rest_forces(free: np.ndarray, p: np.ndarray, road: Road) -> np.ndarray:
     aux = np.zeros(N_AUX)
     rest = p.copy()
     rest[P.TORQUE] = 0.0
+    rest[P.DRIVE_MODEL] = 0.0  # no drive at rest, whichever the vehicle's
     applied_forces(q, np.zeros(N_COORDS), 0.0, p[P.SIGMA_K0], rest, gravity_forces(rest), False, Q, aux)
     J = np.empty((N_CONSTRAINTS, N_COORDS))
     jacobian(q, rest, kind, rp, J)

@@ -18,6 +18,7 @@ from finaldrive.engine.model.diagnostics import (
     N_POWERS,
     integrate_powers,
     powers,
+    record_series,
     retune_sigma,
     start_records,
     track_interval,
@@ -29,7 +30,6 @@ from finaldrive.engine.model.elements import (
     AUX_FZ_FRONT,
     AUX_FZ_REAR,
     AUX_KAPPA,
-    AUX_RE,
     AUX_RESID,
     AUX_TAUT,
     AUX_TENSION,
@@ -85,26 +85,6 @@ _trapezoidal_step, _abm_step = make_steppers(motorcycle_rhs)
 
 
 @jit(allocates=True)
-def _record(row, t, y, sigma, aux, out):
-    q = y[:N_COORDS]
-    out[row, 0] = t
-    out[row, 1] = q[X1]
-    out[row, 2] = q[THETA]
-    out[row, 3] = aux[AUX_TENSION]
-    out[row, 4] = aux[AUX_FZ_REAR]
-    out[row, 5] = aux[AUX_FZ_FRONT]
-    out[row, 6] = aux[AUX_KAPPA]
-    out[row, 7] = aux[AUX_FX]
-    out[row, 8] = aux[AUX_RE]
-    out[row, 9] = -y[N_COORDS + BETA]
-    out[row, 10] = -y[N_COORDS + ALPHA]
-    out[row, 11] = aux[AUX_TAUT]
-    out[row, 12] = y[U]
-    out[row, 13] = sigma
-    out[row, 14] = aux[AUX_RESID]
-
-
-@jit(allocates=True)
 def run_reference(y, p, kind, rp, M, qg, longitudinal, dt, n_steps, n_trap, nu, tol, max_iter,
                   lam_tol, lam_max, max_resid, max_air_steps, stride, keep_series,
                   st, hist, lam, sigma, aux, ext, led, series, q_samples, max_steps):
@@ -138,7 +118,8 @@ def run_reference(y, p, kind, rp, M, qg, longitudinal, dt, n_steps, n_trap, nu, 
             return code
         track_state(ext, aux, p)
         if keep_series:
-            _record(0, 0.0, y, sigma[0], aux, series)
+            record_series(series, 0, 0.0, y[X1], y[THETA], -y[N_COORDS + BETA], -y[N_COORDS + ALPHA], y[U],
+                          sigma[0], aux[AUX_RESID], aux)
             q_samples[0] = y[:U]
             st[S_ROW] = 1.0
         st[S_STARTED] = 1.0
@@ -186,7 +167,8 @@ def run_reference(y, p, kind, rp, M, qg, longitudinal, dt, n_steps, n_trap, nu, 
             st[S_STEP], st[S_T] = step, t
             return REAR_AIRBORNE if st[S_AIR_REAR] > max_air_steps else FRONT_AIRBORNE
         if keep_series and (step % stride == 0 or step == n_steps):
-            _record(row, t, y, sigma[0], aux, series)
+            record_series(series, row, t, y[X1], y[THETA], -y[N_COORDS + BETA], -y[N_COORDS + ALPHA], y[U],
+                          sigma[0], aux[AUX_RESID], aux)
             q_samples[row] = y[:U]
             row += 1
     st[S_STEP], st[S_T], st[S_ROW] = step, t, row

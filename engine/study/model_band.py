@@ -61,6 +61,10 @@ def _phase(degrees: float) -> Change:
     return change
 
 
+def _launch(road: Road, vehicle: Vehicle) -> tuple[Road, Vehicle] | None:
+    return None if vehicle["drive_model"] == 1.0 else (road, vehicle.replace(drive_model=1.0))
+
+
 #: The Magic Formula's upper load bound the issue compared (vehicle file: Fz_max 6,400 N, 4 Fz0).
 LOW_LOAD_RANGE_N = 4800.0
 
@@ -70,6 +74,8 @@ ALTERNATIVES: tuple[Alternative, ...] = (
     Alternative("drive_half", "the drive torque halved (a gentler launch than the paper's constant 150 N m)",
                 _vehicle(torque=0.5)),
     Alternative("drive_double", "the drive torque doubled (300 N m: a harder launch)", _vehicle(torque=2.0)),
+    Alternative("drive_launch", "the launch drive: the engine through the gearbox with traction and wheelie limits "
+                "(docs/engine.md#the-launch-drive; skipped when the vehicle has it already)", _launch),
     Alternative("road_phase_90", "a sine road started a quarter period later (sine roads only)", _phase(90.0)),
     Alternative("road_phase_180", "a sine road started half a period later (sine roads only)", _phase(180.0)),
 )

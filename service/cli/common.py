@@ -48,6 +48,10 @@ def parser_options() -> dict[str, Any]:
 
 # --- arguments -------------------------------------------------------------------------------
 
+#: --drive's choices, in the order of the vehicle's drive_model values (0, 1).
+DRIVES = ("paper", "launch")
+
+
 def add_design_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--a2-deg", type=float, required=True,
                    help="angle a2 of the engine sprocket axis from the swingarm pivot, in the chassis frame [deg]")
@@ -58,6 +62,9 @@ def add_design_args(p: argparse.ArgumentParser) -> None:
 def add_vehicle_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--vehicle", metavar="FILE",
                    help="vehicle parameter file (JSON shaped like engine/data/vehicle.json); default: the paper's bike")
+    p.add_argument("--drive", choices=DRIVES, default=None,
+                   help="paper: the paper's constant torque; launch: the engine through the gearbox with traction and "
+                        "wheelie limits (docs/engine.md#the-launch-drive); default: the vehicle file's drive_model")
 
 
 def add_settings_args(p: argparse.ArgumentParser) -> None:
@@ -110,15 +117,15 @@ def add_json_arg(p: argparse.ArgumentParser, what: str = "print one JSON object 
 
 # --- engine inputs from arguments ----------------------------------------------------------
 
-def load_vehicle_arg(path: str | None) -> Vehicle:
+def load_vehicle_arg(path: str | None, drive: str | None = None) -> Vehicle:
+    """The vehicle of --vehicle (default: the paper's), with --drive's drive_model if given."""
     from finaldrive.engine import VehicleError, default_vehicle, load_vehicle
 
-    if path is None:
-        return default_vehicle()
     try:
-        return load_vehicle(path)
+        vehicle = default_vehicle() if path is None else load_vehicle(path)
     except VehicleError as exc:
         raise UsageError(str(exc)) from None
+    return vehicle if drive is None else vehicle.replace(drive_model=float(DRIVES.index(drive)))
 
 
 def design_from_args(args: argparse.Namespace, vehicle: Vehicle) -> Design:

@@ -39,7 +39,7 @@ from finaldrive.service.cli.travel_view import drive_lines, travel_lines
 def run_geometry(args: argparse.Namespace) -> int:
     from finaldrive.engine import drive_squat, static_geometry, travel_kinematics
 
-    vehicle = load_vehicle_arg(args.vehicle)
+    vehicle = load_vehicle_arg(args.vehicle, args.drive)
     design = design_from_args(args, vehicle)
     road = road_from_arg(args.road) if args.road else None
     settings = settings_from_args(args) if road is not None else None
@@ -74,13 +74,13 @@ def run_geometry(args: argparse.Namespace) -> int:
 
 SERIES_CSV_COLUMNS = ("t_s", "distance_m", "pitch_deg", "chain_tension_n", "squat_ratio", "fz_rear_n", "fz_front_n",
                       "kappa", "fx_n", "effective_radius_m", "wheel_speed_rad_s", "sprocket_speed_rad_s",
-                      "taut_length_m")
+                      "taut_length_m", "drive_torque_nm")
 
 
 def run_simulate(args: argparse.Namespace) -> int:
     from finaldrive.engine import simulate
 
-    vehicle = load_vehicle_arg(args.vehicle)
+    vehicle = load_vehicle_arg(args.vehicle, args.drive)
     design = design_from_args(args, vehicle)
     road = road_from_arg(args.road)
     settings = settings_from_args(args, series=bool(args.series), series_stride=args.stride)
@@ -156,7 +156,7 @@ def write_rows_csv(rows: list[dict[str, Any]], stream: Any) -> None:
 def run_evaluate(args: argparse.Namespace) -> int:
     from finaldrive.engine import evaluate
 
-    vehicle = load_vehicle_arg(args.vehicle)
+    vehicle = load_vehicle_arg(args.vehicle, args.drive)
     road = road_from_arg(args.road)
     designs = _checked_designs(args.designs, vehicle)
     settings = settings_from_args(args)
@@ -174,7 +174,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
 def run_model_band(args: argparse.Namespace) -> int:
     from finaldrive.engine import model_bands
 
-    vehicle = load_vehicle_arg(args.vehicle)
+    vehicle = load_vehicle_arg(args.vehicle, args.drive)
     road = road_from_arg(args.road)
     designs = _checked_designs(args.designs, vehicle)
     if len(designs) < 2:
@@ -215,14 +215,17 @@ def _checked_designs(path: str, vehicle: Any) -> Any:
 # --- calibrate ------------------------------------------------------------------------------
 
 def run_calibrate(args: argparse.Namespace) -> int:
-    from finaldrive.engine import solve_chassis_cog, solve_torque, static_loads
+    from finaldrive.engine import VehicleError, solve_chassis_cog, solve_torque, static_loads
 
-    vehicle = load_vehicle_arg(args.vehicle)
+    vehicle = load_vehicle_arg(args.vehicle, args.drive)
     out = writable(args.out, "--out")
     if not args.skip_cog:
         vehicle = solve_chassis_cog(vehicle)
     if not args.skip_torque:
-        vehicle = solve_torque(vehicle)
+        try:
+            vehicle = solve_torque(vehicle)
+        except VehicleError as exc:
+            raise UsageError(f"{exc} (--skip-torque keeps it)") from None
     loads = static_loads(vehicle)
     out.write_text(json.dumps(vehicle.to_dict(), indent=2) + "\n")
     print_json({"chassis_cog_x_m": vehicle["chassis_cog_x"], "chassis_cog_y_m": vehicle["chassis_cog_y"],

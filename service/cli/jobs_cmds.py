@@ -15,6 +15,7 @@ from finaldrive.service.cli.common import (
     add_tolerance_arg,
     de_from_args,
     de_options,
+    load_vehicle_arg,
     parser_options,
     print_json,
     writable,
@@ -50,6 +51,8 @@ def job_spec(args: argparse.Namespace) -> dict[str, Any]:
             spec["vehicle"] = json.loads(Path(args.vehicle).read_text())
         except (OSError, ValueError) as exc:
             raise UsageError(f"--vehicle {args.vehicle!r}: {exc}") from None
+    if args.drive is not None:  # the whole vehicle goes with the job: the file's or the paper's, with this drive
+        spec["vehicle"] = load_vehicle_arg(args.vehicle, args.drive).to_dict()
     if args.kind == "sweep":
         if args.grid is not None:
             spec["grid"] = args.grid

@@ -76,7 +76,7 @@ def _plan(kind: str, args: argparse.Namespace, **parts: Any) -> Any:
 
     try:
         return plan_study(kind, _roads(args), profiles=lambda name: read_profile(Path(name)),
-                          vehicle=load_vehicle_arg(args.vehicle), **parts)
+                          vehicle=load_vehicle_arg(args.vehicle, args.drive), **parts)
     except PlanError as exc:
         raise UsageError(str(exc)) from None
 
@@ -96,7 +96,7 @@ def run_optimize(args: argparse.Namespace) -> int:
                    objective=args.objective if several else None, seed=args.seed + k) for k in range(args.repeat)]
     plan = plans[0]
     settings = settings_from_args(args)
-    vehicle = load_vehicle_arg(args.vehicle)
+    vehicle = load_vehicle_arg(args.vehicle, args.drive)
     tally = Tally(len(plan.roads), Progress(sum(p.total() for p in plans), enabled=args.progress))
     start = time.monotonic()
     kind = args.executor or default_executor()
@@ -256,7 +256,7 @@ def run_sweep(args: argparse.Namespace) -> int:
     plan = _plan("sweep", args, grid=designs)
     several = len(plan.roads) > 1
     settings = settings_from_args(args)
-    vehicle = load_vehicle_arg(args.vehicle)
+    vehicle = load_vehicle_arg(args.vehicle, args.drive)
     out_path = writable(args.out, "--out") if args.out else None
     tally = Tally(len(plan.roads), Progress(plan.total(), enabled=args.progress))
     table = np.full((len(plan.roads), len(designs)), np.nan)

@@ -23,6 +23,9 @@ def test_each_alternative_is_the_changed_model_simulated() -> None:
     shifted = evaluate(DESIGNS, Road.parse("sine:0.04:3:180"), SETTINGS, vehicle)
     assert out["alternatives"]["road_phase_180"]["fitness_m"] == shifted.fitness_m.tolist()
     assert out["alternatives"]["road_phase_180"]["road"] == "sine:0.04:3:180"
+    launch = evaluate(DESIGNS, road, SETTINGS, vehicle.replace(drive_model=1.0))
+    assert out["alternatives"]["drive_launch"]["fitness_m"] == launch.fitness_m.tolist()
+    assert "drive_launch" in model_bands(DESIGNS[:1], road, SETTINGS, vehicle.replace(drive_model=1.0))["skipped"]
     for alt in out["alternatives"].values():
         assert alt["rank_correlation"] is None or -1.0 <= alt["rank_correlation"] <= 1.0
 

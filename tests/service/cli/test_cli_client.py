@@ -10,6 +10,7 @@ from typing import Any
 import httpx
 import pytest
 
+from finaldrive.engine import default_vehicle, load_vehicle_dict
 from finaldrive.service.cli import main, remote
 from finaldrive.service.client import ServiceClient
 
@@ -73,6 +74,10 @@ def test_submit_maps_options_to_the_spec(monkeypatch: pytest.MonkeyPatch, capsys
                      "de": {"np": 8, "iters": 3, "optimiser": "cmaes", "preset": "paper"},  # the rest: the server's
                      "bounds": {"a2_deg": [90.0, 270.0], "l2_m": [0.0, 0.1], "rws_m": [0.05, 0.15]}}]
     assert capsys.readouterr().out.startswith("job 7: de on 1 road(s), 12 evaluations, queued")
+    seen.clear()
+    assert main(["submit", "sweep", "--road", "flat", "--drive", "launch", "--idempotency-key", "k1"]) == 0
+    vehicle = seen[0]["vehicle"]  # the whole vehicle goes with the job, its drive the launch
+    assert load_vehicle_dict(vehicle).packed().tolist() == default_vehicle().replace(drive_model=1.0).packed().tolist()
     assert main(["submit", "de", "--road", "flat", "--grid", "table9"]) == 2
     assert main(["submit", "sweep"]) == 2
     assert main(["submit", "de", "--road", "flat", "--preset", "paper", "--max-evals", "20"]) == 2  # NP 50
