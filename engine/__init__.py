@@ -27,7 +27,7 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("VEHICLE_VALUE_LIMIT", "Vehicle", "VehicleError", "default_vehicle", "load_vehicle",
                      "load_vehicle_dict"), "finaldrive.engine.vehicle"),
     "static_geometry": "finaldrive.engine.geometry",
-    **dict.fromkeys(("compile_engine", "is_compiled"), "finaldrive.engine.precompile"),
+    **dict.fromkeys(("compile_engine", "compile_progress", "is_compiled"), "finaldrive.engine.precompile"),
     "start_runtime": "finaldrive.engine.model.jit",
     **dict.fromkeys(("FIELDS", "Field", "base_of", "design_label", "history_record", "human", "unit_of"),
                     "finaldrive.engine.fields"),
@@ -120,7 +120,11 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         DifferentialEvolution as DifferentialEvolution,
         Optimiser as Optimiser,
     )
-    from finaldrive.engine.precompile import compile_engine as compile_engine, is_compiled as is_compiled
+    from finaldrive.engine.precompile import (
+        compile_engine as compile_engine,
+        compile_progress as compile_progress,
+        is_compiled as is_compiled,
+    )
     from finaldrive.engine.record import (
         DIAGNOSTICS as DIAGNOSTICS,
         RECORD as RECORD,

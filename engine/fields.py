@@ -64,6 +64,8 @@ _STORED = [
     _f("status", "ok, or failed (reason says why)"),
     _f("reason", "why a run failed (empty when ok)"),
     _f("cached", "reused from an earlier identical simulation"),
+    _f("compile_s", "time a command spent compiling the engine before simulating, once per machine (not in "
+                    "wall_s; null when compiled already)", 1),
     _f("taut_length_m", "length of the chain's taut upper run (geometry: at the static pose; series: over time)", 4),
 ]
 _SERIES = [

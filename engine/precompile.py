@@ -80,6 +80,23 @@ def _lock(method: str) -> Path:
     return cache_dir() / f"compiling-{method}"
 
 
+def compile_progress(method: str) -> tuple[int, int] | None:
+    """How far a compilation of the method under way on this machine is: (kernels compiled, kernels
+    to compile) once its build has traced them, (0, 0) before; None when none is under way."""
+    if not _compiling_elsewhere(method):
+        return None
+    with contextlib.suppress(OSError, ValueError):
+        done, total = _lock(method).read_text().split()
+        return int(done), int(total)
+    return 0, 0
+
+
+def _tell_progress(method: str, done: int, total: int) -> None:
+    """Write the build's progress into the method's lock (refreshing it: the compilation is alive)."""
+    with contextlib.suppress(OSError):
+        _lock(method).write_text(f"{done} {total}")
+
+
 def _compiling_elsewhere(method: str) -> bool:
     """Whether a process (this one's or another's) is compiling the method now: its lock is fresh."""
     with contextlib.suppress(FileNotFoundError):
@@ -176,10 +193,11 @@ def _compile_here(method: str) -> None:
         raise RuntimeError(f"the {method} method failed while compiling: {result.reason}")
 
 
-def _build_here(method: str, directory: Path, waiting: Callable[[], None]) -> None:
+def _build_here(method: str, directory: Path, waiting: Callable[[], None],
+                progress: Callable[[int, int], None] | None = None) -> None:
     """Trace the method's brief run as plain Python (and, briefer, with the two-run chain), then
     compile the kernels they called with the other builders sharing ``directory``
-    (engine.model.kernel_build; ``waiting`` as there)."""
+    (engine.model.kernel_build; ``waiting`` and ``progress`` as there)."""
     from finaldrive.engine.model.jit import load_registries, traced
     from finaldrive.engine.model.kernel_build import build, plan
     from finaldrive.engine.simulation import simulate
@@ -193,7 +211,7 @@ def _build_here(method: str, directory: Path, waiting: Callable[[], None]) -> No
             # with an inf or a nan, and what the trace then misses is compiled by the run after the build
             with contextlib.suppress(ArithmeticError, ValueError):
                 simulate(design, road, run_settings, run_vehicle)
-    build(plan(trace), directory, waiting)
+    build(plan(trace), directory, waiting, progress)
 
 
 def _cpus() -> int:
@@ -224,7 +242,8 @@ def _build(method: str, builders: int) -> None:
                 with log.open("wb") as err:
                     helpers.append(subprocess.Popen([*_PROGRAM, "--builder", name, method],
                                                     stdout=subprocess.DEVNULL, stderr=err))
-            _build_here(method, directory, _give_up_after(_LOCK_S))
+            _build_here(method, directory, _give_up_after(_LOCK_S),
+                        lambda done, total: _tell_progress(method, done, total))
         except BaseException:
             for helper in helpers:
                 helper.kill()

@@ -129,14 +129,19 @@ class _Board:
         os.close(fd)
 
 
-def build(tasks: list[Task], directory: Path, waiting: Callable[[], None] = lambda: None) -> list[str]:
+def build(tasks: list[Task], directory: Path, waiting: Callable[[], None] = lambda: None,
+          progress: Callable[[int, int], None] | None = None) -> list[str]:
     """Compile the tasks with whichever processes build the same plan in ``directory``, until every
     task is done; return the names of those compiled here. ``waiting`` is called whenever this
-    process has nothing to compile for a while (it may raise, to give up)."""
-    board, here = _Board(directory), list[str]()
+    process has nothing to compile for a while (it may raise, to give up); ``progress(done, total)``
+    whenever the number of tasks done (by any process) has changed."""
+    board, here, told = _Board(directory), list[str](), -1
     while True:
         board.look()
         left = [task for task in tasks if task.name not in board.done]
+        if progress is not None and len(tasks) - len(left) != told:
+            told = len(tasks) - len(left)
+            progress(told, len(tasks))
         if not left:
             return here
         for task in left:

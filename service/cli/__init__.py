@@ -14,13 +14,11 @@ import sys
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
+from finaldrive.service.cli.commands import COMMANDS
 from finaldrive.service.cli.common import UsageError, parser_options
 
-#: Modules that add commands, in the order their commands appear in ``--help``.
-COMMAND_MODULES: tuple[str, ...] = tuple(f"finaldrive.service.cli.{name}" for name in (
-    "engine_cmds", "study_cmds", "roads_cmds", "server_cmds", "jobs_cmds", "media_cmds", "paper_cmds", "demo_cmds"))
-#: Commands of engine_cmds: their parser is built alone (the others' would import pydantic & co, ~0.3 s).
-ENGINE_COMMANDS = frozenset({"geometry", "simulate", "evaluate", "calibrate"})
+#: Modules that add commands, in the order their commands appear in ``--help`` (commands.COMMANDS').
+COMMAND_MODULES: tuple[str, ...] = tuple(dict.fromkeys(f"finaldrive.service.cli.{c.module}" for c in COMMANDS.values()))
 
 __all__ = ["UsageError", "build_parser", "main"]
 
@@ -47,15 +45,23 @@ class _Version(argparse.Action):
         parser.exit()
 
 
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
-    """The parser of every command, or of engine_cmds' alone when ``command`` is one of them."""
+def build_parser(command: str | None = None, *, every: bool = False) -> argparse.ArgumentParser:
+    """The parser for ``command``: its module's commands in full, the others as their names and help only
+    (commands.COMMANDS), so that a command, ``--help`` and ``--version`` import one module or none;
+    ``every``: every command in full."""
     doc = __doc__ or ""
     parser = _Parser(prog="finaldrive", description=doc.splitlines()[0], **parser_options())
     parser.add_argument("--version", action=_Version, nargs=0, help="print the version and exit")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
-    modules = COMMAND_MODULES[:1] if command in ENGINE_COMMANDS else COMMAND_MODULES
-    for name in modules:
-        importlib.import_module(name).register(sub)
+    wanted = COMMANDS[command].module if command in COMMANDS else None
+    for module in COMMAND_MODULES:
+        name = module.rsplit(".", 1)[1]
+        if every or name == wanted:
+            importlib.import_module(module).register(sub)
+        else:
+            for listed, spec in COMMANDS.items():
+                if spec.module == name:
+                    sub.add_parser(listed, help=spec.help, add_help=False)
     return parser
 
 

@@ -11,13 +11,14 @@ import csv
 import io
 import json
 import math
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
 if TYPE_CHECKING:
     import subprocess
+
+    import numpy as np
 
     from finaldrive.engine import Design, Road, SimSettings, Vehicle
 
@@ -128,6 +129,19 @@ def load_vehicle_arg(path: str | None, drive: str | None = None) -> Vehicle:
     return vehicle if drive is None else vehicle.replace(drive_model=float(DRIVES.index(drive)))
 
 
+def compile_first(method: str) -> float | None:
+    """Compile the method's kernels before a command's first simulation if this machine has not yet,
+    saying so on stderr (the simulation's wall_s then leaves it out); the seconds it took, else None."""
+    from finaldrive.engine import compile_engine, is_compiled
+
+    if is_compiled(method):
+        return None
+    print(f"compiling the engine's {method} method (once on this machine)...", file=sys.stderr)
+    seconds = compile_engine((method,), later=())()
+    print(f"compiled in {seconds:.0f} s", file=sys.stderr)
+    return seconds
+
+
 def design_from_args(args: argparse.Namespace, vehicle: Vehicle) -> Design:
     """The design of --a2-deg, --l2, --rws, within the vehicle's limits (else UsageError naming the option)."""
     from finaldrive.engine import Design, DesignError
@@ -229,6 +243,8 @@ def read_designs_csv(path: str) -> np.ndarray:
             rows.append([math.radians(float(row["a2_deg"])), float(row["l2_m"]), float(row["rws_m"])])
         except (TypeError, ValueError):
             raise UsageError(f"designs file {path!r}, line {n}: a2_deg, l2_m and rws_m must be numbers") from None
+    import numpy as np
+
     return np.array(rows, dtype=float).reshape(-1, 3)
 
 
@@ -263,7 +279,7 @@ def print_json(obj: Any) -> None:
 
 
 def _json_default(o: Any) -> Any:
-    if isinstance(o, np.generic):
+    if type(o).__module__ == "numpy" and hasattr(o, "item"):   # a numpy scalar (numpy not imported for --help)
         return o.item()
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 

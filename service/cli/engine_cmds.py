@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from finaldrive.engine import VALUES, design_label, human
+from finaldrive.service.cli.commands import COMMANDS
 from finaldrive.service.cli.common import (
     ROAD_HELP,
     UsageError,
@@ -23,6 +24,7 @@ from finaldrive.service.cli.common import (
     add_settings_args,
     add_vehicle_arg,
     clean,
+    compile_first,
     design_from_args,
     load_vehicle_arg,
     parser_options,
@@ -86,8 +88,10 @@ def run_simulate(args: argparse.Namespace) -> int:
     settings = settings_from_args(args, series=bool(args.series), series_stride=args.stride)
     series_path = writable(args.series, "--series") if args.series else None
     record_path = writable(args.record, "--record") if args.record else None
+    compile_s = compile_first(settings.method)
     result = simulate(design, road, settings, vehicle)
     summary = {k: (clean(v) if isinstance(v, float) else v) for k, v in result.summary().items()}
+    summary["compile_s"] = compile_s
     summary.update({"a2_deg": design.a2_deg, "l2_m": design.l2, "rws_m": design.rws, "road": road.spec})
     if series_path is not None and result.series is not None:
         _write_series(series_path, result.series)
@@ -113,6 +117,7 @@ def run_simulate(args: argparse.Namespace) -> int:
             "fitness_m",
             "chain_length_m",
             "wall_s",
+            *(["compile_s"] if compile_s is not None else []),
         ):
             print(f"{key:>15}: {human(key, summary[key])}")
         if "record" in summary:
@@ -160,6 +165,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     road = road_from_arg(args.road)
     designs = _checked_designs(args.designs, vehicle)
     settings = settings_from_args(args)
+    compile_first(settings.method)
     batch = evaluate(designs, road, settings, vehicle)
     rows = batch_rows(batch)
     if args.json:
@@ -235,7 +241,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
 
 def register(sub: Any) -> None:
-    p = sub.add_parser("geometry", help="a design's static quantities (squat ratio, chain length), no simulation",
+    p = sub.add_parser("geometry", help=COMMANDS["geometry"].help,
                        **parser_options())
     add_design_args(p)
     add_vehicle_arg(p)
@@ -249,7 +255,7 @@ def register(sub: Any) -> None:
     add_settings_args(p)
     p.set_defaults(run=run_geometry)
 
-    p = sub.add_parser("simulate", help="simulate one design on one road, in this process", **parser_options())
+    p = sub.add_parser("simulate", help=COMMANDS["simulate"].help, **parser_options())
     add_design_args(p)
     p.add_argument("--road", required=True, help=ROAD_HELP)
     add_vehicle_arg(p)
@@ -261,7 +267,7 @@ def register(sub: Any) -> None:
     p.add_argument("--fps", type=int, default=50, help="--record: frames per simulated second")
     p.set_defaults(run=run_simulate)
 
-    p = sub.add_parser("evaluate", help="simulate a CSV of designs (a2_deg,l2_m,rws_m) in this process",
+    p = sub.add_parser("evaluate", help=COMMANDS["evaluate"].help,
                        **parser_options())
     p.add_argument("--designs", required=True, metavar="FILE.csv", help="CSV with the header a2_deg,l2_m,rws_m")
     p.add_argument("--road", required=True, help=ROAD_HELP)
@@ -270,8 +276,7 @@ def register(sub: Any) -> None:
     add_json_arg(p, "print a JSON list instead of CSV")
     p.set_defaults(run=run_evaluate)
 
-    p = sub.add_parser("model-band", help="a CSV of designs under the documented modelling alternatives (tyre "
-                       "load range, drive level, road phase): does their ranking survive them?", **parser_options())
+    p = sub.add_parser("model-band", help=COMMANDS["model-band"].help, **parser_options())
     p.add_argument("--designs", required=True, metavar="FILE.csv", help="CSV with the header a2_deg,l2_m,rws_m "
                    "(at least 2 designs)")
     p.add_argument("--road", required=True, help=ROAD_HELP)
@@ -280,7 +285,7 @@ def register(sub: Any) -> None:
     add_json_arg(p, "print JSON: every design's fitness and distance under each alternative")
     p.set_defaults(run=run_model_band)
 
-    p = sub.add_parser("calibrate", help="solve the chassis centre of mass and the drive torque of a vehicle file",
+    p = sub.add_parser("calibrate", help=COMMANDS["calibrate"].help,
                        **parser_options())
     add_vehicle_arg(p)
     p.add_argument("--out", required=True, metavar="FILE", help="where to write the calibrated vehicle file")

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from finaldrive.service.cli import remote
+from finaldrive.service.cli.commands import COMMANDS
 from finaldrive.service.cli.common import (
     UsageError,
     add_de_args,
@@ -97,15 +98,18 @@ def run_submit(args: argparse.Namespace) -> int:
     with remote.connect(args) as client:
         spec["roads"] = upload_profiles(client, spec["roads"])
         job = client.submit(spec, idempotency_key=args.idempotency_key)
+        best = None
         if args.follow:
             job = follow(client, job["id"])
+            if not args.json and job["done"]:   # each best with its near-optimal set, as `finaldrive best` prints it
+                best = client.best(job["id"])
     if args.json:
         print_json(job)
     else:
         print(f"job {job['id']}: {job['kind']} on {len(job['roads'])} road(s), {job['total']} evaluations, "
               f"{job['state']}")
         if args.follow:
-            _print_best(job)
+            _print_best(best or job)
     return finished(job) if args.follow else EXIT_OK
 
 
@@ -217,7 +221,7 @@ def run_cancel(args: argparse.Namespace) -> int:
 def register(sub: Any) -> None:
     from finaldrive.service.cli.common import ROAD_HELP, add_settings_args, add_vehicle_arg
 
-    p = sub.add_parser("submit", help="submit a sweep, de or robust-de job to the service",
+    p = sub.add_parser("submit", help=COMMANDS["submit"].help,
                        epilog=exit_codes_epilog(), **parser_options())
     p.add_argument("kind", choices=("sweep", "de", "robust-de"),
                    help="sweep: a design grid on each road; de: the paper's DE on each road; "
@@ -237,7 +241,7 @@ def register(sub: Any) -> None:
     add_server_args(p)
     p.set_defaults(run=run_submit)
 
-    p = sub.add_parser("jobs", help="list the service's jobs, newest first", **parser_options())
+    p = sub.add_parser("jobs", help=COMMANDS["jobs"].help, **parser_options())
     p.add_argument("--state", choices=("queued", "running", "succeeded", "failed", "cancelled", "interrupted"),
                    help="only jobs in this state (default: any)")
     p.add_argument("--kind", choices=("sweep", "de", "robust-de", "paper-study", "designs"),
@@ -246,7 +250,7 @@ def register(sub: Any) -> None:
     add_server_args(p)
     p.set_defaults(run=run_jobs)
 
-    p = sub.add_parser("status", help="a job's progress; --follow draws a progress bar until it ends",
+    p = sub.add_parser("status", help=COMMANDS["status"].help,
                        epilog=exit_codes_epilog(), **parser_options())
     p.add_argument("id", type=int, help="job id")
     p.add_argument("--follow", action="store_true",
@@ -254,14 +258,14 @@ def register(sub: Any) -> None:
     add_server_args(p)
     p.set_defaults(run=run_status)
 
-    p = sub.add_parser("results", help="a job's evaluations as CSV (stdout, or --csv FILE)", **parser_options())
+    p = sub.add_parser("results", help=COMMANDS["results"].help, **parser_options())
     p.add_argument("id", type=int, help="job id")
     p.add_argument("--csv", metavar="FILE", help="write the CSV to this file instead of stdout")
     p.add_argument("--road", help="only this road (name, spec or index; default: every road)")
     add_server_args(p)
     p.set_defaults(run=run_results)
 
-    p = sub.add_parser("best", help="a job's best design on each road, and which variables it decides",
+    p = sub.add_parser("best", help=COMMANDS["best"].help,
                        **parser_options())
     p.add_argument("id", type=int, help="job id")
     add_tolerance_arg(p)
@@ -274,7 +278,7 @@ def register(sub: Any) -> None:
     add_server_args(p)
     p.set_defaults(run=run_best)
 
-    p = sub.add_parser("cancel", help="cancel a job (a finished job is left as it is)", **parser_options())
+    p = sub.add_parser("cancel", help=COMMANDS["cancel"].help, **parser_options())
     p.add_argument("id", type=int, help="job id")
     add_server_args(p)
     p.set_defaults(run=run_cancel)

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from finaldrive.service.cli import remote
+from finaldrive.service.cli.commands import COMMANDS
 from finaldrive.service.cli.common import ROAD_HELP, UsageError, parser_options, print_json, road_from_arg, writable
 from finaldrive.service.cli.remote import EXIT_FAILED, EXIT_OK, add_server_args, client_command
 
@@ -143,7 +144,7 @@ def _plot_remote(args: argparse.Namespace) -> int:
 
 
 def register(sub: Any) -> None:
-    p = sub.add_parser("record", help="a rerun .rrd of designs side by side on a road (local, or --job/--server)",
+    p = sub.add_parser("record", help=COMMANDS["record"].help,
                        epilog='e.g. finaldrive record --compare "0,0,0.093" "270,0.15,0.15" --road sine:0.04:3 '
                               "--out g.rrd", **parser_options())
     p.add_argument("--compare", dest="designs", nargs="+", action="extend", metavar="A2,L2,RWS",
@@ -158,7 +159,7 @@ def register(sub: Any) -> None:
     add_server_args(p, server_default=False)
     p.set_defaults(run=run_record)
 
-    p = sub.add_parser("plot", help="PNG: a job's sweep map or DE history (service), or Fig. 13 series (local)",
+    p = sub.add_parser("plot", help=COMMANDS["plot"].help,
                        **parser_options())
     p.add_argument("id", type=int, nargs="?", help="job id (through the service)")
     p.add_argument("--kind", choices=("sweep-map", "de-history"), default="sweep-map",

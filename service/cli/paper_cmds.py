@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from finaldrive.service.cli.commands import COMMANDS
 from finaldrive.service.cli.common import UsageError, parser_options
 from finaldrive.service.cli.remote import TERMINAL, client_command
 
@@ -25,7 +26,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     from finaldrive.engine import DESettings
 
     table10 = DESettings.paper()
-    study = subparsers.add_parser("study", help="run a study", **parser_options())
+    study = subparsers.add_parser("study", help=COMMANDS["study"].help, **parser_options())
     paper = study.add_subparsers(dest="study_command", required=True, metavar="STUDY").add_parser(
         "paper", help="the paper's study: Table 9 sweep + Table 10 DE on the 23 roads (one paper-study job)",
         **parser_options())
@@ -48,7 +49,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     paper.add_argument("--interval", type=float, default=5.0, help="seconds between progress lines")
     paper.set_defaults(run=run_study_paper)
 
-    report = subparsers.add_parser("report", help="write a report from stored results", **parser_options())
+    report = subparsers.add_parser("report", help=COMMANDS["report"].help, **parser_options())
     paper_report = report.add_subparsers(dest="report_command", required=True, metavar="REPORT").add_parser(
         "paper-study", help="docs/paper-study.md (+ .json, figures) from a finished paper-study job",
         **parser_options())

@@ -6,6 +6,7 @@ import argparse
 import math
 from typing import Any
 
+from finaldrive.service.cli.commands import COMMANDS
 from finaldrive.service.cli.common import add_json_arg, parser_options, print_json
 
 
@@ -26,6 +27,6 @@ def run_roads(args: argparse.Namespace) -> int:
 
 
 def register(sub: Any) -> None:
-    p = sub.add_parser("roads", help="the paper's 23 road presets with its optimum on each", **parser_options())
+    p = sub.add_parser("roads", help=COMMANDS["roads"].help, **parser_options())
     add_json_arg(p, "print a JSON list")
     p.set_defaults(run=run_roads)

@@ -16,6 +16,7 @@ import threading
 import time
 from typing import TYPE_CHECKING, Any
 
+from finaldrive.service.cli.commands import COMMANDS
 from finaldrive.service.cli.common import UsageError, parser_options, stop_process
 
 if TYPE_CHECKING:
@@ -40,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     from finaldrive.service.config import Settings
 
     defaults = {name: field.default for name, field in Settings.model_fields.items()}
-    serve = subparsers.add_parser("serve", help="run the REST job service and a scheduler beside it",
+    serve = subparsers.add_parser("serve", help=COMMANDS["serve"].help,
                                   **parser_options())
     serve.add_argument("--host", help=f"interface to bind (default {defaults['host']}; FINALDRIVE_HOST)")
     serve.add_argument("--port", type=int, help=f"port (default {defaults['port']}; FINALDRIVE_PORT)")
@@ -50,7 +51,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     serve.set_defaults(run=run_serve)
 
     scheduler = subparsers.add_parser(
-        "scheduler", help="run a scheduler: claims jobs from the database and runs their simulations",
+        "scheduler", help=COMMANDS["scheduler"].help,
         description="Several schedulers, on several machines, may serve one database: each job runs under "
                     "one scheduler's lease; a scheduler that dies leaves its jobs to the others once its "
                     "leases lapse. Stop it with SIGTERM or Ctrl-C: it gives its jobs back.", **parser_options())
@@ -64,7 +65,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                            help="stop (giving the jobs back) when the parent process ends; finaldrive serve uses it")
     scheduler.set_defaults(run=run_scheduler_command)
 
-    db = subparsers.add_parser("db", help="manage the results database", **parser_options())
+    db = subparsers.add_parser("db", help=COMMANDS["db"].help, **parser_options())
     db_sub = db.add_subparsers(dest="db_command", required=True, metavar="COMMAND")
     upgrade = db_sub.add_parser("upgrade", help="migrate the database schema to this version", **parser_options())
     upgrade.add_argument("--db", metavar="URL",

@@ -18,6 +18,7 @@ from typing import IO, Any
 import numpy as np
 
 from finaldrive.engine import history_record
+from finaldrive.service.cli.commands import COMMANDS
 from finaldrive.service.cli.common import (
     ROAD_HELP,
     UsageError,
@@ -306,7 +307,7 @@ def _csv_writer(stream: IO[str]) -> csv.DictWriter[str]:
 
 
 def register(sub: Any) -> None:
-    p = sub.add_parser("optimize", help="the paper's DE on one road, or one DE over several roads (local)",
+    p = sub.add_parser("optimize", help=COMMANDS["optimize"].help,
                        description="Differential evolution (Table 10 defaults) over the Table 8 box. --road: the "
                                    "paper's per-road optimisation; --roads: one design scored on every road "
                                    "(--objective mean|worst). Failed simulations score NaN and are counted.",
@@ -322,7 +323,7 @@ def register(sub: Any) -> None:
     add_run_args(p)
     p.set_defaults(run=run_optimize)
 
-    p = sub.add_parser("sweep", help="simulate a design grid (Table 9 by default) on one or more roads (local)",
+    p = sub.add_parser("sweep", help=COMMANDS["sweep"].help,
                        **parser_options())
     add_road_args(p)
     p.add_argument("--grid", default="table9",
