@@ -17,7 +17,7 @@ from typing import Any, NoReturn
 from finaldrive.service.cli.commands import COMMANDS
 from finaldrive.service.cli.common import UsageError, parser_options
 
-#: Modules that add commands, in the order their commands appear in ``--help`` (commands.COMMANDS').
+#: Modules that add commands, in the order of commands.COMMANDS, as ``--help`` lists them.
 COMMAND_MODULES: tuple[str, ...] = tuple(dict.fromkeys(f"finaldrive.service.cli.{c.module}" for c in COMMANDS.values()))
 
 __all__ = ["UsageError", "build_parser", "main"]
