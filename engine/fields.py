@@ -90,6 +90,18 @@ _TRAVEL = [
     _f("swingarm_angle_deg", "swingarm angle phi at the pose", 2),
     _f("anti_squat_pct", "anti-squat, 100 tan(tau) / tan(sigma) (textbook form; docs/engine.md)", 1),
     _f("chain_growth_m", "change of the taut upper run's length from full extension", 5),
+    _f("kickback_deg", "rear wheel's backward turn that the chain growth gives with the engine sprocket held: "
+                       "chain_growth_m / R_WS", 3),
+    _f("anti_rise_pct", "anti-rise under rear braking, caliper on the swingarm: 100 tan(lambda) / tan(sigma), "
+                        "lambda the slope from the rear contact point to the swingarm pivot", 1),
+    _f("spring_length_m", "the rear spring's length between points 3 and 7 (eq. 13)", 4),
+    _f("leverage_ratio", "rear wheel travel per unit of rear spring compression at the pose", 3),
+    _f("engine_sprocket_teeth", "teeth of the engine sprocket: pitch radius R_ES and the vehicle's chain_pitch, "
+                                "N = pi / asin(p / 2R), not rounded", 2),
+    _f("wheel_sprocket_teeth", "teeth of the wheel sprocket (R_WS), as engine_sprocket_teeth", 2),
+    _f("chain_pitch_m", "the chain's pitch (vehicle chain_pitch)", 6),
+    _f("chain_links", "the whole chain's length at the design pose over its pitch (both runs and wraps, and the "
+                      "vehicle's free play), not rounded", 2),
     _f("centre_distance_m", "distance between the sprocket centres", 4),
     _f("chain_angle_deg", "direction of the chain's upper run (rear to front), chassis frame", 2),
     _f("chain_above_pivot_m", "height of the upper run's line above the swingarm pivot", 4),

@@ -17,10 +17,10 @@ import numpy as np
 from finaldrive.engine.api import Design, SimSettings
 from finaldrive.engine.model import params as P
 from finaldrive.engine.model.coordinates import PHI, THETA, X1, X6, X10, X11, X14, X15, Y1, Y6, Y10, Y11
-from finaldrive.engine.model.kinematics import design_pose, squat_line, taut_length
-from finaldrive.engine.model.rear_travel import angle_at, extension_angle
+from finaldrive.engine.model.kinematics import design_pose, squat_line, taut_length, whole_chain_length
+from finaldrive.engine.model.rear_travel import angle_at, extension_angle, spring_length
 from finaldrive.engine.model.road import Road
-from finaldrive.engine.vehicle import Vehicle
+from finaldrive.engine.vehicle import Vehicle, sprocket_teeth
 
 #: Points of a travel curve: default and largest.
 TRAVEL_POINTS = 25
@@ -30,6 +30,11 @@ ANTI_SQUAT_DEFINITION = ("anti_squat_pct = 100 tan(tau) / tan(sigma) (textbook; 
                          "tan(tau) the slope of the squat line (rear contact point to X), tan(sigma) = h / p with h "
                          "the centre of mass height (vehicle target_cog_height, Table 3) and p the wheelbase at the "
                          "design pose; squat_ratio = K / tan(tau) is the paper's reading (docs/engine.md)")
+ANTI_RISE_DEFINITION = ("anti_rise_pct = 100 tan(lambda) / tan(sigma) (Foale, Motorcycle Handling and Chassis "
+                        "Design; a rear brake caliper on the swingarm): tan(lambda) the slope of the line from the "
+                        "rear contact point to the swingarm pivot, tan(sigma) as for anti-squat")
+#: Half the swingarm-angle step of the leverage ratio's central difference [rad].
+_LEVERAGE_STEP = 1e-6
 
 
 def _travel_of(angle: float, extended: float, v: Vehicle) -> float:
@@ -41,6 +46,7 @@ def _pose_quantities(p: np.ndarray, angle: float, tan_sigma: float) -> dict[str,
     (chassis frame) in the design pose (theta0, unloaded tyres on flat ground)."""
     q = design_pose(_with_angle(p, angle))
     run, rise = squat_line(q, q[X6], q[Y6] - p[P.RT0])
+    pivot_slope = (q[Y1] - (q[Y6] - p[P.RT0])) / (q[X1] - q[X6])   # rear contact point to the pivot
     ux, uy = q[X10] - q[X11], q[Y10] - q[Y11]            # the upper run, rear to front
     n = math.hypot(ux, uy)
     above = ((q[X1] - q[X11]) * uy - (q[Y1] - q[Y11]) * ux) / n
@@ -48,6 +54,7 @@ def _pose_quantities(p: np.ndarray, angle: float, tan_sigma: float) -> dict[str,
         "swingarm_angle_deg": math.degrees(angle),
         "squat_ratio": math.inf if rise == 0.0 else float(p[P.SQUAT_K] * run / rise),
         "anti_squat_pct": 100.0 * (rise / run) / tan_sigma,
+        "anti_rise_pct": float(100.0 * pivot_slope / tan_sigma),
         "taut_length_m": taut_length(q),
         "centre_distance_m": math.hypot(q[X6] - (q[X1] + p[P.L2] * math.cos(p[P.THETA0] + p[P.A2])),
                                         q[Y6] - (q[Y1] + p[P.L2] * math.sin(p[P.THETA0] + p[P.A2]))),
@@ -57,9 +64,11 @@ def _pose_quantities(p: np.ndarray, angle: float, tan_sigma: float) -> dict[str,
 
 
 def travel_kinematics(design: Design, vehicle: Vehicle, points: int = TRAVEL_POINTS) -> dict[str, Any]:
-    """Squat ratio, anti-squat %, chain growth (change of the taut run, eq. 68, from full extension)
-    and the sprocket-pivot geometry from full extension to full compression, with the design pose
-    and the static sag (equilibrium on flat ground) as points of their own."""
+    """Squat ratio, anti-squat and anti-rise %, chain growth (change of the taut run, eq. 68, from full
+    extension) and the kickback it gives, the rear spring's length and leverage ratio, and the
+    sprocket-pivot geometry from full extension to full compression, with the design pose and the
+    static sag (equilibrium on flat ground) as points of their own; the sprockets' teeth (pitch radii
+    and chain_pitch, not rounded) and the whole chain's length in links at the design pose."""
     from finaldrive.engine.simulation import pack_parameters, prepare  # the solvers' machinery: only here
 
     if not 2 <= points <= MAX_TRAVEL_POINTS:
@@ -77,6 +86,12 @@ def travel_kinematics(design: Design, vehicle: Vehicle, points: int = TRAVEL_POI
     def point(angle: float) -> dict[str, float]:
         out = {"travel_m": _travel_of(angle, extended, v), **_pose_quantities(p, angle, tan_sigma)}
         out["chain_growth_m"] = out["taut_length_m"] - base
+        # the engine sprocket held, the growth turns the wheel back by growth / R_WS
+        out["kickback_deg"] = math.degrees(out["chain_growth_m"] / design.rws)
+        out["spring_length_m"] = spring_length(angle, v)
+        h = _LEVERAGE_STEP   # wheel travel per unit of spring compression, central difference in the angle
+        out["leverage_ratio"] = ((_travel_of(angle + h, extended, v) - _travel_of(angle - h, extended, v))
+                                 / (spring_length(angle - h, v) - spring_length(angle + h, v)))
         return out
 
     q0 = prepare(design, Road(), SimSettings(), v).q0
@@ -89,7 +104,11 @@ def travel_kinematics(design: Design, vehicle: Vehicle, points: int = TRAVEL_POI
         "rear_wheel_travel_m": full,
         "extension_angle_deg": math.degrees(extended), "compression_angle_deg": math.degrees(compressed),
         "cog_height_m": v["target_cog_height"], "wheelbase_m": wheelbase,
-        "anti_squat_definition": ANTI_SQUAT_DEFINITION,
+        "anti_squat_definition": ANTI_SQUAT_DEFINITION, "anti_rise_definition": ANTI_RISE_DEFINITION,
+        "chain_pitch_m": v["chain_pitch"],
+        "engine_sprocket_teeth": sprocket_teeth(p[P.R_ES], v["chain_pitch"]),
+        "wheel_sprocket_teeth": sprocket_teeth(p[P.R_WS], v["chain_pitch"]),
+        "chain_links": whole_chain_length(design_q, p) / v["chain_pitch"],
         "curve": [point(angle_at(t, extended, v)) for t in np.linspace(0.0, full, points)],
         "design_pose": point(design_angle),
         "static_sag": {**point(sag_angle), "sag_pct": 100.0 * _travel_of(sag_angle, extended, v) / full},

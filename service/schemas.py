@@ -509,6 +509,12 @@ class TravelPointOut(BaseModel):
     centre_distance_m: float = Field(description="engine sprocket axis to rear axle [m]")
     chain_angle_deg: float = Field(description="upper run's angle to the chassis x axis, rear to front [deg]")
     chain_above_pivot_m: float = Field(description="distance of the upper run's line above the swingarm pivot [m]")
+    kickback_deg: float = Field(description="rear wheel's backward turn from the chain growth, the engine sprocket "
+                                "held: chain_growth_m / R_WS [deg]")
+    anti_rise_pct: float = Field(description="100 tan(lambda) / tan(sigma), lambda the slope from the rear contact "
+                                 "point to the swingarm pivot (rear brake caliper on the swingarm) [%]")
+    spring_length_m: float = Field(description="the rear spring's length, points 3-7 (eq. 13) [m]")
+    leverage_ratio: float = Field(description="rear wheel travel per unit of rear spring compression [-]")
 
 
 class StaticSagOut(TravelPointOut):
@@ -524,6 +530,11 @@ class TravelOut(BaseModel):
     cog_height_m: float = Field(description="h of tan(sigma) = h / p [m]")
     wheelbase_m: float = Field(description="p of tan(sigma) = h / p, at the design pose [m]")
     anti_squat_definition: str
+    anti_rise_definition: str
+    chain_pitch_m: float = Field(description="the chain's pitch (vehicle chain_pitch) [m]")
+    engine_sprocket_teeth: float = Field(description="N = pi / asin(p / 2 R_ES), not rounded [-]")
+    wheel_sprocket_teeth: float = Field(description="N = pi / asin(p / 2 R_WS), not rounded [-]")
+    chain_links: float = Field(description="the whole chain's length at the design pose over its pitch [-]")
     curve: list[TravelPointOut] = Field(description="evenly spaced in travel, full extension first")
     design_pose: TravelPointOut = Field(description="the design pose (phi0), where the paper reads SR")
     static_sag: StaticSagOut = Field(description="static equilibrium on flat ground")

@@ -38,8 +38,12 @@ def angle_at(travel: float, extended: float, v: Vehicle) -> float:
     return extended + math.remainder(angle - extended, math.tau)
 
 
+def spring_length(angle: float, v: Vehicle) -> float:
+    """The rear spring's length (points 3-7, eq. 13) with the swingarm at ``angle`` in the chassis frame [m]."""
+    return math.sqrt(v["L3"] ** 2 + v["L7"] ** 2 - 2.0 * v["L3"] * v["L7"] * libm.cos(v["a3"] - angle))
+
+
 def compressed_spring_length(v: Vehicle) -> float:
-    """The rear spring's length (points 3-7, eq. 13) at full compression, ``rear_wheel_travel`` above
-    full extension [m]: where the travel stops' bump stop engages (vehicle ``suspension_stops``)."""
-    compressed = angle_at(v["rear_wheel_travel"], extension_angle(v), v)
-    return math.sqrt(v["L3"] ** 2 + v["L7"] ** 2 - 2.0 * v["L3"] * v["L7"] * libm.cos(v["a3"] - compressed))
+    """The rear spring's length at full compression, ``rear_wheel_travel`` above full extension [m]: where
+    the travel stops' bump stop engages (vehicle ``suspension_stops``)."""
+    return spring_length(angle_at(v["rear_wheel_travel"], extension_angle(v), v), v)

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from typing import Any
 
-_COLUMNS = "travel[mm]  swingarm[deg]     SR  anti-squat[%]  chain growth[mm]  chain angle[deg]  chain above pivot[mm]"
+_COLUMNS = ("travel[mm]  swingarm[deg]     SR  anti-squat[%]  anti-rise[%]  chain growth[mm]  kickback[deg]  "
+            "leverage  chain angle[deg]  chain above pivot[mm]")
 
 
 def _row(point: dict[str, Any], mark: str = "") -> str:
     return (f"{1000 * point['travel_m']:10.1f}  {point['swingarm_angle_deg']:13.2f}  {point['squat_ratio']:5.3f}  "
-            f"{point['anti_squat_pct']:13.1f}  {1000 * point['chain_growth_m']:16.2f}  "
+            f"{point['anti_squat_pct']:13.1f}  {point['anti_rise_pct']:12.1f}  {1000 * point['chain_growth_m']:16.2f}  "
+            f"{point['kickback_deg']:13.3f}  {point['leverage_ratio']:8.3f}  "
             f"{point['chain_angle_deg']:16.2f}  {1000 * point['chain_above_pivot_m']:21.1f}  {mark}").rstrip()
 
 
@@ -24,9 +26,12 @@ def travel_lines(t: dict[str, Any]) -> list[str]:
         f"{t['extension_angle_deg']:.1f} deg) to full compression ({t['compression_angle_deg']:.1f} deg); "
         f"engine sprocket {1000 * t['engine_sprocket_x_m']:.1f}, {1000 * t['engine_sprocket_y_m']:.1f} mm "
         "from the pivot",
+        f"sprockets: {t['engine_sprocket_teeth']:.1f} and {t['wheel_sprocket_teeth']:.1f} teeth of a "
+        f"{1000 * t['chain_pitch_m']:.3f} mm pitch chain (not rounded); chain: {t['chain_links']:.1f} links",
         "SR: the paper's squat ratio K / tan(tau); anti-squat: 100 tan(tau) / tan(sigma), tan(sigma) = "
-        f"{t['cog_height_m']:.3f} m / {t['wheelbase_m']:.3f} m; chain growth: change of the taut run from "
-        "full extension",
+        f"{t['cog_height_m']:.3f} m / {t['wheelbase_m']:.3f} m; anti-rise: the same for the line from the rear "
+        "contact point to the pivot (rear brake caliper on the swingarm); chain growth: change of the taut run from "
+        "full extension; kickback: the wheel's backward turn it gives; leverage: wheel travel per spring travel",
         _COLUMNS,
         *(line for _, line in sorted(rows, key=lambda r: r[0])),
         f"at static sag: SR {sag['squat_ratio']:.3f}, anti-squat {sag['anti_squat_pct']:.0f} % ({verdict})",

@@ -88,3 +88,46 @@ def test_simulated_squat_follows_the_static_anti_squat(vehicle, a2_deg, squats):
     assert d["status"] == "ok"
     assert d["travel_static_m"] == pytest.approx(sag["travel_m"], abs=1e-6)   # the same static equilibrium
     assert (d["squat_mean_m"] > 0) is squats
+
+
+def test_the_leverage_ratio_integrates_to_the_springs_stroke(vehicle):
+    """Wheel travel per unit of spring travel, integrated over the wheel's travel, gives back the spring's
+    stroke: from s_rs at full extension (Table 5) to its length at full compression."""
+    t = travel_kinematics(OFFSET, vehicle, 201)
+    travel = np.array([c["travel_m"] for c in t["curve"]])
+    leverage = np.array([c["leverage_ratio"] for c in t["curve"]])
+    stroke = np.trapezoid(1.0 / leverage, travel)
+    assert t["curve"][0]["spring_length_m"] == pytest.approx(vehicle["s_rs"], abs=1e-12)
+    assert stroke == pytest.approx(vehicle["s_rs"] - t["curve"][-1]["spring_length_m"], rel=1e-6)
+    assert 2.0 < leverage.min() < leverage.max() < 5.0   # Table 4's shock, near the pivot
+
+
+def test_anti_rise_is_the_pivot_line_over_the_centre_of_mass_line(vehicle):
+    """Closed form at each pose (chassis at theta0 = 0): the pivot at the origin, the rear contact point
+    rt0 below the axle at L_SA along the swingarm; the kickback is the growth over R_WS."""
+    t = travel_kinematics(OFFSET, vehicle, 5)
+    tan_sigma = vehicle["target_cog_height"] / t["wheelbase_m"]
+    for c in [*t["curve"], t["design_pose"]]:
+        phi = math.radians(c["swingarm_angle_deg"])
+        ax, ay = vehicle["L_SA"] * math.cos(phi), vehicle["L_SA"] * math.sin(phi)
+        assert c["anti_rise_pct"] == pytest.approx(100 * (0 - (ay - vehicle["rt0"])) / (0 - ax) / tan_sigma, rel=1e-9)
+        assert c["kickback_deg"] == pytest.approx(math.degrees(c["chain_growth_m"] / OFFSET.rws), abs=1e-12)
+
+
+def test_teeth_and_links(vehicle):
+    """A wheel sprocket of exactly 42 teeth's pitch radius has 42; the chain's links agree with the roller
+    chain's textbook length, 2C/p + (N1 + N2)/2 + ((N2 - N1)/2 pi)^2 p/C, plus the free play's slack
+    (the slack run pushed chain_free_play to the side at its middle: two straight halves) and what the
+    model's pitch circles add to the textbook's polygons, about half of each sprocket's 2 pi R - N p =
+    N p (pi^2 / 6 N^2): (pi^2 / 12)(1/N1 + 1/N2) links."""
+    p = vehicle["chain_pitch"]
+    design = Design.from_deg(195.3, 0.037, p / (2 * math.sin(math.pi / 42)))
+    t = travel_kinematics(design, vehicle, 2)
+    assert t["wheel_sprocket_teeth"] == pytest.approx(42.0, abs=1e-9)
+    n1, n2 = t["engine_sprocket_teeth"], t["wheel_sprocket_teeth"]
+    c = t["design_pose"]["centre_distance_m"]
+    textbook = 2 * c / p + (n1 + n2) / 2 + ((n2 - n1) / (2 * math.pi)) ** 2 * p / c
+    taut = t["design_pose"]["taut_length_m"]
+    slack = math.sqrt(taut**2 + vehicle["chain_free_play"] ** 2) - taut
+    circles = math.pi**2 / 12 * (1 / n1 + 1 / n2)
+    assert t["chain_links"] - textbook == pytest.approx(slack / p + circles, abs=0.005)
