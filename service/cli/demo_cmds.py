@@ -30,8 +30,8 @@ DEFAULT_DB = "sqlite:///./finaldrive.db"
 #: How long the demo waits for its service to be ready by default [s] (--timeout): a loaded machine's
 #: first start (imports, the engine's compilation, Ray) took minutes (docs/usage.md).
 START_TIMEOUT_S = 900.0
-#: How often the demo says what it still waits for [s].
-NOTE_EVERY_S = 10.0
+#: When the demo first says what it still waits for, and how often after that [s].
+NOTE_FIRST_S, NOTE_EVERY_S = 2.0, 10.0
 
 
 def start_server(port: int, db: str, executor: str, log: Path) -> subprocess.Popen[bytes]:
@@ -65,11 +65,12 @@ def waiting_for(health: dict[str, Any] | None, executor: str) -> str:
 def wait_ready(client: Any, proc: subprocess.Popen[bytes], executor: str,
                timeout: float = START_TIMEOUT_S) -> dict[str, Any]:
     """The service's /v1/health once it answers and a scheduler of it is alive (Ray up, the engine
-    compiled); every NOTE_EVERY_S says on stderr what it still waits for. RuntimeError when the
-    service exits, or after ``timeout`` seconds."""
+    compiled); after NOTE_FIRST_S, then every NOTE_EVERY_S, says on stderr what it still waits for.
+    RuntimeError when the service exits, or after ``timeout`` seconds."""
     from finaldrive.service.client import ClientError
 
-    start = noted = time.monotonic()
+    start = time.monotonic()
+    noted = start + NOTE_FIRST_S - NOTE_EVERY_S   # the first note NOTE_FIRST_S in
     while True:
         if proc.poll() is not None:
             raise RuntimeError(f"the service exited with code {proc.returncode} (see {LOG})")

@@ -14,6 +14,16 @@ const OUTCOME = [["distance_m", "distance [m]", 4], ["fitness_m", "fitness [m]",
                  ["slack_m", "slack [m]", 4], ["chain_tension_max_n", "max chain tension [N]", 0],
                  ["fz_rear_max_n", "max rear load [N]", 0]];
 
+// over the rear travel (GET /v1/geometry?travel=true): each chart's field and label; the table's, at a pose
+const TRAVEL = [["anti_squat_pct", "anti-squat [%]"], ["anti_rise_pct", "anti-rise [%]"],
+                ["kickback_deg", "kickback [deg]"], ["leverage_ratio", "leverage ratio [-]"]];
+const TRAVEL_FACTS = [
+  [(t) => t.engine_sprocket_teeth, "engine sprocket teeth", 1], [(t) => t.wheel_sprocket_teeth, "wheel sprocket teeth", 1],
+  [(t) => t.chain_links, "chain links", 1], [(t) => t.static_sag.anti_squat_pct, "anti-squat at sag [%]", 0],
+  [(t) => t.static_sag.anti_rise_pct, "anti-rise at sag [%]", 0], [(t) => t.static_sag.leverage_ratio, "leverage at sag", 2],
+  [(t) => t.curve.at(-1).kickback_deg, "kickback, full compression [deg]", 2],
+];
+
 function fromQuery() {
   const q = new URLSearchParams(location.search);
   if (q.get("road")) $("road").value = q.get("road");
@@ -78,10 +88,28 @@ async function show(rec) {
   SERIES.forEach(([key, label], i) => lineChart(boxes[i], data.runs.map((r, k) => ({
     name: r.label, x: data.t_s, y: r.series[key], colour: COLOURS[k],
   })), { xLabel: "t [s]", yLabel: label, title: label, height: 220 }));
+  await showTravel(data.runs);
   $("download").href = localUrl(`/v1/recordings/${encodeURIComponent(rec.id)}/file`);
   $("viewer-card").hidden = false;
   const file = localUrl(rec.viewer_file); // ends in .rrd (how the viewer knows it) and signed when needed
   $("viewer").src = `/viewer/?url=${encodeURIComponent(file)}&hide_welcome_screen&persist=0`;
+}
+
+async function showTravel(runs) {
+  const curves = await Promise.all(runs.map((r) => api(`/v1/geometry?${new URLSearchParams({
+    a2_deg: r.a2_deg, l2_m: r.l2_m, rws_m: r.rws_m, travel: "true" })}`)));
+  $("travel-table").tHead.replaceChildren(el("tr", {}, el("th", {}, "design"),
+    ...TRAVEL_FACTS.map(([, label]) => el("th", { class: "num" }, label))));
+  $("travel-table").tBodies[0].replaceChildren(...curves.map((g, k) => el("tr", {},
+    el("td", {}, el("span", { style: `color:${COLOURS[k]}` }, "■ "), runs[k].label),
+    ...TRAVEL_FACTS.map(([get, , d]) => el("td", { class: "num" }, num(get(g.travel_curve), d))))));
+  const boxes = TRAVEL.map(() => el("div", { class: "chart-box" }));
+  $("travel").replaceChildren(...boxes);
+  TRAVEL.forEach(([key, label], i) => lineChart(boxes[i], curves.map((g, k) => ({
+    name: runs[k].label, x: g.travel_curve.curve.map((c) => 1000 * c.travel_m),
+    y: g.travel_curve.curve.map((c) => c[key]), colour: COLOURS[k],
+  })), { xLabel: "rear wheel travel [mm]", yLabel: label, title: label, height: 220 }));
+  $("travel-card").hidden = false;
 }
 
 async function init() {

@@ -65,6 +65,7 @@ def test_it_names_what_a_starting_service_lacks(cache: Path) -> None:
 
 def test_it_waits_for_a_live_scheduler_and_says_what_for(cache: Path, monkeypatch: pytest.MonkeyPatch,
                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setattr(demo_cmds, "NOTE_FIRST_S", 0.0)
     monkeypatch.setattr(demo_cmds, "NOTE_EVERY_S", 0.0)
     client = FakeClient(refusals=2, idle=2)
     health = demo_cmds.wait_ready(client, FakeProcess(), "ray", timeout=30.0)
@@ -113,6 +114,7 @@ def test_a_compilation_tells_its_progress(tmp_path: Path, monkeypatch: pytest.Mo
     assert compile_progress("fast") is None
 
 
+@pytest.mark.slow
 def test_the_readme_demo_on_a_loaded_machine_says_what_it_waited_for(tmp_path: Path) -> None:
     """`finaldrive demo` (the README's first command) with LOAD busy processes beside it: it succeeds, its
     output says what it waited for, and the best comes with its near-optimal set. (The engine is compiled

@@ -132,6 +132,10 @@ def test_the_design_page_plays_both_designs_in_rerun_s_viewer(tab: Page, tmp_pat
     assert tab.page.locator("#series svg").count() == 7
     assert tab.page.locator("#series svg polyline.series").count() == 14
     assert tab.page.locator("#outcome tbody tr").count() == 2
+    assert tab.page.locator("#travel-table tbody tr").count() == 2   # issue 31: the designer's kinematics
+    assert tab.page.locator("#travel svg").count() == 4
+    assert tab.page.locator("#travel svg polyline.series").count() == 8
+    assert "36.8" in tab.page.inner_text("#travel-table tbody tr:first-child")   # R_WS 93 mm: 36.8 teeth of a 520
     viewer = tab.page.locator("#viewer")
     deadline = time.monotonic() + 120
     pixels = [0, 0]
