@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from finaldrive.engine import Design, default_vehicle, evaluate, resolve_roads
+from finaldrive.engine import Bounds, Design, default_vehicle, evaluate, resolve_roads
 from finaldrive.service.cli import main as cli
 
 DRIVE_KEYS = ("primary_ratio", "first_gear_ratio", "engine_speed_1", "engine_torque_1", "engine_speed_2",
@@ -130,7 +130,8 @@ def render(rows: list[dict[str, Any]], args: argparse.Namespace, wall_s: float, 
     bands = [1e3 * r["launch"]["band_m"] for r in rows]
     decided = [c for c, b in zip(costs, bands, strict=True) if c > b]
     box = default_vehicle().design_limits()
-    on_edge = [r for r in rows if r["launch"]["l2_m"] > box["l2_m"] - 1e-3 or r["launch"]["rws_m"] < 0.051]
+    rws_low = Bounds().rws_m[0]   # Table 8's smallest R_WS
+    on_edge = [r for r in rows if r["launch"]["l2_m"] > box["l2_m"] - 1e-3 or r["launch"]["rws_m"] < rws_low + 1e-3]
     lines += [
         "",
         "## What it says",
