@@ -176,9 +176,9 @@ def make_store(db: Path, n: int) -> int:
     try:
         with db_.write() as session:
             grid = f"a2_deg=0:358.2:{358.2 / (A2_STEPS - 1):.4f},l2_m=0:0.2:{0.2 / (l2_steps - 1)}"
-            job = create_job(session, kind="sweep", spec={"kind": "sweep", "roads": ["sine-h4cm-l3m"], "grid": grid},
+            job = create_job(session, kind="sweep", spec={"kind": "sweep", "roads": ["sine:0.04:3"], "grid": grid},
                              request_hash="bench", idempotency_key=None, total=n,
-                             roads=[("sine-h4cm-l3m", "sine:0.04:3")])
+                             roads=[("sine:0.04:3", "sine:0.04:3")])
             job.state, job.n_done, job.n_failed = "succeeded", int(n - failed.sum()), int(failed.sum())
             job_id = job.id
         now = utcnow()

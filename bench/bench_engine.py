@@ -186,7 +186,7 @@ def cold_start(repeat: int) -> dict[str, float]:
             code = _FIRST_CALL.format(repo=str(REPO), method=method)
             out[f"first {method} result, fresh process, cached"] = _median_wall([sys.executable, "-c", code], repeat,
                                                                                 env)
-    geometry = [finaldrive_command(), "geometry", "--a2-deg", "195.3", "--l2", "0.037", "--rws", "0.088"]
+    geometry = [finaldrive_command(), "geometry", "--a2-deg", "195.3", "--l2-m", "0.037", "--rws-m", "0.088"]
     out["finaldrive geometry"] = _median_wall(geometry, repeat, base)
     out["python -c 'import numpy' (the floor under finaldrive geometry)"] = _median_wall(
         [sys.executable, "-c", "import numpy"], repeat, base)

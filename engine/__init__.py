@@ -51,7 +51,7 @@ _EXPORTS: dict[str, str] = {
                     "finaldrive.engine.study.sweep"),
     **dict.fromkeys(("DE_HELP", "DE_INTEGRAL", "DE_LIMITS", "DE_OPTIONAL", "DE_PRESETS", "Bounds", "DESettings",
                      "SpaceError"), "finaldrive.engine.study.space"),
-    **dict.fromkeys(("OBJECTIVES", "Objective", "Regret", "aggregate", "best_per_road", "fitness_values", "regret",
+    **dict.fromkeys(("AGGREGATES", "Aggregate", "Regret", "aggregate", "best_per_road", "fitness_values", "regret",
                      "score"), "finaldrive.engine.study.scoring"),
     **dict.fromkeys(("DERun", "Request", "SweepRun"), "finaldrive.engine.study.runs"),
     **dict.fromkeys(("PAPER_SWEEP_STEP", "STUDY_KINDS", "SWEEP_RUN", "PlanError", "Run", "StudyKind", "StudyPlan",
@@ -169,8 +169,8 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
     )
     from finaldrive.engine.study.runs import DERun as DERun, Request as Request, SweepRun as SweepRun
     from finaldrive.engine.study.scoring import (
-        OBJECTIVES as OBJECTIVES,
-        Objective as Objective,
+        AGGREGATES as AGGREGATES,
+        Aggregate as Aggregate,
         Regret as Regret,
         aggregate as aggregate,
         best_per_road as best_per_road,

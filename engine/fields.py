@@ -121,7 +121,6 @@ _TRAVEL = [
     _f("pitch_mean_deg", "simulated: mean chassis pitch over the run", 3),
     _f("pitch_min_deg", "simulated: smallest chassis pitch over the run", 3),
     _f("pitch_max_deg", "simulated: largest chassis pitch over the run", 3),
-    _f("duration_s", "simulated time of the run", 2),
 ]
 _STUDY = [
     _f("tolerance_pct", "near-optimal set: fitness within this share of the best (default 0.1 %)", 3),

@@ -128,7 +128,7 @@ def drive_squat(design: Design, road: Road, settings: SimSettings, vehicle: Vehi
 
     result = simulate(design, road, settings.with_(series=True), vehicle)
     out: dict[str, Any] = {"road": road.spec, "status": result.status, "reason": result.reason,
-                           "distance_m": result.distance_m, "duration_s": settings.duration}
+                           "distance_m": result.distance_m, "duration": settings.duration}
     if not result.ok or result.series is None:
         return out
     q = result.series["q"]

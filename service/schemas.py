@@ -174,8 +174,8 @@ class JobSpec(BaseModel):
     kind: JobKind
     roads: list[Annotated[str, StringConstraints(strip_whitespace=True, min_length=1, max_length=500)]] = Field(
         min_length=1, max_length=64,
-        description="preset names, groups (paper, sine, bump) or specs (flat, sine:H:LAMBDA[:PHASE_DEG], "
-                    "bump:H:SIGMA[:MU])",
+        description="specs (flat, sine:H:LAMBDA[:PHASE_DEG], bump:H:SIGMA[:MU]) or groups of the paper's roads "
+                    "(paper, sine, bump)",
     )
     grid: str | None = Field(None, max_length=500, description='sweep / paper-study: "table9" or a grid spec')
     bounds: Bounds | None = Field(None, description="de / robust-de / paper-study (default: Table 8)")

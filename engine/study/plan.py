@@ -4,7 +4,7 @@ One definition for the command line and the job service. Kinds:
 
 - ``sweep``: a design grid (Table 9 by default) on every road;
 - ``de``: the paper's DE (Table 10) on each road separately (run i on road i, seed + i);
-- ``robust-de``: one DE whose designs are scored over all the roads (``objective``);
+- ``robust-de``: one DE whose designs are scored over all the roads (``aggregate``);
 - ``paper-study``: the sweep and the per-road DE on the same roads (paper section 5);
 - ``designs``: explicit designs on each road (e.g. the finite-difference stencils at a job's best).
 """
@@ -20,7 +20,7 @@ import numpy as np
 from finaldrive.engine.optimize import restore
 from finaldrive.engine.study.presets import NamedRoad, ProfileResolver, resolve_roads
 from finaldrive.engine.study.runs import DERun, SweepRun
-from finaldrive.engine.study.scoring import OBJECTIVES, Objective
+from finaldrive.engine.study.scoring import AGGREGATES, Aggregate
 from finaldrive.engine.study.space import Bounds, DESettings, SpaceError
 from finaldrive.engine.study.sweep import parse_grid, table9_grid
 from finaldrive.engine.vehicle import Vehicle, default_vehicle
@@ -58,7 +58,7 @@ class StudyPlan:
     road_designs: tuple[np.ndarray, ...] | None = None  # designs: each road's own, (n_i, 3)
     bounds: Bounds | None = None           # de / robust-de / paper-study
     de: DESettings | None = None
-    objective: Objective = "mean"          # robust-de
+    aggregate: Aggregate = "mean"          # robust-de
     seed: int = 0
 
     @property
@@ -112,19 +112,19 @@ class StudyPlan:
             else:
                 assert self.de is not None and self.bounds is not None
                 optimiser, generation = self.de.build(self.bounds, self.seed + i), 0
-            out.append(DERun(i, optimiser, self.de_roads(i), objective=self.objective, generation=generation))
+            out.append(DERun(i, optimiser, self.de_roads(i), aggregate=self.aggregate, generation=generation))
         return out
 
 
 def plan_study(
     kind: str, roads: Sequence[str], *, grid: str | np.ndarray | None = None, bounds: Bounds | None = None,
-    de: DESettings | None = None, objective: str | None = None, seed: int = 0,
+    de: DESettings | None = None, aggregate: str | None = None, seed: int = 0,
     profiles: ProfileResolver | None = None, vehicle: Vehicle | None = None,
     road_designs: Sequence[np.ndarray] | None = None,
 ) -> StudyPlan:
     """Resolve a study; raises :class:`PlanError` naming the field (``roads``, ``grid``, ...).
 
-    Missing parts take the paper's values: Table 9 grid, Table 8 box, Table 10 DE, mean objective.
+    Missing parts take the paper's values: Table 9 grid, Table 8 box, Table 10 DE, mean aggregate.
     Every design the study can evaluate must fit ``vehicle`` (default: the paper's bike; see
     :meth:`Vehicle.design_limits`): each grid row, and the box's upper L2 and R_WS.
     """
@@ -148,10 +148,10 @@ def plan_study(
         raise PlanError(("grid",), f"not used by a {kind} study")
     if kind == "sweep" and (bounds is not None or de is not None):
         raise PlanError(("bounds" if bounds is not None else "de",), "not used by a sweep")
-    if objective is not None and kind != "robust-de":
-        raise PlanError(("objective",), "only for robust-de")
-    if objective is not None and objective not in OBJECTIVES:
-        raise PlanError(("objective",), f"expected one of {', '.join(OBJECTIVES)}")
+    if aggregate is not None and kind != "robust-de":
+        raise PlanError(("aggregate",), "only for robust-de")
+    if aggregate is not None and aggregate not in AGGREGATES:
+        raise PlanError(("aggregate",), f"expected one of {', '.join(AGGREGATES)}")
     designs = None
     if sweeping:
         try:
@@ -192,7 +192,7 @@ def plan_study(
     settings = de or (DESettings.paper() if kind == "paper-study" else DESettings())
     try:
         return StudyPlan(kind, tuple(named), designs=designs, bounds=bounds or Bounds(), de=settings,  # type: ignore[arg-type]
-                         objective=objective or "mean", seed=seed)  # type: ignore[arg-type]
+                         aggregate=aggregate or "mean", seed=seed)  # type: ignore[arg-type]
     except SpaceError as exc:
         raise PlanError((exc.field,), exc.msg) from None
 

@@ -1,21 +1,25 @@
-"""The paper's 23 roads as named presets, each with its paper reference row.
+"""The paper's 23 roads as presets, each with its paper reference row.
 
-Roads (paper section 5.1; Tables 11-13), built with :class:`engine.model.road.Road`:
+Roads (paper section 5.1; Tables 11-13), built with :class:`engine.model.road.Road`; a road is
+named by its spec everywhere (inputs and outputs):
 
 - ``flat`` (Table 11);
-- 16 sinusoids ``sine-h{H}cm-l{lambda}m``: H_y = 1, 2, 3, 4 cm x lambda = 2, 3, 4, 5 m,
-  H_y outer (Table 12 row order), e.g. ``sine-h4cm-l3m`` = ``sine:0.04:3``;
-- 6 Gaussian bumps ``bump-h{H}cm-s{sigma}cm``: H_y = 2, 4 cm x sigma = 20, 50, 100 cm,
-  H_y outer (Table 13 row order, inferred: docs/engine.md#reading-notes-extraction-faults),
-  centre mu = 5.0 m (a reference choice: docs/engine.md#reading-notes-reference-choices; the
-  paper gives none), e.g. ``bump-h4cm-s20cm``.
+- 16 sinusoids ``sine:H:LAMBDA``: H_y = 0.01, 0.02, 0.03, 0.04 m x lambda = 2, 3, 4, 5 m,
+  H_y outer (Table 12 row order), e.g. ``sine:0.04:3``;
+- 6 Gaussian bumps ``bump:H:SIGMA:5``: H_y = 0.02, 0.04 m x sigma = 0.2, 0.5, 1 m, H_y outer
+  (Table 13 row order, inferred: docs/engine.md#reading-notes-extraction-faults), centre
+  mu = 5.0 m (a reference choice: docs/engine.md#reading-notes-reference-choices; the paper gives
+  none), e.g. ``bump:0.04:0.2:5``.
+
+Earlier versions named the presets ``sine-h{H}cm-l{lambda}m`` and ``bump-h{H}cm-s{sigma}cm``;
+those names are still read (:data:`ALIASES`, so that stored jobs resolve), never printed.
 
 Groups: ``paper`` (all 23 in the order Table 11, Table 12 rows, Table 13 rows),
 ``sine`` and ``bump``.
 
 Each preset's ``paper`` dict is its row of Tables 11-13 (the DE optimum the paper found) in
 the outputs' names (docs/fields.md, :func:`paper_row`): ``a2_deg, l2_m, rws_m, slack_m,
-squat_ratio, fitness_m`` (Table 12 prints a2 = 371.0 deg for ``sine-h4cm-l2m``: angles wrap,
+squat_ratio, fitness_m`` (Table 12 prints a2 = 371.0 deg for ``sine:0.04:2``: angles wrap,
 371 deg = 11 deg; it is kept as printed). The rows are read from the shipped
 ``engine/data/paper_tables.json``, which keeps the paper's own column names (``L2_m``,
 ``R_WS_m``, ``slack_mm``, ``SR``, ``d_m``).
@@ -42,10 +46,8 @@ GROUPS = ("paper", "sine", "bump")
 
 @dataclass(frozen=True)
 class NamedRoad:
-    """A road with a name: a preset (with the paper's optimum on it) or a user's road.
-
-    ``name`` is the preset name, else the road's spec string; ``paper`` is None off the presets.
-    """
+    """A road with its name (its spec, or ``profile:ID`` for a measured profile) and, on the
+    paper's presets, the paper's optimum on it (``paper``, else None)."""
 
     name: str
     road: Road
@@ -80,33 +82,29 @@ def _reference(row: dict[str, Any]) -> dict[str, float]:
     return {key: float(named[key]) for key in PAPER_KEYS}
 
 
-def _build() -> dict[str, NamedRoad]:
+def _build() -> tuple[dict[str, NamedRoad], dict[str, str]]:
+    """The presets by spec, and the earlier names -> spec."""
     tables = paper_tables()
-    presets = [
-        NamedRoad("flat", Road("flat"), _reference(tables["table11_flat"][0]),
-                   "flat road (Table 11)")
-    ]
+    presets = {"flat": NamedRoad("flat", Road("flat"), _reference(tables["table11_flat"][0]), "flat road (Table 11)")}
+    aliases = {}
     for i, row in enumerate(tables["table12_sine"], start=1):
         h, lam = row["H_y_m"], row["lambda_m"]
-        presets.append(NamedRoad(
-            f"sine-h{_cm(h)}cm-l{lam:g}m", Road("sine", height=h, wavelength=lam),
-            _reference(row),
-            f"sinusoid H_y = {_cm(h)} cm, lambda = {lam:g} m (Table 12 row {i})",
-        ))
+        road = Road("sine", height=h, wavelength=lam)
+        presets[road.spec] = NamedRoad(road.spec, road, _reference(row),
+                                       f"sinusoid H_y = {_cm(h)} cm, lambda = {lam:g} m (Table 12 row {i})")
+        aliases[f"sine-h{_cm(h)}cm-l{lam:g}m"] = road.spec
     for i, row in enumerate(tables["table13_gaussian"], start=1):
         h, sigma = row["H_y_m"], row["sigma_m"]
-        presets.append(NamedRoad(
-            f"bump-h{_cm(h)}cm-s{_cm(sigma)}cm",
-            Road("bump", height=h, sigma=sigma, mu=DEFAULT_BUMP_CENTRE_M),
-            _reference(row),
-            f"Gaussian bump H_y = {_cm(h)} cm, sigma = {sigma:g} m, "
-            f"mu = {DEFAULT_BUMP_CENTRE_M:g} m (Table 13 row {i})",
-        ))
-    return {p.name: p for p in presets}
+        road = Road("bump", height=h, sigma=sigma, mu=DEFAULT_BUMP_CENTRE_M)
+        presets[road.spec] = NamedRoad(road.spec, road, _reference(row),
+                                       f"Gaussian bump H_y = {_cm(h)} cm, sigma = {sigma:g} m, "
+                                       f"mu = {DEFAULT_BUMP_CENTRE_M:g} m (Table 13 row {i})")
+        aliases[f"bump-h{_cm(h)}cm-s{_cm(sigma)}cm"] = road.spec
+    return presets, aliases
 
 
-#: The 23 presets by name, in the paper's table order.
-PRESETS: dict[str, NamedRoad] = _build()
+#: The 23 presets by spec, in the paper's table order; the earlier names of the presets -> spec.
+PRESETS, ALIASES = _build()
 
 
 def preset_group(name: str) -> list[NamedRoad]:
@@ -124,12 +122,12 @@ ProfileResolver = Callable[[str], Road]
 
 
 def resolve_roads(text: str, profiles: ProfileResolver | None = None) -> list[NamedRoad]:
-    """Roads from a comma-separated list of group names, preset names and road specs.
+    """Roads from a comma-separated list of group names and road specs.
 
-    ``"paper"``, ``"flat,sine-h4cm-l3m"``, ``"sine:0.04:3,bump:0.03:0.4:6"``. A road spec
-    equal to a preset's road resolves to that preset (so it carries the paper row); any other
-    road is named by its spec. ``profile:NAME`` items are passed to ``profiles`` (the engine
-    reads no files). Order is kept; repeated roads are dropped after their first occurrence.
+    ``"paper"``, ``"flat,sine:0.04:3"``, ``"sine:0.04:3,bump:0.03:0.4:6"``. A road spec
+    equal to a preset's road resolves to that preset (so it carries the paper row), and so does an
+    earlier preset name (:data:`ALIASES`). ``profile:NAME`` items are passed to ``profiles`` (the
+    engine reads no files). Order is kept; repeated roads are dropped after their first occurrence.
     Raises ValueError naming the bad item.
     """
     if not isinstance(text, str) or not text.strip():
@@ -144,8 +142,8 @@ def resolve_roads(text: str, profiles: ProfileResolver | None = None) -> list[Na
         key = item.lower()
         if key in GROUPS:
             found = preset_group(key)
-        elif key in PRESETS:
-            found = [PRESETS[key]]
+        elif key in PRESETS or key in ALIASES:
+            found = [PRESETS[ALIASES.get(key, key)]]
         elif key.startswith("profile:"):
             if profiles is None:
                 raise ValueError(f"road {item!r}: measured profiles are not available here")
@@ -159,8 +157,8 @@ def resolve_roads(text: str, profiles: ProfileResolver | None = None) -> list[Na
             found = [by_road.get(road, NamedRoad(road.spec, road))]
         else:
             raise ValueError(
-                f"unknown road {item!r}: expected a group ({', '.join(GROUPS)}), a preset "
-                "name (e.g. sine-h4cm-l3m), a spec (flat, sine:H:LAMBDA[:PHASE_DEG], bump:H:SIGMA[:MU]) or profile:..."
+                f"unknown road {item!r}: expected a group ({', '.join(GROUPS)}), a spec (flat, "
+                "sine:H:LAMBDA[:PHASE_DEG], bump:H:SIGMA[:MU]) or profile:..."
             )
         for entry in found:
             if entry.road not in seen:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from finaldrive.engine.optimize import Optimiser
-from finaldrive.engine.study.scoring import Objective, score
+from finaldrive.engine.study.scoring import Aggregate, score
 
 
 @dataclass(frozen=True)
@@ -100,18 +100,18 @@ class SweepRun:
 
 class DERun:
     """One optimiser run (any method of engine.optimize): each round is evaluated on every road of
-    the run and told to the optimiser as one score a design (the fitness on one road, else ``objective``
+    the run and told to the optimiser as one score a design (the fitness on one road, else ``aggregate``
     over the roads, engine.study.scoring)."""
 
     def __init__(self, index: int, optimiser: Optimiser, roads: Sequence[int], *,
-                 objective: Objective = "mean", generation: int = 0) -> None:
+                 aggregate: Aggregate = "mean", generation: int = 0) -> None:
         """``generation``: how many rounds ``optimiser`` has been told (a resumed run's count)."""
         if not roads:
             raise ValueError("a DE run needs at least one road")
         self.index = index
         self.optimiser = optimiser
         self.roads = tuple(roads)
-        self.objective = objective
+        self.aggregate = aggregate
         self.generation = generation
         self._issued = False
         self._table: np.ndarray | None = None
@@ -136,7 +136,7 @@ class DERun:
         self._missing -= len(candidates)
         if self._missing > 0:
             return False
-        self.optimiser.tell(score(self._table, self.objective))
+        self.optimiser.tell(score(self._table, self.aggregate))
         self.generation += 1
         self._issued = False
         self._table = None

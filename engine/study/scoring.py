@@ -20,8 +20,8 @@ import numpy.typing as npt
 
 from finaldrive.engine.api import STATUS_OK, BatchResult
 
-Objective = Literal["mean", "worst"]
-OBJECTIVES: tuple[str, ...] = ("mean", "worst")
+Aggregate = Literal["mean", "worst"]
+AGGREGATES: tuple[str, ...] = ("mean", "worst")
 
 
 class Regret(NamedTuple):
@@ -39,26 +39,26 @@ def fitness_values(batch: BatchResult) -> np.ndarray:
     return f
 
 
-def score(table: npt.ArrayLike, objective: Objective = "mean") -> np.ndarray:
+def score(table: npt.ArrayLike, how: Aggregate = "mean") -> np.ndarray:
     """One score a design from a (roads x designs) fitness table: the fitness itself on one road,
     else :func:`aggregate` over the roads."""
     t = _table(table)
-    return t[0] if t.shape[0] == 1 else aggregate(t, objective)
+    return t[0] if t.shape[0] == 1 else aggregate(t, how)
 
 
-def aggregate(fitness: npt.ArrayLike, objective: Objective = "mean") -> np.ndarray:
+def aggregate(fitness: npt.ArrayLike, how: Aggregate = "mean") -> np.ndarray:
     """Score (n_designs,) of a fitness table (n_roads, n_designs); larger is better.
 
     ``mean``: mean fitness over the roads; ``worst``: the smallest (max-min design).
     NaN for a design that failed on any road.
     """
     table = _table(fitness)
-    if objective == "mean":
+    if how == "mean":
         score = table.mean(axis=0)
-    elif objective == "worst":
+    elif how == "worst":
         score = table.min(axis=0)
     else:
-        raise ValueError(f"unknown objective {objective!r}: expected one of {', '.join(OBJECTIVES)}")
+        raise ValueError(f"unknown aggregate {how!r}: expected one of {', '.join(AGGREGATES)}")
     score = np.asarray(score, dtype=float)
     score[np.any(np.isnan(table), axis=0)] = np.nan
     return score

@@ -22,7 +22,7 @@ if TYPE_CHECKING:
 
     from finaldrive.engine import Design, Road, SimSettings, Vehicle
 
-ROAD_HELP = ("a preset name (finaldrive roads), a spec (flat, sine:H:LAMBDA[:PHASE_DEG], bump:H:SIGMA[:MU], metres) "
+ROAD_HELP = ("a spec (flat, sine:H:LAMBDA[:PHASE_DEG], bump:H:SIGMA[:MU], metres; the paper's: finaldrive roads) "
              "or profile:FILE.csv (x, y in metres)")
 
 
@@ -56,8 +56,9 @@ DRIVES = ("paper", "launch")
 def add_design_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--a2-deg", type=float, required=True,
                    help="angle a2 of the engine sprocket axis from the swingarm pivot, in the chassis frame [deg]")
-    p.add_argument("--l2", type=float, required=True, help="distance L2 from the pivot to the engine sprocket axis [m]")
-    p.add_argument("--rws", type=float, required=True, help="wheel sprocket pitch radius R_WS [m]")
+    p.add_argument("--l2-m", type=float, required=True,
+                   help="distance L2 from the pivot to the engine sprocket axis [m]")
+    p.add_argument("--rws-m", type=float, required=True, help="wheel sprocket pitch radius R_WS [m]")
 
 
 def add_vehicle_arg(p: argparse.ArgumentParser) -> None:
@@ -97,19 +98,18 @@ def add_de_args(p: argparse.ArgumentParser) -> None:
 
 def _de_options() -> list[tuple[str, str, type]]:
     """(flag, DESettings field, type) of the optimiser's options, one for each field of DESettings (a
-    method's new setting needs no change here); MR keeps the paper's short name."""
+    method's new setting needs no change here), the flag spelling the field as the API does."""
     import dataclasses
 
     from finaldrive.engine import DE_INTEGRAL, DESettings
 
-    flags = {"mr_fraction": "--mr"}
-    return [(flags.get(f.name, "--" + f.name.replace("_", "-")), f.name, int if f.name in DE_INTEGRAL else float)
+    return [("--" + f.name.replace("_", "-"), f.name, int if f.name in DE_INTEGRAL else float)
             for f in dataclasses.fields(DESettings) if f.name != "optimiser"]
 
 
 def add_tolerance_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tolerance-pct", type=float, default=0.1, metavar="PCT",
-                   help="near-optimal set: evaluated designs within PCT %% of the best fitness (default 0.1)")
+                   help="near-optimal set: evaluated designs within PCT %% of the best fitness")
 
 
 def add_json_arg(p: argparse.ArgumentParser, what: str = "print one JSON object (for scripts)") -> None:
@@ -143,14 +143,14 @@ def compile_first(method: str) -> float | None:
 
 
 def design_from_args(args: argparse.Namespace, vehicle: Vehicle) -> Design:
-    """The design of --a2-deg, --l2, --rws, within the vehicle's limits (else UsageError naming the option)."""
+    """The design of --a2-deg, --l2-m, --rws-m, within the vehicle's limits (else UsageError naming the option)."""
     from finaldrive.engine import Design, DesignError
 
     try:
-        design = Design.from_deg(args.a2_deg, args.l2, args.rws)
+        design = Design.from_deg(args.a2_deg, args.l2_m, args.rws_m)
         vehicle.check_design(design)
     except DesignError as exc:
-        option = {"a2": "--a2-deg", "l2": "--l2"}.get(str(exc).split(" ", 1)[0], "--rws")
+        option = {"a2": "--a2-deg", "l2": "--l2-m"}.get(str(exc).split(" ", 1)[0], "--rws-m")
         raise UsageError(f"{option}: {exc}") from None
     return design
 

@@ -169,7 +169,7 @@ def register(sub: Any) -> None:
     p.add_argument("--executor", choices=("serial", "process", "ray"), default="ray", help="where simulations run")
     p.add_argument("--np", type=int, default=12, help="DE population size")
     p.add_argument("--iters", type=int, default=6, help="DE generations after the initial population")
-    p.add_argument("--road", default="sine:0.04:3", help="the road (a preset name or a spec)")
+    p.add_argument("--road", default="sine:0.04:3", help="the road (its spec)")
     p.add_argument("--json", action="store_true", help="print the best design as JSON")
     p.add_argument("--timeout", type=float, default=START_TIMEOUT_S,
                    help="how long to wait for the service to start [s]; it says what it waits for meanwhile")

@@ -194,12 +194,12 @@ def run_model_band(args: argparse.Namespace) -> int:
     base = out["baseline"]
     best = "none" if base["best"] is None else f"design {base['best'] + 1} (line {base['best'] + 2} of the file)"
     print(f"{len(designs)} designs on {road.spec}; the best with the model as given: {best}")
-    print(f"{'alternative':<22} {'rank corr.':>10} {'same best':>9} {'largest change [mm]':>19} {'failed':>6}  what")
+    print(f"{'alternative':<22} {'rank_correlation':>16} {'same_best':>9} {'largest_change_m':>16} {'failed':>6}  what")
     for name, alt in out["alternatives"].items():
         rho = "-" if alt["rank_correlation"] is None else f"{alt['rank_correlation']:.3f}"
-        change = "-" if alt["largest_change_m"] is None else f"{1000 * alt['largest_change_m']:.1f}"
+        change = "-" if alt["largest_change_m"] is None else f"{alt['largest_change_m']:.4f}"
         failed = sum(f is None for f in alt["fitness_m"])
-        print(f"{name:<22} {rho:>10} {'yes' if alt['same_best'] else 'no':>9} {change:>19} {failed:>6}  {alt['what']}")
+        print(f"{name:<22} {rho:>16} {'yes' if alt['same_best'] else 'no':>9} {change:>16} {failed:>6}  {alt['what']}")
     if out["skipped"]:
         print(f"not applicable to this road: {', '.join(out['skipped'])}")
     return 0

@@ -65,9 +65,9 @@ def job_spec(args: argparse.Namespace) -> dict[str, Any]:
     spec["de"] = de_options(args)
     spec["bounds"] = {k: list(v) for k, v in vars(bounds).items()}
     if args.kind == "robust-de":
-        spec["aggregate"] = args.objective
-    elif args.objective != "mean":
-        raise UsageError("--objective is only for robust-de")
+        spec["aggregate"] = args.aggregate
+    elif args.aggregate != "mean":
+        raise UsageError("--aggregate is only for robust-de")
     return spec
 
 
@@ -120,7 +120,7 @@ def run_jobs(args: argparse.Namespace) -> int:
     if args.json:
         print_json(items)
         return EXIT_OK
-    print(f"{'id':>5}  {'kind':<9}  {'state':<11}  {'progress':>13}  {'best [m]':>9}  created")
+    print(f"{'id':>5}  {'kind':<9}  {'state':<11}  {'progress':>13}  {'fitness_m':>9}  created_at")
     for job in items:
         best = best_fitness(job)
         done = f"{job['done'] + job['failed']}/{job['total']}"
@@ -169,7 +169,7 @@ def run_results(args: argparse.Namespace) -> int:
 
 
 def _print_best(best: dict[str, Any]) -> None:
-    print(f"{'road':<18} {'a2_deg':>8} {'l2_m':>8} {'rws_m':>8} {'fitness [m]':>12} {'distance [m]':>13}")
+    print(f"{'road':<18} {'a2_deg':>8} {'l2_m':>8} {'rws_m':>8} {'fitness_m':>12} {'distance_m':>13}")
     for road in best["roads"]:
         b = road.get("best")
         if b is None:
@@ -233,7 +233,7 @@ def register(sub: Any) -> None:
     p.add_argument("--grid", help='sweep: "table9" (the default) or e.g. "a2_deg=0:350:10,l2_m=0:0.2:0.02,rws_m=0.093"')
     add_de_args(p)
     add_vehicle_arg(p)
-    p.add_argument("--objective", choices=("mean", "worst"), default="mean",
+    p.add_argument("--aggregate", choices=("mean", "worst"), default="mean",
                    help="robust-de: a design's score over the roads")
     add_settings_args(p)
     p.add_argument("--idempotency-key", help="resubmitting with the same key returns the same job")

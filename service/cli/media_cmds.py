@@ -39,10 +39,10 @@ def _designs(texts: list[str]) -> list[tuple[str, Any]]:
 
 
 def run_record(args: argparse.Namespace) -> int:
-    if args.server or args.job is not None:
+    if args.server or args.job_id is not None:
         return _record_remote(args)
     if not args.designs:
-        raise UsageError("give --compare/--design (local) or --job/--server (through the service)")
+        raise UsageError("give --compare/--design (local) or --job-id/--server (through the service)")
     if args.road is None:
         raise UsageError("--road is required for a local recording")
     from finaldrive.service.recording import RecordingError, record
@@ -71,8 +71,8 @@ def run_record(args: argparse.Namespace) -> int:
 @client_command
 def _record_remote(args: argparse.Namespace) -> int:
     body: dict[str, Any] = {"duration": args.duration, "fps": args.fps}
-    if args.job is not None:
-        body["job_id"] = args.job
+    if args.job_id is not None:
+        body["job_id"] = args.job_id
     if args.road is not None:
         body["road"] = args.road
     body["designs"] = [dict(zip(("a2_deg", "l2_m", "rws_m"), parse_design(t), strict=True)) for t in args.designs or []]
@@ -150,8 +150,8 @@ def register(sub: Any) -> None:
     p.add_argument("--compare", dest="designs", nargs="+", action="extend", metavar="A2,L2,RWS",
                    help="designs: a2 [deg], L2 [m], R_WS [m]")
     p.add_argument("--design", dest="designs", action="append", metavar="A2,L2,RWS", help="one more design")
-    p.add_argument("--job", type=int, help="through the service: record this job's best design first")
-    p.add_argument("--road", help=f"{ROAD_HELP} (with --job: one of the job's roads; default its first)")
+    p.add_argument("--job-id", type=int, help="through the service: record this job's best design first")
+    p.add_argument("--road", help=f"{ROAD_HELP} (with --job-id: one of the job's roads; default its first)")
     p.add_argument("--out", required=True, metavar="FILE.rrd", help="the recording to write (open it with `rerun`)")
     p.add_argument("--duration", type=float, default=3.5, help="simulated time [s]")
     p.add_argument("--fps", type=int, default=50, help="frames per simulated second")

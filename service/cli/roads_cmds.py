@@ -17,12 +17,12 @@ def run_roads(args: argparse.Namespace) -> int:
         print_json([{"name": p.name, "spec": p.road.spec, "description": p.description, "paper": p.paper}
                     for p in PRESETS.values()])
         return 0
-    print(f"{'name':<20} {'spec':<20} {'a2 deg':>7} {'L2 m':>6} {'R_WS m':>7} {'fit m':>7}  description")
+    print(f"{'road':<16} {'a2_deg':>7} {'l2_m':>6} {'rws_m':>6} {'fitness_m':>9}  description")
     for p in PRESETS.values():
         ref = p.paper or {}
-        print(f"{p.name:<20} {p.road.spec:<20} {ref.get('a2_deg', math.nan):7.1f} "
-              f"{ref.get('l2_m', math.nan):6.3f} {ref.get('rws_m', math.nan):7.3f} "
-              f"{ref.get('fitness_m', math.nan):7.3f}  {p.description}")
+        print(f"{p.spec:<16} {ref.get('a2_deg', math.nan):7.1f} "
+              f"{ref.get('l2_m', math.nan):6.3f} {ref.get('rws_m', math.nan):6.3f} "
+              f"{ref.get('fitness_m', math.nan):9.3f}  {p.description}")
     return 0
 
 

@@ -45,7 +45,7 @@ def add_road_args(p: argparse.ArgumentParser) -> None:
     group = p.add_mutually_exclusive_group(required=True)
     group.add_argument("--road", help=f"one road: {ROAD_HELP}")
     group.add_argument("--roads", help="several roads: a group (paper, sine, bump) or a comma-separated list of roads")
-    p.add_argument("--objective", choices=("mean", "worst"), default="mean",
+    p.add_argument("--aggregate", choices=("mean", "worst"), default="mean",
                    help="with several roads, a design's score: the mean fitness over the roads, or the worst road")
 
 
@@ -94,7 +94,7 @@ def run_optimize(args: argparse.Namespace) -> int:
         raise UsageError("--repeat must be >= 1")
     several = args.roads is not None
     plans = [_plan("robust-de" if several else "de", args, bounds=bounds, de=de,
-                   objective=args.objective if several else None, seed=args.seed + k) for k in range(args.repeat)]
+                   aggregate=args.aggregate if several else None, seed=args.seed + k) for k in range(args.repeat)]
     plan = plans[0]
     settings = settings_from_args(args)
     vehicle = load_vehicle_arg(args.vehicle, args.drive)
@@ -130,13 +130,13 @@ def run_optimize(args: argparse.Namespace) -> int:
                          "regret_pct": regret, "paper": _paper(road)})
     sharp = _sharpness(args, tally, plan, settings, vehicle, de_run.best_x if best is not None else None)
     if best is not None and args.band:
-        _bands(sharp, best, per_road, de_run.best_x, tally, plan, settings, vehicle, args.objective)
+        _bands(sharp, best, per_road, de_run.best_x, tally, plan, settings, vehicle, args.aggregate)
     if best is not None:
         sharp["final_population"] = _population(de_run)
         if len(de_runs) > 1:
             sharp["repeats"] = _repeats(de_runs, args.seed)
     out = {
-        "command": "optimize", "roads": [r.name for r in plan.roads], "objective": args.objective if several else None,
+        "command": "optimize", "roads": [r.name for r in plan.roads], "aggregate": args.aggregate if several else None,
         "best": best, "per_road": per_road, "evaluations": tally.progress.done, "failed": tally.progress.failed,
         "designs_evaluated": de_run.n_evals, "generations": de_run.generation, "stop_reason": de_run.stop_reason,
         "history": [{k: (clean(v) if isinstance(v, float) else v) for k, v in history_record(h).items()}
@@ -145,7 +145,7 @@ def run_optimize(args: argparse.Namespace) -> int:
         "de": {"preset": args.preset or "default", **dataclasses.asdict(de)},
         "bounds": {"a2_deg": list(bounds.a2_deg), "l2_m": list(bounds.l2_m), "rws_m": list(bounds.rws_m)},
         "sharpness": sharp,
-        "executor": kind, "workers": n_workers, "duration_s": settings.duration, "wall_s": time.monotonic() - start,
+        "executor": kind, "workers": n_workers, "duration": settings.duration, "wall_s": time.monotonic() - start,
     }
     print_result(out, args.json)
     return 0 if best is not None else 1
@@ -181,7 +181,7 @@ def _sharpness(args: argparse.Namespace, tally: Tally, plan: Any, settings: Any,
 
     designs, fitness, distance = tally.arrays()
     several = len(plan.roads) > 1
-    score = fitness[0] if not several else aggregate(fitness, args.objective)
+    score = fitness[0] if not several else aggregate(fitness, args.aggregate)
     dist = distance[0] if not several else distance.mean(axis=0)
     try:
         near = near_optimal(designs, score, dist, args.tolerance_pct)
@@ -198,7 +198,7 @@ def _sharpness(args: argparse.Namespace, tally: Tally, plan: Any, settings: Any,
 
 
 def _bands(sharp: dict[str, Any], best: dict[str, Any], per_road: list[dict[str, Any]], best_x: np.ndarray,
-           tally: Tally, plan: Any, settings: Any, vehicle: Any, objective: Any) -> None:
+           tally: Tally, plan: Any, settings: Any, vehicle: Any, how: Any) -> None:
     """Numerical bands (engine study.band): on one road, of the best and the next best distinct
     designs, with which of them tie with it (``sharpness.ties``); over several roads, of the best
     design on each road and of its score (each re-run's fitness aggregated as the score is)."""
@@ -211,7 +211,7 @@ def _bands(sharp: dict[str, Any], best: dict[str, Any], per_road: list[dict[str,
                 row["best_design"]["numerical_band"] = band
         if all(b["band_m"] is not None for b in bands):
             scores = {label: float(aggregate(np.array([[b["runs"][label]["fitness_m"]] for b in bands]),
-                                             objective)[0]) for label in bands[0]["runs"]}
+                                             how)[0]) for label in bands[0]["runs"]}
             width = max(abs(v - scores["production"]) for v in scores.values())
             best["numerical_band"] = {"fitness_m": scores["production"], "band_m": width,
                                       "exceeds_limit": width > BAND_LIMIT_M,
@@ -232,21 +232,21 @@ def _mean(values: list[Any], n: int) -> float | None:
 # --- sweep ------------------------------------------------------------------------------------
 
 def sweep_grid(args: argparse.Namespace) -> tuple[str, np.ndarray]:
-    """(grid label, designs) from --grid and --rws."""
+    """(grid label, designs) from --grid and --rws-m."""
     from finaldrive.engine import TABLE9_DEFAULT_RWS_M, parse_grid, table9_grid
 
     spec = args.grid.strip()
     try:
         if spec.lower() == "table9":
-            rws = TABLE9_DEFAULT_RWS_M if args.rws is None else args.rws
+            rws = TABLE9_DEFAULT_RWS_M if args.rws_m is None else args.rws_m
             return f"table9 (rws_m={rws:g})", table9_grid(rws)
-        if args.rws is not None:
+        if args.rws_m is not None:
             if "rws" in spec.lower():
-                raise UsageError("give R_WS either in --grid (rws_m=...) or with --rws, not both")
-            spec = f"{spec},rws_m={args.rws!r}" if spec else f"rws_m={args.rws!r}"
+                raise UsageError("give R_WS either in --grid (rws_m=...) or with --rws-m, not both")
+            spec = f"{spec},rws_m={args.rws_m!r}" if spec else f"rws_m={args.rws_m!r}"
         return spec, parse_grid(spec)
     except ValueError as exc:
-        option = "--rws" if args.rws is not None and str(exc).startswith("rws") else "--grid"
+        option = "--rws-m" if args.rws_m is not None and str(exc).startswith("rws") else "--grid"
         raise UsageError(f"{option}: {exc}") from None
 
 
@@ -278,7 +278,7 @@ def run_sweep(args: argparse.Namespace) -> int:
             run_study(plan.runs(), plan, settings, vehicle, executor, on_result)
         finally:
             tally.progress.close()
-    score = table[0] if not several else aggregate(table, args.objective)
+    score = table[0] if not several else aggregate(table, args.aggregate)
     i = int(np.nanargmax(score)) if np.isfinite(score).any() else None
     best = None
     if i is not None:
@@ -290,11 +290,11 @@ def run_sweep(args: argparse.Namespace) -> int:
                  "failed": int(np.isnan(table[r]).sum()), "paper": _paper(road)}
                 for r, road in enumerate(plan.roads)]
     out = {
-        "command": "sweep", "roads": [r.name for r in plan.roads], "objective": args.objective if several else None,
+        "command": "sweep", "roads": [r.name for r in plan.roads], "aggregate": args.aggregate if several else None,
         "grid": grid_label, "designs": len(designs), "best": best, "per_road": per_road,
         "sharpness": _sharpness(args, tally, plan, settings, vehicle, designs[i] if i is not None else None),
         "evaluations": tally.progress.done, "failed": tally.progress.failed, "out": args.out, "executor": kind,
-        "workers": n_workers, "duration_s": settings.duration, "wall_s": time.monotonic() - start,
+        "workers": n_workers, "duration": settings.duration, "wall_s": time.monotonic() - start,
     }
     print_result(out, args.json)
     return 0 if best is not None else 1
@@ -308,9 +308,10 @@ def _csv_writer(stream: IO[str]) -> csv.DictWriter[str]:
 
 def register(sub: Any) -> None:
     p = sub.add_parser("optimize", help=COMMANDS["optimize"].help,
-                       description="Differential evolution (Table 10 defaults) over the Table 8 box. --road: the "
-                                   "paper's per-road optimisation; --roads: one design scored on every road "
-                                   "(--objective mean|worst). Failed simulations score NaN and are counted.",
+                       description="An optimiser (DE by default; --preset paper: Table 10) over the Table 8 box "
+                                   "(--bounds). --road: the paper's per-road optimisation; --roads: one design "
+                                   "scored on every road (--aggregate mean|worst). Failed simulations score NaN "
+                                   "and are counted.",
                        **parser_options())
     add_road_args(p)
     add_de_args(p)
@@ -328,7 +329,7 @@ def register(sub: Any) -> None:
     add_road_args(p)
     p.add_argument("--grid", default="table9",
                    help="table9, or a grid spec such as a2_deg=0:358:2,l2_m=0:0.2:0.02,rws_m=0.093")
-    p.add_argument("--rws", type=float, default=None, help="R_WS [m] of the grid (default 0.093, Table 9)")
+    p.add_argument("--rws-m", type=float, default=None, help="R_WS [m] of the grid (default 0.093, Table 9)")
     p.add_argument("--out", metavar="FILE.csv", help="write every result (road, design, outcome) as CSV")
     add_tolerance_arg(p)
     add_run_args(p)

@@ -13,7 +13,7 @@ def print_result(out: dict[str, Any], as_json: bool) -> None:
     if as_json:
         print_json(out)
         return
-    where = f"  ({out['objective']} over {len(out['roads'])} roads)" if out["objective"] else f"  on {out['roads'][0]}"
+    where = f"  ({out['aggregate']} over {len(out['roads'])} roads)" if out["aggregate"] else f"  on {out['roads'][0]}"
     print(f"best: {_design_text(out['best'])}{where}")
     if len(out["roads"]) > 1:
         for road in out["per_road"]:
@@ -33,7 +33,7 @@ def _band_lines(out: dict[str, Any]) -> list[str]:
     band = (out.get("best") or {}).get("numerical_band")
     if band is None:
         return []
-    what = "fitness" if len(out["roads"]) == 1 else f"{out['objective']} fitness"
+    what = "fitness" if len(out["roads"]) == 1 else f"{out['aggregate']} fitness"
     return band_lines(band, out["sharpness"].get("ties") or [], what=what, indent="")
 
 

@@ -44,7 +44,7 @@ def drive_lines(d: dict[str, Any]) -> list[str]:
         return [f"simulation on {d['road']} failed: {d['reason']}"]
     squat = 1000 * d["squat_mean_m"]
     return [
-        f"simulated on {d['road']} for {d['duration_s']:g} s ({d['distance_m']:.3f} m):",
+        f"simulated on {d['road']} for {d['duration']:g} s ({d['distance_m']:.3f} m):",
         f"  rear travel {1000 * d['travel_static_m']:.1f} mm at the start, mean {1000 * d['travel_mean_m']:.1f} mm "
         f"({squat:+.2f} mm: {'compressed' if squat > 0 else 'extended'} under drive), "
         f"range {1000 * d['travel_min_m']:.1f} to {1000 * d['travel_max_m']:.1f} mm",

@@ -139,12 +139,12 @@ def _sets_sql(source: str) -> str:
             "WHERE s.fitness_m >= t.best - abs(t.best) * :pct / 100.0 GROUP BY b")
 
 
-def aggregate_sharpness(session: Session, job_id: int, roads: int, objective: str,
+def aggregate_sharpness(session: Session, job_id: int, roads: int, aggregate: str,
                         tolerance_pct: float) -> dict[str, Any]:
     """The near-optimal set of a robust-de's designs by their aggregate score (``mean`` or ``worst``
     over its ``roads`` roads; a design that failed on one of them has none)."""
     _need_floor(session.connection())
-    source = _DESIGNS.format(score={"mean": "AVG", "worst": "MIN"}[objective])
+    source = _DESIGNS.format(score={"mean": "AVG", "worst": "MIN"}[aggregate])
     rows = session.execute(text(_sets_sql(source)),
                            {"job": job_id, "roads": roads, "pct": tolerance_pct}).all()
     return _summary(rows, tolerance_pct, distance=False)

@@ -55,7 +55,7 @@ def build_plan(spec: JobSpec, *, profiles: ProfileResolver | None = None,
         raise PlanError(("bounds" if exc.field in Bounds.__dataclass_fields__ else "de", exc.field), exc.msg) from None
     road_designs = None if spec.designs is None else [
         np.array([(math.radians(a2), l2, rws) for a2, l2, rws in designs]) for designs in spec.designs]
-    study = plan_study(spec.kind, spec.roads, grid=spec.grid, bounds=bounds, de=de, objective=spec.aggregate,
+    study = plan_study(spec.kind, spec.roads, grid=spec.grid, bounds=bounds, de=de, aggregate=spec.aggregate,
                        seed=spec.seed, profiles=profiles, vehicle=vehicle, road_designs=road_designs)
     try:
         settings = SimSettings(duration=spec.settings.duration, dt=spec.settings.dt, method=spec.settings.method,

@@ -152,7 +152,7 @@ def per_road(data: StudyData) -> list[dict[str, Any]]:
         sweep, de = on_road & (e["step"] == SWEEP_STEP), on_road & (e["step"] >= 0)
         d = e["distance_m"][sweep & e["ok"]]
         i_de, i_sw = _best(e, de), _best(e, sweep)
-        preset = PRESETS.get(name)
+        preset = PRESETS.get(spec)
         paper = None if preset is None or preset.paper is None else {
             k: _r(v, 7 if k == "slack_m" else 4) for k, v in sorted(preset.paper.items())}  # slack: to the um
         out.append({

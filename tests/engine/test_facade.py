@@ -32,7 +32,7 @@ def test_importing_the_facade_loads_no_simulation_machinery() -> None:
 def test_the_geometry_command_loads_no_simulation_machinery() -> None:
     """`finaldrive geometry` (no --travel) answers from kinematics alone: no numba, no solver."""
     code = ("import sys; from finaldrive.service.cli import main; "
-            "assert main(['geometry', '--a2-deg', '195.3', '--l2', '0.037', '--rws', '0.088', '--json']) == 0; "
+            "assert main(['geometry', '--a2-deg', '195.3', '--l2-m', '0.037', '--rws-m', '0.088', '--json']) == 0; "
             "heavy = {'numba', 'finaldrive.engine.simulation', 'finaldrive.engine.solver.reference'} "
             "& set(sys.modules); assert not heavy, sorted(heavy)")
     subprocess.run([sys.executable, "-c", code], check=True, stdout=subprocess.DEVNULL)

@@ -17,7 +17,7 @@ from finaldrive.service.report.analysis import alignment_deg, de_history, offset
 from finaldrive.service.report.data import StudyNotFound, from_database, from_server
 from finaldrive.service.services import open_database
 
-ROADS = ["flat", "sine-h4cm-l3m"]
+ROADS = ["flat", "sine:0.04:3"]
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +42,7 @@ def test_report_is_complete_and_byte_identical_when_rerun(study: str, tmp_path: 
     files = _files(out_a)
     assert files == _files(out_b)
     assert {"paper-study.md", "paper-study.json", "paper-study/table14-series.png"} <= set(files)
-    assert {f"paper-study/sweep-{i:02d}-{name}.png" for i, name in enumerate(ROADS)} <= set(files)
+    assert {f"paper-study/sweep-{i:02d}-{name.replace(':', '_')}.png" for i, name in enumerate(ROADS)} <= set(files)
     md = files["paper-study.md"].decode()
     for heading in ("## Run", "## Do the paper's conclusions hold here?", "## Per road", "## Sweep",
                     "## Table 14", "## Robust design", "## Sharpness of each optimum", "(1)", "(2)", "(3)"):

@@ -86,7 +86,7 @@ def test_the_default_stops_once_converged_and_presets_take_given_fields() -> Non
     ("de", ["flat"], {"grid": "table9"}, "grid"),
     ("sweep", ["flat"], {"de": DESettings()}, "de"),
     ("sweep", ["flat"], {"grid": "l2_m=0:oops"}, "grid"),
-    ("de", ["flat"], {"objective": "mean"}, "objective"),
+    ("de", ["flat"], {"aggregate": "mean"}, "aggregate"),
     ("sweep", ["flat"], {"grid": "a2_deg=0,l2_m=0.1|0.25,rws_m=0.09"}, "grid"),      # beyond l2_max
     ("de", ["flat"], {"bounds": Bounds(rws_m=(0.05, 0.21))}, "bounds.rws_m"),    # beyond rt0 - margin
     ("de", ["flat"], {"bounds": Bounds(l2_m=(0.0, 0.3))}, "bounds.l2_m"),
@@ -157,7 +157,7 @@ def test_a_de_is_bit_identical_whatever_the_order_and_splitting_of_its_work() ->
 
 
 def test_a_resumed_de_continues_exactly() -> None:
-    plan = plan_study("robust-de", ["flat,sine:0.04:3"], de=DESettings(np=8, iters=6), objective="worst", seed=3)
+    plan = plan_study("robust-de", ["flat,sine:0.04:3"], de=DESettings(np=8, iters=6), aggregate="worst", seed=3)
     whole = plan.runs()
     drive(whole)
     first = plan.runs()
@@ -187,5 +187,5 @@ def test_a_resumed_sweep_hands_out_only_what_is_missing() -> None:
 
 def test_spec_roads_equal_to_a_preset_carry_the_paper_row() -> None:
     plan = plan_study("sweep", ["sine:0.04:3", "flat,sine:0.04:3"])
-    assert [r.name for r in plan.roads] == ["sine-h4cm-l3m", "flat"]
-    assert plan.roads[0].paper == PRESETS["sine-h4cm-l3m"].paper
+    assert [r.name for r in plan.roads] == ["sine:0.04:3", "flat"]
+    assert plan.roads[0].paper == PRESETS["sine:0.04:3"].paper

@@ -35,8 +35,8 @@ def test_23_roads_split_1_16_6_with_unique_names() -> None:
 
 def test_names_and_roads_follow_the_paper() -> None:
     assert PRESETS["flat"].road == Road("flat")
-    assert PRESETS["sine-h4cm-l3m"].road == Road("sine", height=0.04, wavelength=3.0)
-    assert PRESETS["bump-h4cm-s20cm"].road == Road("bump", height=0.04, sigma=0.2, mu=5.0)
+    assert PRESETS["sine:0.04:3"].road == Road("sine", height=0.04, wavelength=3.0)
+    assert PRESETS["bump:0.04:0.2:5"].road == Road("bump", height=0.04, sigma=0.2, mu=5.0)
     sines = {(p.road.height, p.road.wavelength) for p in preset_group("sine")}
     assert sines == {(h, lam) for h in (0.01, 0.02, 0.03, 0.04) for lam in (2.0, 3.0, 4.0, 5.0)}
     bumps = {(p.road.height, p.road.sigma, p.road.mu) for p in preset_group("bump")}
@@ -63,19 +63,20 @@ def test_reference_rows_match_tables_11_to_13() -> None:
             assert (preset.road.height, preset.road.sigma) == (row["H_y_m"], row["sigma_m"])
     assert PRESETS["flat"].paper["fitness_m"] == 20.708
     # the check row of docs/engine.md#reading-notes-extraction-faults
-    assert PRESETS["sine-h4cm-l3m"].paper["fitness_m"] == 19.861
-    assert PRESETS["sine-h4cm-l2m"].paper["a2_deg"] == 371.0       # printed; wraps to 11 deg
-    assert PRESETS["bump-h4cm-s20cm"].paper["fitness_m"] == 20.584
+    assert PRESETS["sine:0.04:3"].paper["fitness_m"] == 19.861
+    assert PRESETS["sine:0.04:2"].paper["a2_deg"] == 371.0       # printed; wraps to 11 deg
+    assert PRESETS["bump:0.04:0.2:5"].paper["fitness_m"] == 20.584
 
 
 def test_resolve_roads_mixes_groups_names_and_specs_in_order() -> None:
-    roads = resolve_roads("flat, sine-h1cm-l2m ,sine:0.04:3,bump:0.03:0.4:6")
-    assert [r.name for r in roads] == ["flat", "sine-h1cm-l2m", "sine-h4cm-l3m", "bump:0.03:0.4:6"]
+    roads = resolve_roads("flat, sine:0.01:2 ,sine:0.04:3,bump:0.03:0.4:6")
+    assert [r.name for r in roads] == ["flat", "sine:0.01:2", "sine:0.04:3", "bump:0.03:0.4:6"]
     assert roads[2].paper is not None and roads[3].paper is None and isinstance(roads[3], NamedRoad)
     assert len(resolve_roads("paper")) == 23
     assert len(resolve_roads("bump,paper,flat")) == 23          # repeats dropped
     assert [r.name for r in resolve_roads("bump,flat")][-1] == "flat"
-    assert resolve_roads("SINE-H1CM-L2M") == [PRESETS["sine-h1cm-l2m"]]
+    assert resolve_roads("SINE-H1CM-L2M") == [PRESETS["sine:0.01:2"]]   # an earlier name: read, not printed
+    assert resolve_roads("bump-h4cm-s20cm")[0].name == "bump:0.04:0.2:5"
 
 
 @pytest.mark.parametrize("text, bad", [

@@ -148,7 +148,7 @@ def test_an_uploaded_profile_gives_the_distance_simulate_gives_locally(
     """Acceptance: the engine through the service (a scheduler running the real task) and the CLI agree exactly."""
     path = tmp_path / "bumps.csv"
     path.write_text("x,y\n" + "".join(f"{0.25 * i:g},{0.01 * (i % 3 == 1):g}\n" for i in range(-8, 40)))
-    design = ["--a2-deg", "195.3", "--l2", "0.037", "--rws", "0.088"]
+    design = ["--a2-deg", "195.3", "--l2-m", "0.037", "--rws-m", "0.088"]
     assert main(["simulate", "--road", f"profile:{path}", *design, "--duration", "1", "--json"]) == 0
     local = json.loads(capsys.readouterr().out)
     assert local["status"] == "ok"

@@ -66,7 +66,7 @@ def test_submit_maps_options_to_the_spec(monkeypatch: pytest.MonkeyPatch, capsys
 
     use_transport(monkeypatch, handler)
     argv = ["submit", "robust-de", "--roads", "flat,sine:0.02:3", "--road", "bump:0.02:0.5", "--np", "8",
-            "--iters", "3", "--seed", "4", "--objective", "worst", "--duration", "1.5", "--idempotency-key", "k1",
+            "--iters", "3", "--seed", "4", "--aggregate", "worst", "--duration", "1.5", "--idempotency-key", "k1",
             "--bounds", "a2_deg=90:270,l2_m=0:0.1", "--optimiser", "cmaes", "--preset", "paper"]
     assert main(argv) == 0
     assert seen == [{"kind": "robust-de", "roads": ["bump:0.02:0.5", "flat", "sine:0.02:3"], "seed": 4,
@@ -144,7 +144,7 @@ def test_local_record_simulate_record_and_series_plot(tmp_path: Any, capsys: pyt
     assert json.loads(capsys.readouterr().out)["frames"] == 6
     assert frame_count(two, "/world/g2/rear_wheel") == 6
     one = tmp_path / "one.rrd"
-    assert main(["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0.093", "--road", "flat", "--duration", "0.2",
+    assert main(["simulate", "--a2-deg", "0", "--l2-m", "0", "--rws-m", "0.093", "--road", "flat", "--duration", "0.2",
                  "--record", str(one), "--json"]) == 0
     assert frame_count(one, "/world/g1/chain") == 11 and frame_count(one, "/world/g2/chain") == 0
     png = tmp_path / "s.png"

@@ -66,7 +66,8 @@ def test_submit_follow_results_record_plot(server: str, tmp_path: Path, monkeypa
     assert len(rows) == 8 and {r["status"] for r in rows} == {"ok"}
 
     rrd = tmp_path / "best-vs-g2.rrd"
-    assert main(["record", "--job", "1", "--compare", "270,0.15,0.15", "--duration", "0.4", "--out", str(rrd), *s]) == 0
+    argv = ["record", "--job-id", "1", "--compare", "270,0.15,0.15", "--duration", "0.4", "--out", str(rrd), *s]
+    assert main(argv) == 0
     assert frame_count(rrd, "/world/g1/swingarm") == frame_count(rrd, "/world/g2/swingarm") == 21
     exe = console_script("rerun")
     subprocess.run([exe, "analytics", "disable"], capture_output=True, check=False)

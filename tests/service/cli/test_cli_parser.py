@@ -93,10 +93,11 @@ def test_version(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 @pytest.mark.parametrize("argv", [
-    ["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0.093", "--road", "flat", "--record", "/missing/dir/x.rrd"],
-    ["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0.093", "--road", "flat", "--series", "/missing/x.csv"],
+    ["simulate", "--a2-deg", "0", "--l2-m", "0", "--rws-m", "0.093", "--road", "flat",
+     "--record", "/missing/dir/x.rrd"],
+    ["simulate", "--a2-deg", "0", "--l2-m", "0", "--rws-m", "0.093", "--road", "flat", "--series", "/missing/x.csv"],
     ["evaluate", "--designs", "/missing/designs.csv", "--road", "flat"],
-    ["simulate", "--a2-deg", "0", "--l2", "0", "--rws", "0.093", "--road", "profile:/missing/road.csv"],
+    ["simulate", "--a2-deg", "0", "--l2-m", "0", "--rws-m", "0.093", "--road", "profile:/missing/road.csv"],
     ["optimize", "--road", "flat", "--vehicle", "/missing/vehicle.json"],
     ["calibrate", "--out", "/missing/dir/v.json"],
     ["optimize", "--road", "flat", "--bounds", "l2_m=0.2:0.1"],

@@ -35,7 +35,7 @@ def run_json(argv: list[str], capsys: pytest.CaptureFixture[str]) -> dict:
 
 
 def test_optimize_toy_budget_json(capsys: pytest.CaptureFixture[str]) -> None:
-    r = run_json(["optimize", "--road", "sine-h4cm-l3m", *TOY, "--executor", "serial"], capsys)
+    r = run_json(["optimize", "--road", "sine:0.04:3", *TOY, "--executor", "serial"], capsys)
     assert r["evaluations"] == r["designs_evaluated"] == 6 * (2 + 1)
     assert r["failed"] == 0 and r["generations"] == 2 and len(r["history"]) == 3
     best = r["best"]
@@ -49,7 +49,7 @@ def test_optimize_toy_budget_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert ties[0]["tie"] is True and ties[0]["band_m"] == band["band_m"] and 2 <= len(ties) <= 5
     assert [t["fitness_m"] for t in ties] == sorted((t["fitness_m"] for t in ties), reverse=True)
     assert all(t["tie"] == (abs(t["fitness_m"] - best["fitness_m"]) <= t["band_m"] + band["band_m"]) for t in ties)
-    skipped = run_json(["optimize", "--road", "sine-h4cm-l3m", *TOY, "--executor", "serial", "--no-band"], capsys)
+    skipped = run_json(["optimize", "--road", "sine:0.04:3", *TOY, "--executor", "serial", "--no-band"], capsys)
     assert "numerical_band" not in skipped["best"] and "ties" not in skipped["sharpness"]
 
 
@@ -61,9 +61,9 @@ def test_same_seed_same_best_serial_and_process(capsys: pytest.CaptureFixture[st
 
 
 def test_robust_optimize_over_roads(capsys: pytest.CaptureFixture[str]) -> None:
-    r = run_json(["optimize", "--roads", "flat,sine:0.04:3", "--objective", "worst", *TOY,
+    r = run_json(["optimize", "--roads", "flat,sine:0.04:3", "--aggregate", "worst", *TOY,
                   "--executor", "serial", "--bounds", "a2_deg=90:270,rws_m=0.08:0.1"], capsys)
-    assert r["objective"] == "worst" and r["evaluations"] == 2 * 18 and r["designs_evaluated"] == 18
+    assert r["aggregate"] == "worst" and r["evaluations"] == 2 * 18 and r["designs_evaluated"] == 18
     assert 90 <= r["best"]["a2_deg"] <= 270 and 0.08 <= r["best"]["rws_m"] <= 0.1
     on_roads = [road["best_design"]["fitness_m"] for road in r["per_road"]]
     assert r["best"]["fitness_m"] == pytest.approx(min(on_roads))
@@ -92,7 +92,7 @@ def test_failed_simulations_are_counted_and_never_best(
 
 def test_sweep_grid_writes_one_csv_row_per_design(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "results.csv"
-    r = run_json(["sweep", "--road", "flat", "--grid", "a2_deg=0:300:60,l2_m=0|0.1", "--rws", "0.09",
+    r = run_json(["sweep", "--road", "flat", "--grid", "a2_deg=0:300:60,l2_m=0|0.1", "--rws-m", "0.09",
                   "--duration", "0.2", "--executor", "serial", "--out", str(out)], capsys)
     rows = list(csv.DictReader(out.open()))
     assert len(rows) == r["designs"] == r["evaluations"] == 6 * 2
@@ -101,10 +101,10 @@ def test_sweep_grid_writes_one_csv_row_per_design(tmp_path: Path, capsys: pytest
 
 
 def test_sweep_several_roads_reports_each_road(capsys: pytest.CaptureFixture[str]) -> None:
-    r = run_json(["sweep", "--roads", "flat,sine-h2cm-l3m", "--grid", "a2_deg=0|180,l2_m=0.05,rws_m=0.093",
+    r = run_json(["sweep", "--roads", "flat,sine:0.02:3", "--grid", "a2_deg=0|180,l2_m=0.05,rws_m=0.093",
                   "--duration", "0.2", "--executor", "serial"], capsys)
-    assert r["evaluations"] == 4 and [p["road"] for p in r["per_road"]] == ["flat", "sine-h2cm-l3m"]
-    assert r["objective"] == "mean" and r["best"]["a2_deg"] in (0.0, 180.0)
+    assert r["evaluations"] == 4 and [p["road"] for p in r["per_road"]] == ["flat", "sine:0.02:3"]
+    assert r["aggregate"] == "mean" and r["best"]["a2_deg"] in (0.0, 180.0)
 
 
 def test_text_output_is_the_best_design(capsys: pytest.CaptureFixture[str]) -> None:
@@ -201,7 +201,7 @@ def test_text_output_says_which_variables_are_decided(capsys: pytest.CaptureFixt
 
 
 def test_sweep_reports_the_near_optimal_set(capsys: pytest.CaptureFixture[str]) -> None:
-    r = run_json(["sweep", "--road", "flat", "--grid", "a2_deg=0:300:60,l2_m=0.02|0.1", "--rws", "0.09",
+    r = run_json(["sweep", "--road", "flat", "--grid", "a2_deg=0:300:60,l2_m=0.02|0.1", "--rws-m", "0.09",
                   "--duration", "0.2", "--executor", "serial"], capsys)
     near = r["sharpness"]["near_optimal"]
     assert near["verdicts"]["rws_m"] == "fixed" and near["evaluated"] == 12
