@@ -34,7 +34,7 @@ COMMANDS: dict[str, Command] = {
     'results': Command('jobs_cmds', "a job's evaluations as CSV (stdout, or --csv FILE)"),
     'best': Command('jobs_cmds', "a job's best design on each road, and which variables it decides"),
     'cancel': Command('jobs_cmds', 'cancel a job (a finished job is left as it is)'),
-    'record': Command('media_cmds', 'a rerun .rrd of designs side by side on a road (local, or --job/--server)'),
+    'record': Command('media_cmds', 'a rerun .rrd of designs side by side on a road (local, or --job-id/--server)'),
     'plot': Command('media_cmds', "PNG: a job's sweep map or DE history (service), or Fig. 13 series (local)"),
     'study': Command('paper_cmds', 'run a study'),
     'report': Command('paper_cmds', 'write a report from stored results'),
