@@ -28,7 +28,7 @@ _EXPORTS: dict[str, str] = {
                      "load_vehicle_dict"), "finaldrive.engine.vehicle"),
     "static_geometry": "finaldrive.engine.geometry",
     **dict.fromkeys(("compile_engine", "compile_progress", "is_compiled"), "finaldrive.engine.precompile"),
-    "start_runtime": "finaldrive.engine.model.jit",
+    "start_runtime": "finaldrive.engine.jit.kernel",
     **dict.fromkeys(("FIELDS", "Field", "base_of", "design_label", "history_record", "human", "unit_of"),
                     "finaldrive.engine.fields"),
     **dict.fromkeys(("MAX_TRAVEL_POINTS", "TRAVEL_POINTS", "drive_squat", "travel_kinematics"),
@@ -103,11 +103,11 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         unit_of as unit_of,
     )
     from finaldrive.engine.geometry import static_geometry as static_geometry
+    from finaldrive.engine.jit.kernel import start_runtime as start_runtime
     from finaldrive.engine.model.coordinates import (
         coordinate_index as coordinate_index,
         point_positions as point_positions,
     )
-    from finaldrive.engine.model.jit import start_runtime as start_runtime
     from finaldrive.engine.model.rear_travel import TravelError as TravelError
     from finaldrive.engine.model.road import (
         PROFILE_MAX_POINTS as PROFILE_MAX_POINTS,

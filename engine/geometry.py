@@ -6,8 +6,8 @@ import math
 from typing import Any
 
 from finaldrive.engine.api import Design, SimSettings
+from finaldrive.engine.jit.kernel import interpreted
 from finaldrive.engine.model import params as P
-from finaldrive.engine.model.jit import interpreted
 from finaldrive.engine.model.kinematics import taut_length
 from finaldrive.engine.model.road import Road
 from finaldrive.engine.setup import prepare

@@ -1,6 +1,6 @@
 """The engine's compiled code, built once per machine before any worker starts.
 
-numba compiles a kernel at its first call and caches it on disk (engine.model.jit). Left to the
+numba compiles a kernel at its first call and caches it on disk (engine.jit.kernel). Left to the
 workers, every worker of a fresh machine would compile the same code at once, each for 30-50 s a
 method. :func:`compile_engine` instead compiles each method once, in child processes (the caller
 never imports numba), and leaves a marker per method in the cache directory; later processes
@@ -8,8 +8,8 @@ only load the cache.
 
 With more than one CPU the fast method is built by several processes at once (up to
 ``_MAX_BUILDERS``): each runs the method briefly as plain Python, recording which kernel calls
-which with what types (engine.model.jit.traced), then all compile those kernels between them, each
-traced kernel once, callees first (engine.model.kernel_build). A last brief compiled run, here,
+which with what types (engine.jit.kernel.traced), then all compile those kernels between them, each
+traced kernel once, callees first (engine.jit.parallel). A last brief compiled run, here,
 loads them all (and compiles what no trace saw) before the marker is written. The reference method,
 whose plain-Python run takes half a minute, is compiled by one run in one process (the kernels it
 shares with the fast method's build may be written by both at once: numba writes each index and
@@ -34,7 +34,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from finaldrive.engine.model.jit import cache_dir
+from finaldrive.engine.jit.cache import cache_dir, plain
 
 if TYPE_CHECKING:
     from finaldrive.engine.api import Design, SimSettings
@@ -184,7 +184,7 @@ def _brief_run(method: str) -> tuple[Design, Road, SimSettings, Vehicle]:
 
 def _compile_here(method: str) -> None:
     """Compile and cache (or load) every kernel of the method, by a brief run."""
-    from finaldrive.engine.model.jit import load_registries
+    from finaldrive.engine.jit.kernel import load_registries
     from finaldrive.engine.simulation import simulate
 
     load_registries()
@@ -197,9 +197,9 @@ def _build_here(method: str, directory: Path, waiting: Callable[[], None],
                 progress: Callable[[int, int], None] | None = None) -> None:
     """Trace the method's brief run as plain Python (and, briefer, with the two-run chain), then
     compile the kernels they called with the other builders sharing ``directory``
-    (engine.model.kernel_build; ``waiting`` and ``progress`` as there)."""
-    from finaldrive.engine.model.jit import load_registries, traced
-    from finaldrive.engine.model.kernel_build import build, plan
+    (engine.jit.parallel; ``waiting`` and ``progress`` as there)."""
+    from finaldrive.engine.jit.kernel import load_registries, traced
+    from finaldrive.engine.jit.parallel import build, plan
     from finaldrive.engine.simulation import simulate
 
     load_registries()
@@ -263,7 +263,8 @@ def _build(method: str, builders: int) -> None:
 def _compile(method: str) -> None:
     """Compile the method (the fast one by several builders with more than one CPU: the module's
     docstring), then write its marker."""
-    builders = min(_cpus(), _MAX_BUILDERS) if method == "fast" and sys.platform != "win32" else 1  # fcntl locks
+    several = method == "fast" and sys.platform != "win32" and not plain()  # fcntl locks; traced kernels
+    builders = min(_cpus(), _MAX_BUILDERS) if several else 1
     if builders > 1:
         _build(method, builders)
     _compile_here(method)

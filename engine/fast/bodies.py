@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model import libm, params as P
-from finaldrive.engine.model.jit import jit
 
 N_DOF = 6
 ZX1, ZY1, ZTHETA, ZPHI, ZFS, ZBETA = range(N_DOF)

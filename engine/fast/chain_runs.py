@@ -20,8 +20,8 @@ import numpy as np
 
 from finaldrive.engine.fast.bodies import G_P2_X, G_P2_Y, N_DOF, ZBETA, ZPHI, ZTHETA, mass_solve
 from finaldrive.engine.fast.minimal import FREE, LOWER, UPPER, ZALPHA_DOT, ZPLAY, chain_terms
+from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model import libm, params as P
-from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.kinematics import loop_length
 from finaldrive.engine.model.linalg import dot
 

@@ -18,10 +18,10 @@ import numpy as np
 
 from finaldrive.engine.fast.bodies import N_WS, W_Q, ZFS, ZPHI, ZTHETA, ZX1, ZY1, design_constants
 from finaldrive.engine.fast.minimal import N_STATE, fast_rhs
+from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model import libm, params as P
 from finaldrive.engine.model.coordinates import FT, GAMMA, RT
 from finaldrive.engine.model.elements import N_AUX
-from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.kinematics import assemble, first_guess
 from finaldrive.engine.model.linalg import solve
 from finaldrive.engine.model.road import Road

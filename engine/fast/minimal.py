@@ -48,6 +48,7 @@ from finaldrive.engine.fast.bodies import (
     mass_product,
     mass_solve,
 )
+from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model import libm, params as P
 from finaldrive.engine.model.elements import (
     AUX_ALPHA_DOT,
@@ -64,7 +65,6 @@ from finaldrive.engine.model.elements import (
     spring_damper,
     sprocket_chain_tension,
 )
-from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.linalg import dot
 from finaldrive.engine.model.road_height import road_height
 

@@ -43,6 +43,7 @@ from finaldrive.engine.fast.chain_runs import (
 )
 from finaldrive.engine.fast.minimal import FREE, N_STATE, N_STATE_TWO_RUNS, UPPER, ZALPHA_DOT, ZPLAY, ZU, fast_rhs
 from finaldrive.engine.fast.wstep import ERROR_ORDER, N_STAGES, attempt, w_solve
+from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model import libm
 from finaldrive.engine.model.diagnostics import (
     E_CHAIN_COMPRESSION,
@@ -72,7 +73,6 @@ from finaldrive.engine.model.elements import (
     AUX_VX,
     N_AUX,
 )
-from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.road import PROFILE
 from finaldrive.engine.model.tyre import relaxation_length
 from finaldrive.engine.outcome import FRONT_AIRBORNE, NONFINITE, OK, PAUSED, REAR_AIRBORNE

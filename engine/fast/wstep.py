@@ -27,8 +27,8 @@ import numpy as np
 
 from finaldrive.engine.fast.bodies import N_DOF
 from finaldrive.engine.fast.minimal import N_STATE, ZU, fast_rhs
+from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model.elements import AUX_FX, AUX_FZ_REAR, AUX_KAPPA
-from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.tyre import relaxation_length
 
 N_STAGES = 4

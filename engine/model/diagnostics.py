@@ -20,6 +20,7 @@ import math
 
 import numpy as np
 
+from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model import params as P
 from finaldrive.engine.model.elements import (
     AUX_DUDT,
@@ -41,7 +42,6 @@ from finaldrive.engine.model.elements import (
     AUX_VSX,
     AUX_VX,
 )
-from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.tyre import low_speed_factor, magic_formula_slope
 
 # Extremes and durations of a run (ext).

@@ -24,8 +24,8 @@ import math
 
 import numpy as np
 
+from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model import params as P
-from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.tyre import (
     FZ_CONTACT_MIN,
     deformation_rate,

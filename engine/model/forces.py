@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model import params as P
 from finaldrive.engine.model.coordinates import ALPHA, BETA, FS, FT, RS, RT, THETA, X6
 from finaldrive.engine.model.elements import (
@@ -22,7 +23,6 @@ from finaldrive.engine.model.elements import (
     rear_tyre,
     spring_damper,
 )
-from finaldrive.engine.model.jit import jit
 
 
 @jit(allocates=True, one_form=True)

@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model import libm, params as P
 from finaldrive.engine.model.coordinates import (
     ALPHA,
@@ -57,7 +58,6 @@ from finaldrive.engine.model.coordinates import (
     Y14,
     Y15,
 )
-from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.road import Road
 from finaldrive.engine.model.road_height import road_height
 

@@ -29,7 +29,7 @@ import struct
 
 import numpy as np
 
-from finaldrive.engine.model.jit import jit
+from finaldrive.engine.jit.kernel import jit
 
 
 def _f(bits: int) -> float:

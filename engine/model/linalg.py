@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from finaldrive.engine.model.jit import jit
+from finaldrive.engine.jit.kernel import jit
 
 
 @jit

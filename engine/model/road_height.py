@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 
+from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model import libm
-from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.road import BUMP, FLAT, PROFILE, SINE
 
 

@@ -20,8 +20,8 @@ import math
 
 import numpy as np
 
+from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model import libm, params as P
-from finaldrive.engine.model.jit import jit
 
 #: Below this vertical load [N] the tyre is off the road: no longitudinal force.
 FZ_CONTACT_MIN = 1.0e-6

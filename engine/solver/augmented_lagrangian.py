@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model import params as P
 from finaldrive.engine.model.constraints import jacobian, phi, phiq_dot_qdot
 from finaldrive.engine.model.coordinates import N_CONSTRAINTS, N_COORDS
-from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.linalg import cholesky, cholesky_solve, matvec, rmatvec
 
 

@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from finaldrive.engine.model.jit import jit, njit
+from finaldrive.engine.jit.kernel import jit, njit
 
 # Adams-Bashforth (63) and Adams-Moulton (64) coefficients, over 24.
 AB4 = (55.0, -59.0, 37.0, -9.0)

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model import libm
 from finaldrive.engine.model.constraints import phi
 from finaldrive.engine.model.coordinates import ALPHA, BETA, N_CONSTRAINTS, N_COORDS, THETA, X1, X10, X11, Y10, Y11
@@ -36,7 +37,6 @@ from finaldrive.engine.model.elements import (
     N_AUX,
 )
 from finaldrive.engine.model.forces import applied_forces
-from finaldrive.engine.model.jit import jit
 from finaldrive.engine.model.tyre import relaxation_length
 from finaldrive.engine.outcome import (
     CORRECTOR,

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from finaldrive.engine import precompile
-from finaldrive.engine.model.jit import Kernel, interpreted, jit
+from finaldrive.engine.jit.kernel import Kernel, interpreted, jit
 from finaldrive.engine.model.linalg import cholesky, dot, matmul, matvec, rmatvec, solve
 
 
@@ -46,7 +46,7 @@ def test_the_cache_directory_is_named_after_the_sources_and_the_toolchain(
     import importlib.machinery
     import importlib.util
 
-    from finaldrive.engine.model import jit as jit_module
+    from finaldrive.engine.jit import cache as jit_module
 
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     here = jit_module.cache_dir()
@@ -224,7 +224,7 @@ def test_a_fast_result_loads_neither_scipy_linalg_nor_the_reference_solver() -> 
 
 
 def test_scipy_linalg_imported_after_its_lapack_was_loaded_alone_is_whole() -> None:
-    """engine.model.lapack loads SciPy's LAPACK without scipy.linalg: the same functions (results
+    """engine.jit.lapack loads SciPy's LAPACK without scipy.linalg: the same functions (results
     bit-identical to a process that imported scipy.linalg first), and scipy.linalg imported later
     as after a plain import (its LAPACK modules its attributes)."""
     later = ("import scipy.linalg.cython_lapack, scipy.linalg.cython_blas; "
@@ -350,10 +350,10 @@ print(compiled)
 @pytest.mark.skipif(precompile._cpus() < 2, reason="one CPU: the fast method is built by one process")
 def test_a_method_built_by_several_processes_is_whole_in_the_cache(tmp_path: Path) -> None:
     """The fast method compiled as compile_engine does (by several builders at once, two on a machine of
-    two CPUs, from a trace of its plain-Python runs: engine.model.kernel_build): a fresh process's
+    two CPUs, from a trace of its plain-Python runs: engine.jit.parallel): a fresh process's
     runs, with either chain, then compile nothing; every kernel
     was compiled for one signature only (a traced type unlike the one numba infers would add a
-    second); and none in both forms (one Python calls, one compiled code calls: engine.model.jit),
+    second); and none in both forms (one Python calls, one compiled code calls: engine.jit.kernel),
     which would compile it twice."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
     (tmp_path / "compiling-fast").touch()   # locked, as compile_engine does before starting it
@@ -425,3 +425,103 @@ def _zombie(pid: int) -> bool:
     with contextlib.suppress(OSError):
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
     return True
+
+
+def _imports_by_ast(path: Path, modules: set[str]) -> set[str]:
+    """The engine modules a file imports, read with Python's parser (the regex's check)."""
+    import ast
+
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.add(node.module)
+            out |= {f"{node.module}.{a.name}" for a in node.names}
+        elif isinstance(node, ast.Import):
+            out |= {a.name for a in node.names}
+    return out & modules
+
+
+def test_the_cache_key_covers_the_kernels_modules_and_everything_they_import() -> None:
+    from finaldrive.engine.jit import cache
+
+    modules = cache._modules(cache.ENGINE)
+    names = set(modules)
+    for name, path in modules.items():
+        assert cache.imported(path.read_bytes(), modules) == _imports_by_ast(path, names), name
+    sources = set(cache.kernel_sources())
+    closure = {modules[n] for n in names if "@jit" in modules[n].read_text() or "@njit" in modules[n].read_text()}
+    todo = list(closure)
+    while todo:
+        path = todo.pop()
+        for name in _imports_by_ast(path, names):
+            if modules[name] not in closure:
+                closure.add(modules[name])
+                todo.append(modules[name])
+    assert closure <= sources
+    assert {"model/tyre.py", "model/params.py", "fast/rosenbrock.py", "jit/kernel.py"} <= {
+        p.relative_to(cache.ENGINE).as_posix() for p in sources}
+
+
+@pytest.mark.parametrize(("module", "recompiles"), [
+    ("fields.py", False), ("study/presets.py", False), ("optimize/de.py", False), ("precompile.py", False),
+    ("__init__.py", False), ("model/tyre.py", True), ("model/params.py", True), ("solver/integrators.py", True),
+    ("jit/kernel.py", True),
+])
+def test_a_comment_appended_to_a_module_without_kernels_recompiles_nothing(
+        tmp_path: Path, module: str, recompiles: bool) -> None:
+    """The compiled code's cache directory (engine.jit.cache) is named after the kernels' sources: a
+    comment appended to a module the kernels do not import keeps it (nothing recompiles); one appended
+    to a kernel module, or to a module whose constants a kernel reads, moves it."""
+    import shutil
+
+    from finaldrive.engine.jit import cache
+
+    copy = tmp_path / "engine"
+    shutil.copytree(cache.ENGINE, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    before = cache.fingerprint(copy)
+    cache._fingerprint.cache_clear()   # sources are read once a process
+    with (copy / module).open("a") as f:
+        f.write("# a comment\n")
+    assert (cache.fingerprint(copy) != before) is recompiles
+    cache._fingerprint.cache_clear()
+
+
+def test_an_untested_numba_makes_plain_kernels_cached_apart(monkeypatch: pytest.MonkeyPatch) -> None:
+    import importlib.metadata
+
+    from finaldrive.engine.jit import cache
+
+    monkeypatch.delenv(cache.PLAIN_ENV, raising=False)
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    tested = cache.cache_dir()
+    for version, plain in (("0.60.0", False), ("0.68.1", False), ("0.69.0", True), ("0.59.1", True)):
+        cache.plain.cache_clear()
+        monkeypatch.setattr(importlib.metadata, "version", lambda name, v=version: v)
+        assert cache.plain() is plain
+        assert (cache.cache_dir() == tested.with_name("numba-plain-" + tested.name[6:])) is plain
+    cache.plain.cache_clear()
+
+
+@pytest.mark.slow
+def test_plain_kernels_give_the_same_results(tmp_path: Path) -> None:
+    """FINALDRIVE_PLAIN_NUMBA=1 (what an untested numba gets): every kernel a plain numba.njit(cache=True)
+    function, compiled afresh into a cache of its own; both methods' results equal this process's."""
+    import json
+
+    from finaldrive.engine import Design, Road, SimSettings, simulate
+
+    code = ("import json, sys; from finaldrive.engine import Design, Road, SimSettings, simulate, is_compiled; "
+            "from finaldrive.engine.jit import cache; assert cache.plain(); "
+            "d = Design.from_deg(270, 0.15, 0.15); "
+            "print(json.dumps([simulate(d, Road.parse('sine:0.04:3'), SimSettings(method=m, duration=0.5)).summary() "
+            "for m in ('fast', 'reference')]))")
+    env = {**os.environ, "FINALDRIVE_PLAIN_NUMBA": "1", "NUMBA_CACHE_DIR": str(tmp_path)}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stderr[-3000:]
+    plain = json.loads(out.stdout)
+    design = Design.from_deg(270, 0.15, 0.15)
+    here = [simulate(design, Road.parse("sine:0.04:3"), SimSettings(method=m, duration=0.5)).summary()
+            for m in ("fast", "reference")]
+    assert [p.pop("wall_s") >= 0 for p in plain] and [h.pop("wall_s") >= 0 for h in here]
+    assert plain == json.loads(json.dumps(here))
+    assert any(tmp_path.rglob("*.nbi"))   # numba's own cache, in the directory given

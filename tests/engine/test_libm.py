@@ -2,7 +2,7 @@
 
 The C library's functions are correctly rounded or nearly so; fdlibm's are within 1 ulp, so each
 function here must be within 1 ulp of the C library's over random arguments, and its Python form
-(what runs inside engine.model.jit.interpreted) bit-identical to its compiled form.
+(what runs inside engine.jit.kernel.interpreted) bit-identical to its compiled form.
 """
 
 from __future__ import annotations

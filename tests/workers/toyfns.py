@@ -188,5 +188,5 @@ def held_keys_after(batch: object, seconds: float) -> tuple[int, list[int]]:
 
 def runtime_started(batch: object) -> tuple[int, bool]:
     """(this worker's pid, whether numba's runtime was started in it before this task)."""
-    jit = sys.modules.get("finaldrive.engine.model.jit")
+    jit = sys.modules.get("finaldrive.engine.jit.kernel")
     return os.getpid(), jit is not None and jit.start_runtime.cache_info().currsize == 1

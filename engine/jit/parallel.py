@@ -2,7 +2,7 @@
 
 numba compiles the kernels a kernel calls inside its own compilation, one after another: the fast
 method's ~60 compilations ran on one core (docs/performance.md). Given the calls a plain-Python run
-made (engine.model.jit.Trace), every process of a build runs :func:`build` on the same plan with
+made (engine.jit.kernel.Trace), every process of a build runs :func:`build` on the same plan with
 the same directory: each in turn claims a kernel whose traced callees are all compiled (an
 exclusive lock on ``<task>.claimed``, held while it compiles: the system releases it if the
 process dies, and another takes the task over), compiles it, numba loading those callees from its
@@ -23,7 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from finaldrive.engine.model.jit import Call, Trace
+from finaldrive.engine.jit.kernel import Call, Trace
 
 #: How often a process with nothing to compile looks at the others' progress [s].
 _POLL_S = 0.02

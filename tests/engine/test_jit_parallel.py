@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from finaldrive.engine.model import kernel_build
-from finaldrive.engine.model.jit import CALLEE, PYTHON, jit, traced
-from finaldrive.engine.model.kernel_build import Task, build, plan
+from finaldrive.engine.jit import parallel as kernel_build
+from finaldrive.engine.jit.kernel import CALLEE, PYTHON, jit, traced
+from finaldrive.engine.jit.parallel import Task, build, plan
 
 
 @jit

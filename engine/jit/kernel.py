@@ -1,15 +1,12 @@
-"""The one place that configures numba for the engine: compiled at first use, cached on disk, no
-Python fallback.
+"""The one place that configures numba for the engine: compiled at first use, cached on disk
+(engine.jit.cache: where, and when the cache is stale), no Python fallback.
 
-numba's on-disk cache checks only the timestamp of the file that defines a compiled function,
-yet a compiled function carries copies of every compiled function it calls, from any module (and
-the integrator steps built by engine.solver.integrators.make_steppers carry the right-hand side
-they close over). Editing engine/model/tyre.py alone would leave the cached right-hand sides of
-both solvers running the old tyre. So the cache lives in a directory named after a hash of the
-engine's source files and of the toolchain (Python, and where numba and llvmlite are installed and
-when: another venv on the same checkout, or numba upgraded in place, has a cache of its own and
-compiles afresh rather than finding the compile markers of code it cannot load): any change to any
-of them compiles everything afresh. A NUMBA_CACHE_DIR set by the user is respected as it is.
+What follows uses numba's internals (a dispatcher's call typing, its cache's loading, the
+``_nrt`` and wrapper options, the runtime's start), as tested with the numba versions of
+engine.jit.cache.TESTED_NUMBA, which pyproject.toml allows. With another numba, or with
+``FINALDRIVE_PLAIN_NUMBA=1``, every kernel is a plain ``numba.njit(cache=True)`` function
+(engine.jit.cache.plain): the same results, compiled slower and once per argument type, by one
+process, into a cache directory of their own.
 
 ``@jit`` makes a :class:`Kernel`: numba is imported, and the function compiled (or loaded from the
 cache), at its first call, not when the engine is imported. Called from compiled code, a kernel is
@@ -29,7 +26,7 @@ that none of its kernels is compiled in both forms, tests/engine/test_compiled.p
 
 Inside :func:`traced`, every kernel runs as plain Python, and each call is recorded with the
 argument types numba would compile it for, in the form it would compile (a
-:class:`Trace`): what engine.model.kernel_build needs to compile those kernels in several processes
+:class:`Trace`): what engine.jit.parallel needs to compile those kernels in several processes
 at once.
 
 numba's cache also loads all of numba's typing and lowering registries before it loads anything
@@ -44,13 +41,12 @@ import contextlib
 import functools
 import gc
 import os
-import sys
 import threading
 from collections.abc import Callable, Iterator
-from pathlib import Path
 from typing import Any, overload
 
-_ENGINE = Path(__file__).resolve().parents[1]
+from finaldrive.engine.jit.cache import cache_dir, plain
+
 _lock = threading.Lock()
 _local = threading.local()
 #: numba's options for the kernels (besides the on-disk cache): fast math off so the results are bit-reproducible
@@ -68,45 +64,16 @@ _FOR_PYTHON: dict[str, Any] = {"no_cfunc_wrapper": True}
 _FOR_CALLERS: dict[str, Any] = {"no_cfunc_wrapper": True, "no_cpython_wrapper": True}
 
 
-def _source_fingerprint() -> str:
-    """sha256 (16 hex digits) of the engine's Python sources (path and content) and of the toolchain
-    that compiles them: this Python's version, and numba's and llvmlite's files (path, time)."""
-    import hashlib
-    import importlib.util
-
-    digest = hashlib.sha256(sys.version.encode())
-    for name in ("numba", "llvmlite"):  # found, not imported
-        spec = importlib.util.find_spec(name)
-        origin = spec.origin if spec is not None and spec.origin else ""
-        digest.update(f"{name}:{origin}:{os.stat(origin).st_mtime_ns if origin else 0}".encode())
-    for path in sorted(_ENGINE.rglob("*.py")):
-        digest.update(path.relative_to(_ENGINE).as_posix().encode())
-        digest.update(path.read_bytes())
-    return digest.hexdigest()[:16]
-
-
-def cache_dir() -> Path:
-    """Where the compiled code is cached: NUMBA_CACHE_DIR if set, else engine/__pycache__/numba-<hash of
-    the engine's sources and the toolchain> (in the temporary directory if the engine's folder is
-    read-only)."""
-    if os.environ.get("NUMBA_CACHE_DIR"):
-        return Path(os.environ["NUMBA_CACHE_DIR"])
-    import tempfile  # here: it imports shutil, lzma, bz2 (~5 ms), which the static geometry never needs
-
-    base = _ENGINE / "__pycache__" if os.access(_ENGINE, os.W_OK) else Path(tempfile.gettempdir()) / "finaldrive"
-    return base / f"numba-{_source_fingerprint()}"
-
-
 @functools.cache
 def start_runtime() -> None:
     """Import numba, point its cache at cache_dir() and start its runtime (once); SciPy's LAPACK for
-    it without scipy.linalg (engine.model.lapack); then ``gc.freeze()`` (see load_registries): what
+    it without scipy.linalg (engine.jit.lapack); then ``gc.freeze()`` (see load_registries): what
     loading compiled code needs, and what a kernel's first use does (a worker may do it beforehand,
     while the engine compiles: workers.make_executor).
 
     numba's typing and lowering registries are left to the first compilation (numba's compiler
     loads them itself): loading compiled code from the cache needs only the runtime."""
-    from finaldrive.engine.model import lapack
+    from finaldrive.engine.jit import lapack
 
     lapack.load()
     from numba import config
@@ -115,7 +82,8 @@ def start_runtime() -> None:
 
     if not os.environ.get("NUMBA_CACHE_DIR"):
         config.CACHE_DIR = str(cache_dir())  # type: ignore[attr-defined]
-    rtsys.initialize(cpu_target.target_context)
+    if not plain():
+        rtsys.initialize(cpu_target.target_context)
     gc.freeze()
 
 
@@ -127,6 +95,8 @@ def load_registries() -> None:
     skips them and whatever else exists by then (the process's imports, mostly): only a reference
     cycle among those objects that is dropped later stays uncollected."""
     start_runtime()
+    if plain():
+        return
     from numba.core.compiler_lock import global_compiler_lock
     from numba.core.registry import cpu_target
 
@@ -231,7 +201,7 @@ class Kernel:
     def callee(self) -> Any:
         """numba's dispatcher of the form compiled code calls: without a Python wrapper, it must not
         be called from Python (``one_form``: the dispatcher Python calls)."""
-        if self._one_form:
+        if self._one_form or plain():
             return self.dispatcher
         if self._callee is None:
             self._make(callee=True)
@@ -245,6 +215,11 @@ class Kernel:
             if self._prepare is not None:
                 self._prepare()
             start_runtime()
+            if plain():
+                import numba
+
+                self._dispatcher = numba.njit(cache=True, **_OPTIONS)(self.py_func)
+                return
             options = {"nopython": True, **_OPTIONS, **({} if self._allocates else _NO_RUNTIME),
                        **(_FOR_CALLERS if callee else _FOR_PYTHON)}
             made = _dispatcher_class(callee)(py_func=self.py_func, targetoptions=options)
