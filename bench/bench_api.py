@@ -12,7 +12,7 @@ is Debian's ``wrk`` package (the benchmark says so and stops when it is missing)
 ``--idle``: the same with no job running (the status of a finished, cancelled sweep).
 
 Results, 2026-12-04 (lscpu: AMD EPYC family 25 model 17, 2 CPUs under KVM; Python 3.11.7, uvicorn
-0.55; load average 2-4 with the sweep; median of 3 runs; docs/performance.md has each run):
+0.55; load average 2-4 with the sweep; median of 3 runs; docs/performance-log.md has each run):
 h11 + asyncio 3,784 req/s, p99 30.8 ms; httptools + uvloop 5,291 req/s, p99 34.8 ms (again:
 5,045 req/s, p99 27.0 ms); idle 6,544 req/s, p99 17.7 ms. Before the snapshots: 1,208 req/s,
 p99 250 ms.

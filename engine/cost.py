@@ -12,7 +12,7 @@ smooth stretch, shorter ones for each feature of the road it drives over. The es
 where ``features`` counts the road's shortest features within the distance the vehicle can
 cover in ``duration`` (its drive force over its mass, plus what the road's height can give it):
 a sine's wavelengths, a profile's points, a bump once; and ``K``, the steps a feature takes, is
-an upper envelope of measurements over random designs (docs/service.md#limits) with a margin.
+an upper envelope of measurements over random designs (docs/service.md#bounded-cost) with a margin.
 It is an estimate, not a proof: the scheduler also stops a job at its budget of measured time.
 """
 

@@ -81,3 +81,22 @@ def test_the_lock_files_pin_every_dependency_within_pyproject(lock: str, extras:
         assert requirement.specifier.contains(pins[name], prereleases=True), f"{lock}: {name}=={pins[name]} {text}"
     runtime = _locked(REPO / "deploy" / "requirements.lock")
     assert {name: pins[name] for name in runtime} == runtime
+
+
+def test_the_api_reference_lists_exactly_the_engine_facades_names() -> None:
+    """docs/reference/engine.md (the site's API reference, mkdocs.yml) documents each name of the facade
+    finaldrive.engine under the module the facade loads it from, and nothing else."""
+    import re
+
+    import finaldrive.engine as facade
+
+    page = (REPO / "docs" / "reference" / "engine.md").read_text()
+    listed: dict[str, str] = {}
+    for block in re.split(r"^::: ", page, flags=re.MULTILINE)[1:]:
+        module = block.split()[0]
+        members = re.search(r"^ +members:\n((?: +- \w+\n?)+)", block, flags=re.MULTILINE)
+        assert members, f"docs/reference/engine.md: ::: {module} lists no members"
+        for name in re.findall(r"- (\w+)", members.group(1)):
+            assert name not in listed, f"docs/reference/engine.md lists {name} twice"
+            listed[name] = module
+    assert listed == {"ENGINE_VERSION": "finaldrive.engine", **facade._EXPORTS}

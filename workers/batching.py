@@ -7,7 +7,7 @@ The rule (docs/workers.md, "Batching"):
    (:meth:`BatchSizer.after`) skips the probe: it starts from their per-task overhead and, weighted
    as :data:`PRIOR_DESIGNS` designs, their per-design time, which its own results soon outweigh
    (a DE job arriving at a warm 256-CPU cluster would otherwise hand out its first round one
-   design a task: 368 tasks of the driver's ~1 ms for the 23 paper roads, docs/performance.md).
+   design a task: 368 tasks of the driver's ~1 ms for the 23 paper roads, docs/performance-log.md).
 2. **Measure.** For each finished batch of ``n`` designs: ``compute`` is the time ``fn`` ran
    in the worker, ``busy`` adds the one-off warm-up, ``round_trip`` runs from handing the
    batch to the executor to receiving its result, and ``idle`` is the worker's time from its
@@ -16,7 +16,7 @@ The rule (docs/workers.md, "Batching"):
    least-queued task; cold-start tasks only overestimate it, and later tasks lower it), or the
    median ``idle`` of the last :data:`IDLE_SAMPLES` tasks if larger: with work queued, a worker
    waits that long between tasks (the result's way back and the next task's way out; 6-10 ms
-   on 2 loaded cores against ~4 ms for the smallest round trip, docs/performance.md).
+   on 2 loaded cores against ~4 ms for the smallest round trip, docs/performance-log.md).
 3. **Size.** Overhead fraction ``o / (b c) <= 0.02`` needs ``b >= o / (0.02 c)``; take the
    smallest such ``b``, but at most ``remaining // (num_workers * 4)`` (at least 1), so at
    least four waves remain: every worker gets work, the tail balances, and progress streams;

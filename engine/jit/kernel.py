@@ -20,7 +20,7 @@ A kernel has two compiled forms, each cached apart: the one Python calls, with n
 unboxes Python's arguments, and the one compiled code calls, without it. numba would otherwise
 build, optimise and cache that wrapper (and a C-callable one, which nothing here uses) for every
 kernel, though most are only ever called from compiled code: a fifth of the fast method's
-compilation (docs/performance.md). A kernel that both call on a method's path is marked
+compilation (docs/performance-log.md). A kernel that both call on a method's path is marked
 ``one_form``: its form with Python's wrapper serves both (a test of the fast method's build checks
 that none of its kernels is compiled in both forms, tests/engine/test_compiled.py).
 

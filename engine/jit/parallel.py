@@ -1,7 +1,7 @@
 """Compiling traced kernels in several processes at once, each traced kernel once.
 
 numba compiles the kernels a kernel calls inside its own compilation, one after another: the fast
-method's ~60 compilations ran on one core (docs/performance.md). Given the calls a plain-Python run
+method's ~60 compilations ran on one core (docs/performance-log.md). Given the calls a plain-Python run
 made (engine.jit.kernel.Trace), every process of a build runs :func:`build` on the same plan with
 the same directory: each in turn claims a kernel whose traced callees are all compiled (an
 exclusive lock on ``<task>.claimed``, held while it compiles: the system releases it if the

@@ -4,7 +4,7 @@
 the pivot), with each group's count and ranges, updated by each store of results. /best reads the
 explored ranges there. ``ix_evaluations_job_road_a2`` (eight columns, inserted at a random place for
 every evaluation) served only those ranges and cost the store's ingest: ``bench/bench_commit.py``
-stores 1.31x as many evaluations a second without it (docs/performance.md, issue 27). Existing jobs'
+stores 1.31x as many evaluations a second without it (docs/performance-log.md, issue 27). Existing jobs'
 ranges are computed here from their evaluations.
 
 Revision ID: v0.3.0.c

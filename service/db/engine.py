@@ -33,7 +33,7 @@ POOL_SIZE = 40
 #: The page cache [KiB] of a SQLite connection that stores results (the scheduler's writer; the others
 #: keep SQLite's 2 MiB), filled only as pages are read. Storing evaluations touches the indexes' pages
 #: at random; 16 MiB stores 1.07x as many evaluations a second in 50,000-row transactions
-#: (``bench/bench_commit.py --cache-kib``, issue 27, docs/performance.md).
+#: (``bench/bench_commit.py --cache-kib``, issue 27, docs/performance-log.md).
 WRITER_CACHE_KIB = 16384
 #: Seconds to open a connection to a database server before giving up.
 CONNECT_TIMEOUT_S = 5

@@ -4,7 +4,7 @@ dispatching loop's GIL.
 In one process the writer thread's 6.5-7.5 s of CPU a paper-study run (binding each row's values
 for the driver) and the rows' building (1.9 s) shared the GIL with the loop that dispatches
 30,000 tasks; a simulated 256-CPU cluster ran at 0.86-0.89 of its ideal for that alone
-(docs/performance.md). :class:`WriterProcess` has the interface of the thread
+(docs/performance-log.md). :class:`WriterProcess` has the interface of the thread
 :class:`~finaldrive.service.jobs.writer.Writer` and runs one in a child process, started from a
 fork server (spawned once, so a new child costs a fork, not an interpreter's start and imports).
 

@@ -7,7 +7,7 @@ sensitive designs differ by millimetres; slack enters the fitness as 0.1/m x sla
 converged at that step (wheel hops and slip past the force peak make some designs sensitive,
 mostly on sine:0.04:2), it is rerun at half the step, and halved again (down to an eighth) while
 the fast path still misses: the fast path must then be within the bound plus twice the reference's
-last change, of the reference at the finest step (docs/performance.md shows the figures).
+last change, of the reference at the finest step (docs/performance-log.md shows the figures).
 """
 
 from __future__ import annotations
