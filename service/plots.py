@@ -86,13 +86,12 @@ def _radial_labels(fig: Figure, ax: PolarAxes, r_max: float, avoid: Sequence[flo
     labelled = [r for r in rings if r >= RADIAL_LABEL_CLEAR * r_max]
     texts = {r: f"{1000 * r:.4g} mm" for r in labelled}
     ax.set_yticks(rings, [texts.get(r, "") for r in rings])
-    renderer = cast(FigureCanvasAgg, fig.canvas).get_renderer()
     pad = RADIAL_LABEL_PAD * RADIAL_LABEL_PT * fig.dpi / 72.0 + 6.0   # the box's pad and a marker's radius [px]
     half = []
     for r in labelled:
         probe = Text(0.0, 0.0, texts[r], fontsize=RADIAL_LABEL_PT)
         probe.set_figure(fig)
-        extent = probe.get_window_extent(renderer)
+        extent = probe.get_window_extent()   # on the figure's canvas
         half.append([extent.width / 2 + pad, extent.height / 2 + pad])
     seen = ax.transData.transform(markers) if len(markers) else np.empty((0, 2))
 
