@@ -87,7 +87,7 @@ _SERIES = [
 ]
 _TRAVEL = [
     _f("travel_m", "rear wheel travel: rear axle height above full extension, chassis frame (engine.travel)", 4),
-    _f("swingarm_angle_deg", "swingarm angle phi at the pose", 2),
+    _f("swingarm_angle_deg", "swingarm angle at the pose: pivot to rear axle, phi - theta (chassis frame, as a2)", 2),
     _f("anti_squat_pct", "anti-squat, 100 tan(tau) / tan(sigma) (textbook form; docs/engine.md)", 1),
     _f("chain_growth_m", "change of the taut upper run's length from full extension", 5),
     _f("kickback_deg", "rear wheel's backward turn that the chain growth gives with the engine sprocket held: "

@@ -8,6 +8,7 @@ from typing import Any
 from finaldrive.engine.api import Design, SimSettings
 from finaldrive.engine.jit.kernel import interpreted
 from finaldrive.engine.model import params as P
+from finaldrive.engine.model.coordinates import PHI, THETA
 from finaldrive.engine.model.kinematics import taut_length
 from finaldrive.engine.model.road import Road
 from finaldrive.engine.setup import prepare
@@ -16,7 +17,8 @@ from finaldrive.engine.vehicle import Vehicle
 
 def static_geometry(design: Design, vehicle: Vehicle) -> dict[str, Any]:
     """SR at the design pose, chain length L (69) and taut run at static equilibrium on flat
-    ground, R_ES, and the engine sprocket centre relative to the swingarm pivot (chassis frame).
+    ground, R_ES, the engine sprocket centre relative to the swingarm pivot (chassis frame) and the
+    swingarm's angle at that equilibrium (pivot to rear axle, phi - theta: the frame of a2).
 
     Runs the compiled model as plain Python unless it is compiled already in this process: one
     equilibrium does not repay loading numba (about a second)."""
@@ -32,4 +34,5 @@ def static_geometry(design: Design, vehicle: Vehicle) -> dict[str, Any]:
         "taut_length_m": taut_length(setup.q0),
         "engine_sprocket_x_m": design.l2 * math.cos(design.a2),
         "engine_sprocket_y_m": design.l2 * math.sin(design.a2),
+        "swingarm_angle_deg": math.degrees(setup.q0[PHI] - setup.q0[THETA]),
     }

@@ -22,6 +22,8 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.projections.polar import PolarAxes
+from matplotlib.text import Text
+from matplotlib.ticker import MaxNLocator
 
 from finaldrive.engine import default_vehicle
 from finaldrive.service.scene import ROW_OFFSET_M
@@ -38,8 +40,22 @@ SERIES_PANELS: tuple[tuple[str, str], ...] = (
 _DPI = 110
 
 
-def _save(fig: Figure, path: str | Path) -> None:
+#: The polar maps' radial (L2) labels: their size [pt], and no label closer to the pivot than this share of the
+#: map's radius (the designs crowd there).
+RADIAL_LABEL_PT = 10.0
+RADIAL_LABEL_CLEAR = 0.2
+#: the white box around a radial label, beyond the text [in the font's size]
+RADIAL_LABEL_PAD = 0.25
+
+
+def _figure(figsize: tuple[float, float]) -> Figure:
+    """A figure on an Agg canvas (its renderer measures text before it is saved)."""
+    fig = Figure(figsize=figsize, dpi=_DPI)
     FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig: Figure, path: str | Path) -> None:
     fig.savefig(str(path), dpi=_DPI)
 
 
@@ -51,12 +67,45 @@ def _polar_axes(fig: Figure, rect: Any = 111) -> PolarAxes:
     return ax
 
 
-def _swingarm(ax: Axes, r_max: float) -> None:
+def _swingarm(ax: Axes, r_max: float) -> float:
+    """The swingarm at its design angle, from the pivot; returns that angle [rad]."""
     v = default_vehicle()
-    angle = v["phi0"] - v["theta0"]
+    angle = float(v["phi0"] - v["theta0"])
     ax.plot([angle, angle], [0.0, r_max], color="black", lw=3, solid_capstyle="butt",
             label=f"swingarm (to the rear axle, {math.degrees(angle):.0f}°)")
     ax.plot([0.0], [0.0], "o", color="black", ms=6)
+    return angle
+
+
+def _radial_labels(fig: Figure, ax: PolarAxes, r_max: float, avoid: Sequence[float], markers: np.ndarray) -> None:
+    """Legible L2 labels: four round rings or so, in mm, RADIAL_LABEL_PT dark text on a white box, none in the
+    crowd around the pivot; along a direction at least 45° from the angles ``avoid`` [rad] (the swingarm, the best
+    design) whose boxes cover the fewest ``markers`` (rows a2 [rad], L2 [m]), mid-way between two spokes where that
+    costs none. Measures the labels on the canvas: call it once the figure's layout is final."""
+    rings = [float(r) for r in MaxNLocator(4).tick_values(0.0, r_max) if 0.0 < r <= r_max]
+    labelled = [r for r in rings if r >= RADIAL_LABEL_CLEAR * r_max]
+    texts = {r: f"{1000 * r:.4g} mm" for r in labelled}
+    ax.set_yticks(rings, [texts.get(r, "") for r in rings])
+    pad = RADIAL_LABEL_PAD * RADIAL_LABEL_PT * fig.dpi / 72.0 + 6.0   # the box's pad and a marker's radius [px]
+    half = []
+    for r in labelled:
+        probe = Text(0.0, 0.0, texts[r], fontsize=RADIAL_LABEL_PT)
+        probe.set_figure(fig)
+        extent = probe.get_window_extent()   # on the figure's canvas
+        half.append([extent.width / 2 + pad, extent.height / 2 + pad])
+    seen = ax.transData.transform(markers) if len(markers) else np.empty((0, 2))
+
+    def rank(c: float) -> tuple[bool, int, bool, float]:
+        clear = min((abs((math.degrees(a) - c + 180.0) % 360.0 - 180.0) for a in avoid), default=180.0)
+        centres = ax.transData.transform(np.column_stack([np.full(len(labelled), math.radians(c)), labelled]))
+        under = (np.abs(seen[:, None, :] - centres[None, :, :]) <= np.array(half)).all(axis=2).any(axis=1)
+        return clear >= 45.0, -int(under.sum()), c % 45.0 == 22.5, clear   # then mid-way between spokes
+
+    ax.set_rlabel_position(max((11.25 * k for k in range(32) if k % 4), key=rank))   # off the spokes (every 45°)
+    ax.tick_params(axis="y", labelsize=RADIAL_LABEL_PT, labelcolor="0.1")
+    for label in ax.get_yticklabels():   # centred on its ring: the outermost stays inside the rim
+        label.set(horizontalalignment="center", verticalalignment="center", bbox={
+            "boxstyle": f"round,pad={RADIAL_LABEL_PAD}", "facecolor": "white", "edgecolor": "none", "alpha": 0.85})
 
 
 def _mark_best(ax: Axes, best: tuple[float, float] | None, label: str = "best") -> None:
@@ -66,9 +115,14 @@ def _mark_best(ax: Axes, best: tuple[float, float] | None, label: str = "best") 
                 f"{math.degrees(a2) % 360:.0f}°, L2 = {l2 * 1000:.0f} mm")
 
 
-def sweep_map_png(path: str | Path, designs: np.ndarray, values: np.ndarray, *, title: str,
-                  value_label: str = "distance [m]", best: tuple[float, float] | None = None,
-                  best_label: str = "best", near: np.ndarray | None = None, near_label: str = "near-optimal") -> None:
+def sweep_map_png(path: str | Path, designs: np.ndarray, values: np.ndarray, **kwargs: Any) -> None:
+    """:func:`sweep_map_figure` as a PNG file."""
+    _save(sweep_map_figure(designs, values, **kwargs), path)
+
+
+def sweep_map_figure(designs: np.ndarray, values: np.ndarray, *, title: str, value_label: str = "distance [m]",
+                     best: tuple[float, float] | None = None, best_label: str = "best",
+                     near: np.ndarray | None = None, near_label: str = "near-optimal") -> Figure:
     """A sweep's values over the engine sprocket position (polar a2, L2), as Figs. 9-11.
 
     Failed designs (NaN) are left blank. With several R_WS per (a2, L2) the highest value
@@ -77,7 +131,7 @@ def sweep_map_png(path: str | Path, designs: np.ndarray, values: np.ndarray, *, 
     """
     designs = np.asarray(designs, dtype=float).reshape(-1, 3)
     values = np.asarray(values, dtype=float)
-    fig = Figure(figsize=(7.2, 6.4))
+    fig = _figure((7.2, 6.4))
     ax = _polar_axes(fig)
     a2s, a2_idx = np.unique(np.round(designs[:, 0] % (2 * math.pi), 9), return_inverse=True)
     l2s, l2_idx = np.unique(np.round(designs[:, 1], 9), return_inverse=True)
@@ -86,7 +140,9 @@ def sweep_map_png(path: str | Path, designs: np.ndarray, values: np.ndarray, *, 
         if np.isfinite(v) and not v <= grid[i, j]:
             grid[i, j] = v
     mappable: Any
+    markers = designs[:, :2]   # what the radial labels should not cover
     if len(a2s) > 1 and len(l2s) > 1 and np.isfinite(grid).sum() >= 0.5 * grid.size:
+        markers = markers[:0]   # cells cover the whole map: no direction is freer than another
         mappable = ax.pcolormesh(_edges(a2s, periodic=True), _edges(l2s), np.ma.masked_invalid(grid),
                                  cmap="viridis", shading="flat")
         if near is not None and near.any():
@@ -105,15 +161,16 @@ def sweep_map_png(path: str | Path, designs: np.ndarray, values: np.ndarray, *, 
                        label=near_label)
     r_max = max(float(designs[:, 1].max()), 1e-3) * 1.05
     ax.set_ylim(0, r_max)
-    _swingarm(ax, r_max)
+    swingarm = _swingarm(ax, r_max)
     _mark_best(ax, best, best_label)
-    ax.set_xlabel("a2 [deg] (0° = forward)   ·   radius: L2 [m]")
-    ax.set_rlabel_position(112)
+    ax.set_xlabel("a2 [deg] (0° = forward)   ·   radius: L2")
     fig.colorbar(mappable, ax=ax, label=value_label, pad=0.1, shrink=0.8)
-    ax.legend(loc="upper left", bbox_to_anchor=(-0.12, 1.12), fontsize=8, framealpha=0.9)
+    # under the map, across the figure: above the map, a legend of long labels covered the 90° label
+    fig.legend(*ax.get_legend_handles_labels(), loc="lower center", ncol=2, fontsize=8, framealpha=0.9)
     fig.suptitle(title)
-    fig.subplots_adjust(left=0.08, right=0.95, bottom=0.12, top=0.88)
-    _save(fig, path)
+    fig.subplots_adjust(left=0.06, right=0.95, bottom=0.16, top=0.9)
+    _radial_labels(fig, ax, r_max, [swingarm, *([best[0]] if best is not None else [])], markers)
+    return fig
 
 
 def _outline(ax: Axes, inside: np.ndarray, a_edges: np.ndarray, r_edges: np.ndarray, label: str) -> None:
@@ -145,6 +202,11 @@ def _edges(centres: np.ndarray, periodic: bool = False) -> np.ndarray:
 
 
 def de_history_png(path: str | Path, history: list[dict[str, Any]], population: np.ndarray, *, title: str) -> None:
+    """:func:`de_history_figure` as a PNG file."""
+    _save(de_history_figure(history, population, title=title), path)
+
+
+def de_history_figure(history: list[dict[str, Any]], population: np.ndarray, *, title: str) -> Figure:
     """Best and mean fitness per generation (left) and the final population on the polar map (right).
 
     ``history`` holds generation records in the outputs' names (``finaldrive.engine.history_record``):
@@ -152,7 +214,7 @@ def de_history_png(path: str | Path, history: list[dict[str, Any]], population: 
     ``population`` is (n, 3), or (n, 4) with the fitness as fourth column (used for colour).
     """
     population = np.asarray(population, dtype=float)
-    fig = Figure(figsize=(12, 5.2))
+    fig = _figure((12, 5.2))
     ax = fig.add_subplot(121)
     gens = [h["generation"] for h in history]
     ax.plot(gens, [_num(h.get("best_fitness_m")) for h in history], "o-", label="best fitness")
@@ -164,6 +226,7 @@ def de_history_png(path: str | Path, history: list[dict[str, Any]], population: 
     ax.set_title("convergence")
     pax = _polar_axes(fig, 122)
     r_max = max(float(population[:, 1].max()) if len(population) else 0.0, 1e-3) * 1.1
+    marked: list[float] = []
     if population.shape[1] >= 4:
         fit = population[:, 3]
         ok = np.isfinite(fit)
@@ -174,16 +237,17 @@ def de_history_png(path: str | Path, history: list[dict[str, Any]], population: 
         if ok.any():
             b = int(np.nanargmax(np.where(ok, fit, -np.inf)))
             _mark_best(pax, (population[b, 0], population[b, 1]))
+            marked.append(float(population[b, 0]))
     else:
         pax.scatter(population[:, 0], population[:, 1], s=45, edgecolors="k", lw=0.3, label="designs")
     pax.set_ylim(0, r_max)
-    pax.set_rlabel_position(112)
-    _swingarm(pax, r_max)
-    pax.set_xlabel("final population: a2 [deg], radius L2 [m]")
+    marked.append(_swingarm(pax, r_max))
+    pax.set_xlabel("final population: a2 [deg], radius L2")
     pax.legend(loc="upper left", bbox_to_anchor=(-0.25, 1.15), fontsize=8)
     fig.suptitle(title)
     fig.subplots_adjust(left=0.07, right=0.95, bottom=0.15, top=0.85, wspace=0.3)
-    _save(fig, path)
+    _radial_labels(fig, pax, r_max, marked, population[:, :2])
+    return fig
 
 
 def _num(v: Any) -> float:
@@ -192,7 +256,7 @@ def _num(v: Any) -> float:
 
 def series_png(path: str | Path, runs: list[tuple[str, Mapping[str, np.ndarray]]], *, title: str) -> None:
     """Fig. 13: distance, chain tension, SR, Fz, slip and Fx against time, one line per run."""
-    fig = Figure(figsize=(11, 8.5))
+    fig = _figure((11, 8.5))
     axes = fig.subplots(3, 2, sharex=True)
     for ax, (key, label) in zip(axes.ravel(), SERIES_PANELS, strict=True):
         for name, series in runs:
@@ -212,7 +276,7 @@ def scene_png(path: str | Path, strips: Mapping[str, Sequence[np.ndarray]],
     """A recording's 2D scene at one instant (entity path -> line strips, as read back from the
     .rrd by service.recording.scene_at); geometries keep the recording's vertical offsets."""
     colours = ("tab:blue", "tab:red", "tab:green", "tab:purple")
-    fig = Figure(figsize=(11, 6.5))
+    fig = _figure((11, 6.5))
     ax = fig.add_subplot(111)
     for entity, lines in sorted(strips.items()):
         parts = entity.split("/")  # /world/g<k>/<part>
@@ -239,7 +303,7 @@ def travel_png(path: str | Path, travel: Mapping[str, Any], *, title: str) -> No
     x = [1000.0 * c["travel_m"] for c in curve]
     panels = (("squat_ratio", "squat ratio SR [-]", 1.0), ("anti_squat_pct", "anti-squat [%]", 1.0),
               ("chain_growth_m", "chain growth [mm]", 1000.0))
-    fig = Figure(figsize=(8, 8.5))
+    fig = _figure((8, 8.5))
     axes = fig.subplots(3, 1, sharex=True)
     for ax, (key, label, scale) in zip(axes, panels, strict=True):
         ax.plot(x, [scale * c[key] for c in curve], color="tab:blue", lw=1.6)

@@ -552,6 +552,8 @@ class GeometryOut(BaseModel):
     taut_length_m: float = Field(description="taut upper run at static equilibrium on flat ground, eq. (68) [m]")
     engine_sprocket_x_m: float = Field(description="engine sprocket axis from the pivot, chassis x [m]")
     engine_sprocket_y_m: float = Field(description="engine sprocket axis from the pivot, chassis y [m]")
+    swingarm_angle_deg: float = Field(description="swingarm (pivot to rear axle) at static equilibrium on flat "
+                                      "ground, phi - theta: from the chassis x axis, as a2 [deg]")
     travel_curve: TravelOut | None = Field(None, description="over the rear travel (with travel=true)")
 
 

@@ -6,7 +6,11 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 from fastapi.testclient import TestClient
+from matplotlib.colors import to_rgba
+from matplotlib.figure import Figure
+from matplotlib.projections.polar import PolarAxes
 
 from finaldrive.engine.study.sweep import parse_grid
 from finaldrive.service import plots
@@ -37,6 +41,73 @@ def test_sweep_map_outlines_the_near_optimal_set(tmp_path: Path) -> None:
     for name, rows in (("grid", slice(None)), ("few", slice(None, None, 7))):
         plots.sweep_map_png(tmp_path / f"{name}.png", grid[rows], values[rows], title=name, near=near[rows])
         assert is_png((tmp_path / f"{name}.png").read_bytes())
+
+
+def _luminance(rgb: tuple[float, ...]) -> float:
+    """Relative luminance (WCAG 2)."""
+    lin = [c / 12.92 if c <= 0.03928 else ((c + 0.055) / 1.055) ** 2.4 for c in rgb[:3]]
+    return 0.2126 * lin[0] + 0.7152 * lin[1] + 0.0722 * lin[2]
+
+
+def assert_radial_labels_legible(fig: Figure, avoid_deg: list[float], markers: np.ndarray | None = None) -> None:
+    """The polar map's L2 labels: at least two, >= 9 pt, dark on a box light enough over any colour (WCAG contrast
+    >= 7 with black beneath the box), apart from each other, from the pivot's surroundings and from ``markers``
+    (rows a2 [rad], L2 [m]: scattered designs), along a direction at least 45 deg from the swingarm and the best
+    design; no angle label under a legend."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()   # type: ignore[attr-defined]
+    ax = next(a for a in fig.axes if isinstance(a, PolarAxes))
+    labels = [t for t in ax.get_yticklabels() if t.get_visible() and t.get_text()]
+    assert len(labels) >= 2
+    boxes = []
+    for t in labels:
+        assert t.get_fontsize() >= 9, t.get_text()
+        patch = t.get_bbox_patch()
+        assert patch is not None, t.get_text()
+        face = to_rgba(patch.get_facecolor())
+        alpha = face[3] if patch.get_alpha() is None else patch.get_alpha()
+        beneath = tuple(alpha * c for c in face[:3])   # the box over black, the worst case
+        text = _luminance(to_rgba(t.get_color()))
+        assert (_luminance(beneath) + 0.05) / (text + 0.05) >= 7, t.get_text()
+        boxes.append(patch.get_window_extent(renderer))
+    for i, a in enumerate(boxes):
+        for b in boxes[i + 1:]:
+            assert not a.overlaps(b), (a, b)
+    centre = ax.transData.transform((0.0, 0.0))
+    radius = np.hypot(*(ax.transData.transform((math.pi / 2, ax.get_rmax())) - centre))
+    clear = 0.15 * radius   # the pivot's marker and the designs crowding around it
+    for box in boxes:
+        nearest = np.clip(centre, [box.x0, box.y0], [box.x1, box.y1])
+        assert np.hypot(*(nearest - centre)) > clear, (box, centre)
+        for x, y in ax.transData.transform(markers) if markers is not None else []:
+            assert not box.padded(5).contains(x, y), (box, x, y)   # a marker's radius: 45 pt^2 at 110 dpi, 5 px
+    position = ax.get_rlabel_position()
+    assert all(abs((position - a + 180) % 360 - 180) >= 45 for a in avoid_deg), (position, avoid_deg)
+    legends = [*fig.legends, *(a.get_legend() for a in fig.axes if a.get_legend() is not None)]
+    for t in ax.get_xticklabels():
+        assert not any(t.get_window_extent(renderer).overlaps(g.get_window_extent(renderer)) for g in legends), t
+
+
+@pytest.mark.parametrize("best_deg", [204.0, 20.0, 100.0])
+def test_sweep_map_radial_labels_are_legible(best_deg: float) -> None:
+    """Issue 31, item 6: the radial labels were 8 crowded ones from the pivot out, black on the cells, and the
+    legend hid the 90 deg label."""
+    grid = parse_grid("a2_deg=0:354:6,l2_m=0:0.2:0.02,rws_m=0.093")
+    values = 20 + np.cos(grid[:, 0] - 3.3) * grid[:, 1]
+    near = values >= values.max() - 0.01
+    fig = plots.sweep_map_figure(grid, values, title="grid", best=(math.radians(best_deg), 0.02), near=near,
+                                 near_label="fitness within 0.1 % of the best (6 designs)")
+    assert_radial_labels_legible(fig, [190.0, best_deg])
+    few = grid[::37]
+    scattered = plots.sweep_map_figure(few, values[::37], title="few", best=(math.radians(best_deg), 0.1))
+    assert_radial_labels_legible(scattered, [190.0, best_deg], few[:, :2])
+
+
+def test_de_history_radial_labels_are_legible() -> None:
+    population = np.column_stack([np.linspace(0, 6, 8), np.linspace(0, 0.2, 8), np.full(8, 0.09), np.arange(8.0)])
+    fig = plots.de_history_figure([{"generation": 1, "best_fitness_m": 1.0, "mean_fitness_m": 0.5}], population,
+                                  title="de")
+    assert_radial_labels_legible(fig, [190.0, math.degrees(6.0)], population[:, :2])
 
 
 def test_de_history_and_series(tmp_path: Path) -> None:

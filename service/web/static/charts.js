@@ -12,21 +12,51 @@ export function viridis(t) {
   return `rgb(${c[0]},${c[1]},${c[2]})`;
 }
 
-export function extent(values) {
+/** The smallest and largest of ``values``, nulls and non-finite ones left out ([Infinity, -Infinity]: none). */
+function range(values) {
   let lo = Infinity;
   let hi = -Infinity;
   for (const v of values) if (v !== null && Number.isFinite(v)) (lo = Math.min(lo, v)), (hi = Math.max(hi, v));
+  return [lo, hi];
+}
+
+export function extent(values) {
+  const [lo, hi] = range(values);
   return lo <= hi ? [lo, hi === lo ? lo + 1e-12 : hi] : [0, 1];
+}
+
+/** A round step for about ``n`` ticks over [lo, hi]. */
+function tickStep(lo, hi, n) {
+  const step0 = (hi - lo) / Math.max(1, n);
+  const mag = 10 ** Math.floor(Math.log10(step0 || 1));
+  return [1, 2, 2.5, 5, 10].map((m) => m * mag).find((s) => s >= step0) || mag * 10;
 }
 
 /** About ``n`` round tick values over [lo, hi]. */
 export function ticks(lo, hi, n = 5) {
-  const step0 = (hi - lo) / Math.max(1, n);
-  const mag = 10 ** Math.floor(Math.log10(step0 || 1));
-  const step = [1, 2, 2.5, 5, 10].map((m) => m * mag).find((s) => s >= step0) || mag * 10;
+  const step = tickStep(lo, hi, n);
   const out = [];
   for (let v = Math.ceil(lo / step) * step; v <= hi + step * 1e-9; v += step) out.push(+v.toPrecision(12));
   return out;
+}
+
+/**
+ * A linear axis over ``values`` (nulls and non-finite ones left out): its domain widened to the round ticks that
+ * enclose every value, so that no value lies beyond the first or last tick; a single value gets a span around it.
+ */
+export function niceAxis(values, n = 5) {
+  let [lo, hi] = range(values);
+  if (lo > hi) (lo = 0), (hi = 1);
+  if (hi - lo <= 1e-12 * Math.max(Math.abs(lo), Math.abs(hi))) {
+    const half = Math.abs(lo) / 20 || 0.5;
+    lo -= half;
+    hi += half;
+  }
+  const step = tickStep(lo, hi, n);
+  const first = Math.floor(lo / step + 1e-9); // 0.3 / 0.1 is 2.9999999999999996
+  const count = Math.ceil(hi / step - 1e-9) - first;
+  const marks = Array.from({ length: count + 1 }, (_, k) => +((first + k) * step).toPrecision(12));
+  return { lo: Math.min(lo, marks[0]), hi: Math.max(hi, marks[count]), ticks: marks };
 }
 
 function canvasIn(container, height) {
@@ -91,6 +121,7 @@ function pickable(canvas, tip, indices, position, radius, describe, pick) {
 }
 
 function colourBar(ctx, x, y, h, lo, hi, label) {
+  ctx.textBaseline = "alphabetic";
   for (let i = 0; i < h; i++) {
     ctx.fillStyle = viridis(1 - i / h);
     ctx.fillRect(x, y + i, 14, 1);
@@ -102,14 +133,35 @@ function colourBar(ctx, x, y, h, lo, hi, label) {
   ctx.fillText(label, x - 4, y - 8);
 }
 
+/** Whether boxes {x, y, w, h} overlap. */
+function overlaps(a, b) {
+  return a.x < b.x + b.w && b.x < a.x + a.w && a.y < b.y + b.h && b.y < a.y + a.h;
+}
+
+/** The box of ``text`` drawn at (x, y) in ``ctx``'s font, alignment and a middle baseline. */
+function textBox(ctx, text, x, y) {
+  const w = ctx.measureText(text).width;
+  const left = ctx.textAlign === "right" ? x - w : ctx.textAlign === "center" ? x - w / 2 : x;
+  return { x: left, y: y - 7, w, h: 14 };
+}
+
+/** Smallest angle between two directions [deg]. */
+function angleApart(a, b) {
+  const d = Math.abs((((a - b) % 360) + 360) % 360);
+  return Math.min(d, 360 - d);
+}
+
 /**
- * The polar map of a sweep (a2 = 0 forward, to the right; counter-clockwise; radius L2).
- * ``data``: columns a2_deg, l2_m, rws_m, and ``value`` (null: failed). Several R_WS at one (a2, L2)
- * show the highest value. ``near``: optional booleans (outlined). Returns {positionOf(i), select(i)}.
+ * The polar map of a sweep around the swingarm pivot (a2 = 0 forward, to the right; counter-clockwise; radius
+ * L2). ``data``: columns a2_deg, l2_m, rws_m, and ``value`` (null: failed). Several R_WS at one (a2, L2) show
+ * the highest value. ``near``: optional booleans (outlined). ``swingarmDeg``: the swingarm's direction from the
+ * pivot to the rear axle in a2's frame, drawn as a line (null: not drawn). A key under the map names the pivot
+ * and the markers, out of the data's way. Returns {best, positionOf(i), select(i), layout, swingarm, key}.
  */
-export function polarMap(container, data, { valueLabel = "value [m]", near = null, onSelect = () => {},
-                                            describe = () => [] } = {}) {
-  const { canvas, ctx, width, height, tip } = canvasIn(container, 460);
+export function polarMap(container, data, { valueLabel = "value [m]", near = null, swingarmDeg = null,
+                                            onSelect = () => {}, describe = () => [] } = {}) {
+  const MAP = 460; // the map's height; the key below it
+  const { canvas, ctx, width, height, tip } = canvasIn(container, MAP + 44);
   const n = data.a2_deg.length;
   const keep = new Map(); // (a2, l2) -> index with the highest value
   for (let i = 0; i < n; i++) {
@@ -120,42 +172,36 @@ export function polarMap(container, data, { valueLabel = "value [m]", near = nul
   }
   const shown = [...keep.values()];
   const [lo, hi] = extent(shown.map((i) => data.value[i]));
-  const rMax = Math.max(1e-3, ...data.l2_m) * 1.08;
-  const cx = (width - 90) / 2;
-  const cy = height / 2;
-  const scale = (Math.min(width - 90, height) / 2 - 24) / rMax;
-  const pos = (i) => {
-    const a = (data.a2_deg[i] * Math.PI) / 180;
-    return [cx + scale * data.l2_m[i] * Math.cos(a), cy - scale * data.l2_m[i] * Math.sin(a)];
-  };
   const a2s = [...new Set(shown.map((i) => +data.a2_deg[i].toFixed(6)))].sort((a, b) => a - b);
   const l2s = [...new Set(shown.map((i) => +data.l2_m[i].toFixed(6)))].sort((a, b) => a - b);
   const grid = a2s.length > 2 && l2s.length > 1 && shown.length >= 0.5 * a2s.length * l2s.length;
   const da = grid ? (((a2s.at(-1) - a2s[0]) / (a2s.length - 1)) * Math.PI) / 180 : 0;
   const dl = grid ? (l2s.at(-1) - l2s[0]) / (l2s.length - 1) : 0;
+  // the outermost data (a cell's outer edge, or a point and its marker) reaches the rim, never beyond it
+  const rData = Math.max(1e-3, l2s.at(-1) + dl / 2);
+  const cx = (width - 90) / 2;
+  const cy = MAP / 2;
+  const radius = Math.min(width - 90, MAP) / 2 - 30;
+  const scale = (radius - (grid ? 0 : 6)) / rData;
+  const pos = (i) => {
+    const a = (data.a2_deg[i] * Math.PI) / 180;
+    return [cx + scale * data.l2_m[i] * Math.cos(a), cy - scale * data.l2_m[i] * Math.sin(a)];
+  };
+  const ray = (deg, r) => [cx + r * Math.cos((deg * Math.PI) / 180), cy - r * Math.sin((deg * Math.PI) / 180)];
   let best = -1;
   for (const i of shown) if (data.value[i] !== null && (best < 0 || data.value[i] > data.value[best])) best = i;
+  // the rings' labels along the direction farthest from the swingarm and the best design (mid-way between spokes)
+  const avoid = [swingarmDeg, best >= 0 ? data.a2_deg[best] : null].filter((a) => a !== null);
+  const ringDeg = [45, 135, 225, 315, 15, 75, 105, 165, 195, 255, 285, 345].reduce((b, a) =>
+    Math.min(...avoid.map((v) => angleApart(a, v))) > Math.min(...avoid.map((v) => angleApart(b, v))) ? a : b);
+  const rings = ticks(0, rData, 5).filter((r) => r > 0 && r * scale <= radius);
+  const swingarm = swingarmDeg === null ? null : { deg: swingarmDeg, from: [cx, cy], to: ray(swingarmDeg, radius + 6) };
   let selected = null;
+  let key = [];
 
   function draw() {
     ctx.clearRect(0, 0, width, height);
-    ctx.strokeStyle = "#ccc";
-    ctx.fillStyle = "#666";
-    ctx.font = "11px sans-serif";
-    for (const r of ticks(0, rMax / 1.08, 4).filter((r) => r > 0)) {
-      ctx.beginPath();
-      ctx.arc(cx, cy, r * scale, 0, 2 * Math.PI);
-      ctx.stroke();
-      ctx.fillText(`${(r * 1000).toFixed(0)} mm`, cx + r * scale * 0.71 + 3, cy - r * scale * 0.71);
-    }
-    for (let a = 0; a < 360; a += 30) {
-      const t = (a * Math.PI) / 180;
-      ctx.beginPath();
-      ctx.moveTo(cx, cy);
-      ctx.lineTo(cx + rMax * scale * Math.cos(t), cy - rMax * scale * Math.sin(t));
-      ctx.stroke();
-      ctx.fillText(`${a}°`, cx + (rMax * scale + 10) * Math.cos(t) - 10, cy - (rMax * scale + 10) * Math.sin(t) + 4);
-    }
+    ctx.textBaseline = "middle";
     for (const i of shown) {
       const v = data.value[i];
       ctx.fillStyle = v === null ? "#e33" : viridis((v - lo) / (hi - lo));
@@ -175,6 +221,25 @@ export function polarMap(container, data, { valueLabel = "value [m]", near = nul
         ctx.fill();
       }
     }
+    // the grid over the data: rings, and spokes from the innermost ring out (the pivot's surroundings stay clear)
+    ctx.strokeStyle = "rgba(40, 40, 40, 0.28)";
+    ctx.lineWidth = 1;
+    for (const r of rings) {
+      ctx.beginPath();
+      ctx.arc(cx, cy, r * scale, 0, 2 * Math.PI);
+      ctx.stroke();
+    }
+    const inner = (rings[0] ?? rData) * scale;
+    for (let a = 0; a < 360; a += 30) {
+      ctx.beginPath();
+      ctx.moveTo(...ray(a, inner));
+      ctx.lineTo(...ray(a, radius));
+      ctx.stroke();
+    }
+    ctx.strokeStyle = "#888";
+    ctx.beginPath();
+    ctx.arc(cx, cy, radius, 0, 2 * Math.PI);
+    ctx.stroke();
     if (near) {
       ctx.strokeStyle = "#d62728";
       ctx.lineWidth = 1.2;
@@ -187,22 +252,102 @@ export function polarMap(container, data, { valueLabel = "value [m]", near = nul
       }
       ctx.lineWidth = 1;
     }
-    ctx.fillStyle = "#000";
-    ctx.beginPath();
-    ctx.arc(cx, cy, 4, 0, 2 * Math.PI);
-    ctx.fill();
-    ctx.fillText("pivot", cx + 6, cy + 14);
-    if (best >= 0) star(...pos(best));
-    if (selected !== null) {
-      const [x, y] = pos(selected);
-      ctx.strokeStyle = "#ff7f0e";
-      ctx.lineWidth = 3;
-      ctx.beginPath();
-      ctx.arc(x, y, 9, 0, 2 * Math.PI);
-      ctx.stroke();
-      ctx.lineWidth = 1;
+    const taken = []; // boxes of the labels outside the rim
+    if (swingarm) {
+      swingarmLine(swingarm.from, swingarm.to);
+      const c = Math.cos((swingarm.deg * Math.PI) / 180);
+      ctx.font = "bold 12px sans-serif";
+      ctx.fillStyle = "#111";
+      ctx.textAlign = c > 0.3 ? "left" : c < -0.3 ? "right" : "center";
+      const [x, y] = ray(swingarm.deg, radius + 16);
+      ctx.fillText("swingarm", x, y);
+      taken.push(textBox(ctx, "swingarm", x, y));
     }
-    colourBar(ctx, width - 70, 40, height - 90, lo, hi, valueLabel);
+    ctx.font = "11px sans-serif";
+    ctx.fillStyle = "#555";
+    ctx.textAlign = "center";
+    for (let a = 0; a < 360; a += 30) {
+      const [x, y] = ray(a, radius + 14);
+      if (!taken.some((b) => overlaps(b, textBox(ctx, `${a}°`, x, y)))) ctx.fillText(`${a}°`, x, y);
+    }
+    for (const r of rings) {
+      if (r * scale < 28) continue; // no label in the crowd around the pivot
+      const [x, y] = ray(ringDeg, r * scale);
+      const text = `${+(r * 1000).toPrecision(6)} mm`;
+      const b = textBox(ctx, text, x, y);
+      ctx.fillStyle = "rgba(255, 255, 255, 0.85)";
+      ctx.fillRect(b.x - 3, b.y - 1, b.w + 6, b.h + 2);
+      ctx.fillStyle = "#222";
+      ctx.fillText(text, x, y);
+    }
+    if (best >= 0) star(...pos(best));
+    pivot(cx, cy); // above a design at L2 = 0 (its star too): the star stays visible around it
+    if (selected !== null) ring(...pos(selected), 9, "#ff7f0e", 3);
+    colourBar(ctx, width - 70, 40, MAP - 90, lo, hi, valueLabel);
+    key = drawKey();
+  }
+
+  /** The key under the map, item after item (wrapping): a symbol and its text; returns their text boxes. */
+  function drawKey() {
+    const items = [["pivot", "swingarm pivot (L2 = 0)", pivot]];
+    if (swingarm) {
+      items.push(["swingarm", `swingarm at static sag (${swingarm.deg.toFixed(1)}°)`,
+                  (x, y) => swingarmLine([x - 8, y], [x + 8, y])]);
+    }
+    if (best >= 0) items.push(["best", `highest ${valueLabel.replace(/ \[.*\]$/, "")}`, star]);
+    if (near) items.push(["near", "near-optimal set", (x, y) => ring(x, y, 5, "#d62728", 1.2)]);
+    if (shown.some((i) => data.value[i] === null)) items.push(["failed", "failed", (x, y) => dot(x, y, "#e33")]);
+    items.push(["selected", "selected", (x, y) => ring(x, y, 7, "#ff7f0e", 3)]);
+    ctx.font = "12px sans-serif";
+    ctx.textAlign = "left";
+    ctx.textBaseline = "middle";
+    let x = 12;
+    let y = MAP + 12;
+    const boxes = [];
+    for (const [name, text, symbol] of items) {
+      const w = 24 + ctx.measureText(text).width;
+      if (x > 12 && x + w > width - 12) (x = 12), (y += 20);
+      symbol(x + 8, y);
+      ctx.fillStyle = "#222";
+      ctx.fillText(text, x + 22, y);
+      boxes.push({ name, box: textBox(ctx, text, x + 22, y) });
+      x += w + 18;
+    }
+    return boxes;
+  }
+
+  function swingarmLine([x0, y0], [x1, y1]) {
+    ctx.strokeStyle = "#111";
+    ctx.lineWidth = 3;
+    ctx.lineCap = "butt";
+    ctx.beginPath();
+    ctx.moveTo(x0, y0);
+    ctx.lineTo(x1, y1);
+    ctx.stroke();
+    ctx.lineWidth = 1;
+  }
+
+  /** The pivot: a white disc ringed in black with a black centre, above the data, the swingarm and the star. */
+  function pivot(x, y) {
+    ring(x, y, 5, "#000", 1.5, "#fff");
+    dot(x, y, "#000", 1.8);
+  }
+
+  function ring(x, y, r, colour, lineWidth, fill = null) {
+    ctx.beginPath();
+    ctx.arc(x, y, r, 0, 2 * Math.PI);
+    if (fill) (ctx.fillStyle = fill), ctx.fill();
+    ctx.strokeStyle = colour;
+    ctx.lineWidth = lineWidth;
+    ctx.stroke();
+    ctx.lineWidth = 1;
+  }
+
+  function dot(x, y, colour, r = 4) {
+    ctx.fillStyle = colour;
+    ctx.beginPath();
+    ctx.arc(x, y, r, 0, 2 * Math.PI);
+    ctx.fill();
   }
 
   function star(x, y) {
@@ -223,6 +368,12 @@ export function polarMap(container, data, { valueLabel = "value [m]", near = nul
   const api = {
     best,
     positionOf: (i) => pos(i),
+    /** for the browser tests: what was drawn where */
+    layout: { cx, cy, radius, scale, grid, shown, cell: grid ? { da: (da * 180) / Math.PI, dl } : null },
+    swingarm,
+    get key() {
+      return key;
+    },
     select(i) {
       selected = i;
       draw();
@@ -302,41 +453,50 @@ export function lineChart(container, series, { xLabel = "", yLabel = "", height 
   return svg;
 }
 
-/** A scatter plot on canvas: points (x, y) coloured by c; hover describes, click selects. */
+/**
+ * A scatter plot on canvas: points (x, y) coloured by c; hover describes, click selects. Each axis spans round
+ * ticks around its values and the points keep a margin inside the frame, so every point lies within its axes.
+ * Returns {plot: the frame {left, top, right, bottom}, shown: the indices drawn, positionOf(i), x, y: the axes}.
+ */
 export function scatter(container, { x, y, c, xLabel, yLabel, cLabel, describe = () => [], onSelect = () => {} }) {
   const { canvas, ctx, width, height, tip } = canvasIn(container, 340);
   const m = { l: 64, r: 90, t: 12, b: 40 };
+  const inset = 6; // px between the frame and the first and last tick: a marker at the domain's end stays inside
+  const plot = { left: m.l, top: m.t, right: width - m.r, bottom: height - m.b };
   const ok = x.map((v, i) => v !== null && y[i] !== null && Number.isFinite(v) && Number.isFinite(y[i]));
-  const [x0, x1] = extent(x.filter((_, i) => ok[i]));
-  const [y0, y1] = extent(y.filter((_, i) => ok[i]));
-  const [c0, c1] = extent(c);
-  const X = (v) => m.l + ((v - x0) / (x1 - x0)) * (width - m.l - m.r);
-  const Y = (v) => height - m.b - ((v - y0) / (y1 - y0)) * (height - m.t - m.b);
+  const shown = x.map((_, i) => i).filter((i) => ok[i]);
+  const ax = niceAxis(shown.map((i) => x[i]), 6);
+  const ay = niceAxis(shown.map((i) => y[i]), 4);
+  const [c0, c1] = extent(shown.map((i) => c[i]));
+  const X = (v) => plot.left + inset + ((v - ax.lo) / (ax.hi - ax.lo)) * (plot.right - plot.left - 2 * inset);
+  const Y = (v) => plot.bottom - inset - ((v - ay.lo) / (ay.hi - ay.lo)) * (plot.bottom - plot.top - 2 * inset);
   ctx.font = "11px sans-serif";
-  ctx.strokeStyle = "#ddd";
+  ctx.strokeStyle = "#e5e8eb";
   ctx.fillStyle = "#444";
-  for (const t of ticks(y0, y1, 4)) {
+  ctx.textAlign = "right";
+  for (const t of ay.ticks) {
     ctx.beginPath();
-    ctx.moveTo(m.l, Y(t));
-    ctx.lineTo(width - m.r, Y(t));
+    ctx.moveTo(plot.left, Y(t));
+    ctx.lineTo(plot.right, Y(t));
     ctx.stroke();
-    ctx.textAlign = "right";
-    ctx.fillText(+t.toPrecision(4), m.l - 6, Y(t) + 4);
+    ctx.fillText(+t.toPrecision(4), plot.left - 6, Y(t) + 4);
   }
   ctx.textAlign = "center";
-  for (const t of ticks(x0, x1, 6)) ctx.fillText(+t.toPrecision(4), X(t), height - m.b + 16);
-  ctx.fillText(xLabel, (m.l + width - m.r) / 2, height - 6);
+  for (const t of ax.ticks) ctx.fillText(+t.toPrecision(4), X(t), plot.bottom + 16);
+  ctx.strokeStyle = "#999";
+  ctx.strokeRect(plot.left + 0.5, plot.top + 0.5, plot.right - plot.left - 1, plot.bottom - plot.top - 1);
+  ctx.fillText(xLabel, (plot.left + plot.right) / 2, height - 6);
   ctx.save();
-  ctx.translate(14, (m.t + height - m.b) / 2);
+  ctx.translate(14, (plot.top + plot.bottom) / 2);
   ctx.rotate(-Math.PI / 2);
   ctx.fillText(yLabel, 0, 0);
   ctx.restore();
-  for (let i = 0; i < x.length; i++) {
-    if (!ok[i]) continue;
+  for (const i of shown) {
     ctx.fillStyle = c[i] === null ? "#e33" : viridis((c[i] - c0) / (c1 - c0));
     ctx.fillRect(X(x[i]) - 2, Y(y[i]) - 2, 4, 4);
   }
   colourBar(ctx, width - 70, 30, height - 90, c0, c1, cLabel);
-  const indices = x.map((_, i) => i).filter((i) => ok[i]);
-  pickable(canvas, tip, indices, (i) => [X(x[i]), Y(y[i])], 10, describe, onSelect);
+  const positionOf = (i) => [X(x[i]), Y(y[i])];
+  pickable(canvas, tip, shown, positionOf, 10, describe, onSelect);
+  return { plot, shown, positionOf, x: ax, y: ay };
 }

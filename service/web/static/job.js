@@ -111,6 +111,22 @@ const describe = (i) => [
 ].filter(Boolean); // tooltip lines (text)
 
 let map = null;
+let swingarmDeg = null; // the swingarm at static sag [deg], in a2's frame: GET /v1/geometry with the job's vehicle
+
+/** The swingarm's direction at static sag on flat ground, for this job's vehicle (the engine's equilibrium), once:
+ * at the best design of the road shown first (else its first evaluation); over the paper's whole design space it
+ * moves by a hundredth of a degree. */
+async function loadSwingarm() {
+  const d = job.roads.find((r) => r.name === $("road").value)?.best
+    ?? { a2_deg: points.a2_deg[0], l2_m: points.l2_m[0], rws_m: points.rws_m[0] };
+  const query = new URLSearchParams({ a2_deg: d.a2_deg, l2_m: d.l2_m, rws_m: d.rws_m, job: jobId });
+  try {
+    swingarmDeg = (await api(`/v1/geometry?${query}`)).swingarm_angle_deg;
+  } catch (e) {
+    showBanner(`the swingarm's angle: ${e.message}`);
+  }
+}
+
 function select(i) {
   const road = job.roads.find((r) => r.name === $("road").value);
   const d = { a2_deg: points.a2_deg[i], l2_m: points.l2_m[i], rws_m: points.rws_m[i] };
@@ -134,9 +150,10 @@ function drawMap() {
   const key = $("value").value;
   const near = nearMask();
   map = polarMap($("map"), { ...points, value: points[key] }, {
-    valueLabel: $("value").selectedOptions[0].textContent, near, describe, onSelect: (i) => (map && select(i)),
+    valueLabel: $("value").selectedOptions[0].textContent, near, swingarmDeg, describe,
+    onSelect: (i) => (map && select(i)),
   });
-  window.fdMap = map; // for the browser tests: positionOf(i), best
+  window.fdMap = map; // for the browser tests: positionOf(i), best, layout, swingarm, key
 }
 
 function nearMask() {
@@ -149,7 +166,7 @@ function drawScatter() {
   if (!points?.id.length) return;
   const x = $("sx").value;
   const y = $("sy").value;
-  scatter($("scatter"), {
+  window.fdScatter = scatter($("scatter"), { // for the browser tests: plot, shown, positionOf(i), x, y
     x: points[x], y: points[y], c: points.fitness_m, xLabel: $("sx").selectedOptions[0].textContent,
     yLabel: $("sy").selectedOptions[0].textContent, cLabel: "fitness [m]", describe, onSelect: select,
   });
@@ -202,6 +219,7 @@ async function loadPoints() {
   }
   $("points-note").textContent = `${points.id.length} evaluations on ${road}`;
   $("csv").href = pageLink(`/v1/jobs/${jobId}/evaluations`, [["format", "csv"], ["limit", "100000"], ["road", road]]);
+  if (swingarmDeg === null && points.id.length) await loadSwingarm();
   drawMap();
   drawScatter();
   drawTable();

@@ -7,6 +7,7 @@ Every request a page makes is recorded and must go to the server itself.
 from __future__ import annotations
 
 import io
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -22,12 +23,14 @@ from tests.service.web.browser import TOKEN, Page
 pytestmark = pytest.mark.slow
 #: run colours of the recording's first two geometries (service/recording.py)
 RUN_COLOURS = ((31, 119, 180), (214, 39, 40))
-#: a small sweep: 4 x 3 designs, 0.5 s each
+#: a small sweep: 4 x 3 designs, 0.5 s each (the map draws a grid of cells)
 GRID = "a2_deg=0:270:90,l2_m=0.04:0.12:0.04,rws_m=0.093"
+#: 2 x 2 designs, two at the pivot itself (L2 = 0): the map draws points
+FEW = "a2_deg=0|200,l2_m=0|0.1,rws_m=0.093"
 
 
-def submit_sweep(server: Server) -> int:
-    response = server.client.post("/v1/jobs", json={"kind": "sweep", "roads": ["flat"], "grid": GRID,
+def submit_sweep(server: Server, grid: str = GRID) -> int:
+    response = server.client.post("/v1/jobs", json={"kind": "sweep", "roads": ["flat"], "grid": grid,
                                                     "settings": {"duration": 0.5}})
     assert response.status_code == 201, response.text
     job_id = int(response.json()["id"])
@@ -115,13 +118,101 @@ def test_the_numerical_bands_are_asked_for_and_shown(tab: Page, server: Server) 
     assert tab.page.is_hidden("#bands")
 
 
-def _run_pixels(png: bytes) -> list[int]:
-
-    """Pixels of each run's colour (within a few levels) in the left part of the viewer: its 2D view of
-    the bikes (the series panels on the right draw in the same colours)."""
+def _image(png: bytes) -> np.ndarray:
     from PIL import Image
 
-    image = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
+
+
+def _dark_share(image: np.ndarray, centre: tuple[float, float], deg: float, radii: np.ndarray) -> float:
+    """The share of the pixels along the ray from ``centre`` at ``deg`` (counter-clockwise from the right; image
+    rows grow downwards) that are near black: the swingarm's line."""
+    t = np.radians(deg)
+    cols = np.rint(centre[0] + radii * np.cos(t)).astype(int)
+    rows = np.rint(centre[1] - radii * np.sin(t)).astype(int)
+    return float((image[rows, cols].max(axis=1) < 60).mean())
+
+
+def _box_overlaps(a: dict[str, float], b: dict[str, float]) -> bool:
+    return (a["x"] < b["x"] + b["w"] and b["x"] < a["x"] + a["w"]
+            and a["y"] < b["y"] + b["h"] and b["y"] < a["y"] + a["h"])
+
+
+@pytest.mark.parametrize("grid", [GRID, FEW], ids=["cells", "points"])
+def test_the_sweep_map_keeps_the_pivot_label_clear_and_draws_the_swingarm_from_the_geometry(
+        tab: Page, server: Server, grid: str) -> None:
+    """Issue 31, item 6: the pivot's label clear of every marker and of the map; the swingarm a line from the pivot
+    at the engine's static sag for the road's best design; every cell and point inside the rim."""
+    from finaldrive.engine import Design, default_vehicle, static_geometry
+
+    job_id = submit_sweep(server, grid)
+    tab.goto(f"/jobs/{job_id}")
+    tab.ready()
+    canvas = tab.page.wait_for_selector("#map canvas")
+    m = tab.page.evaluate("({layout: window.fdMap.layout, swingarm: window.fdMap.swingarm, key: window.fdMap.key,"
+                          " width: document.querySelector('#map canvas').clientWidth})")
+    layout, swingarm = m["layout"], m["swingarm"]
+    assert layout["grid"] == (grid == GRID)
+    points = server.client.get(f"/v1/jobs/{job_id}/points").json()
+    drawn = [tab.page.evaluate(f"window.fdMap.positionOf({i})") for i in layout["shown"]]
+    centre = (layout["cx"], layout["cy"])
+    for i, (x, y) in zip(layout["shown"], drawn, strict=True):   # within the rim: a cell's outer edge, a point's marker
+        reach = (points["l2_m"][i] + layout["cell"]["dl"] / 2) * layout["scale"] if layout["grid"] else math.hypot(
+            x - centre[0], y - centre[1]) + 4
+        assert reach <= layout["radius"] + 1e-9, (i, reach, layout["radius"])
+
+    (label,) = [k["box"] for k in m["key"] if k["name"] == "pivot"]
+    assert label["x"] >= 0 and label["x"] + label["w"] <= m["width"]
+    disc = {"x": centre[0] - layout["radius"], "y": centre[1] - layout["radius"], "w": 2 * layout["radius"],
+            "h": 2 * layout["radius"]}
+    markers = [{"x": x - 10, "y": y - 10, "w": 20, "h": 20} for x, y in drawn]   # the star, rings and selection: 10 px
+    assert not any(_box_overlaps(label, b) for b in [disc, *markers]), (label, disc)
+
+    best = server.client.get(f"/v1/jobs/{job_id}").json()["roads"][0]["best"]
+    expected = static_geometry(Design.from_deg(best["a2_deg"], best["l2_m"], best["rws_m"]),
+                               default_vehicle())["swingarm_angle_deg"]
+    assert swingarm["deg"] == pytest.approx(expected, abs=1e-9)
+    (x0, y0), (x1, y1) = swingarm["from"], swingarm["to"]
+    assert (x0, y0) == pytest.approx(centre)
+    assert math.degrees(math.atan2(y0 - y1, x1 - x0)) % 360 == pytest.approx(expected % 360, abs=1e-6)
+    image = _image(canvas.screenshot())
+    radii = np.arange(0.3, 0.95, 0.01) * layout["radius"]
+    assert _dark_share(image, centre, expected, radii) > 0.9       # drawn along the engine's direction ...
+    assert _dark_share(image, centre, expected + 8, radii) < 0.1   # ... and not beside it
+    assert _dark_share(image, centre, expected - 8, radii) < 0.1
+    assert any(k["name"] == "swingarm" for k in m["key"])
+
+
+@pytest.mark.parametrize(("sx", "sy"), [("a2_deg", "fitness_m"), ("rws_m", "l2_m")])
+def test_every_scatter_point_lies_within_its_axes(tab: Page, server: Server, sx: str, sy: str) -> None:
+    """Issue 31, item 6: each axis spans round ticks around its values (one value, R_WS here: a span around it) and
+    every point's 4 px marker lies inside the frame drawn."""
+    job_id = submit_sweep(server)
+    tab.goto(f"/jobs/{job_id}")
+    tab.ready()
+    tab.page.select_option("#sx", sx)
+    tab.page.select_option("#sy", sy)
+    s = tab.page.evaluate("window.fdScatter")
+    plot = s["plot"]
+    points = server.client.get(f"/v1/jobs/{job_id}/points").json()
+    assert len(s["shown"]) == len(points["id"]) == 12
+    for name, ax in ((sx, s["x"]), (sy, s["y"])):
+        values = [points[name][i] for i in s["shown"]]
+        assert ax["lo"] <= min(values) and max(values) <= ax["hi"], (name, ax)
+        assert ax["ticks"][0] == pytest.approx(ax["lo"]) and ax["ticks"][-1] == pytest.approx(ax["hi"])
+        assert len({f"{t:.4g}" for t in ax["ticks"]}) == len(ax["ticks"]) >= 3, ax["ticks"]   # distinct labels
+    for i in s["shown"]:
+        x, y = tab.page.evaluate(f"window.fdScatter.positionOf({i})")
+        assert plot["left"] + 2 <= x <= plot["right"] - 2 and plot["top"] + 2 <= y <= plot["bottom"] - 2, (i, x, y)
+    image = _image(tab.page.locator("#scatter canvas").screenshot())
+    frame = image[int(plot["top"]) + 5: int(plot["bottom"]) - 5, int(plot["left"])]
+    assert (np.abs(frame - 153).max(axis=1) < 40).all()   # the frame (#999) is drawn where the plot says
+
+
+def _run_pixels(png: bytes) -> list[int]:
+    """Pixels of each run's colour (within a few levels) in the left part of the viewer: its 2D view of
+    the bikes (the series panels on the right draw in the same colours)."""
+    image = _image(png)
     left = image[:, : int(image.shape[1] * 0.55)]
     return [int((np.abs(left - np.array(c)).sum(axis=2) < 40).sum()) for c in RUN_COLOURS]
 
