@@ -239,6 +239,16 @@ def read_rows(path: str | Path) -> dict[str, list[object]]:
     return out
 
 
+def chunk_counts(path: str | Path) -> dict[str, int]:
+    """Chunks per entity path of a finished .rrd's recording, static and temporal, as the file stores them."""
+    from rerun.chunk import RrdReader
+
+    counts: dict[str, int] = {}
+    for chunk in RrdReader(str(path)).stream().to_chunks():
+        counts[chunk.entity_path] = counts.get(chunk.entity_path, 0) + 1
+    return counts
+
+
 def frame_count(path: str | Path, entity: str) -> int:
     """Time rows logged on ``entity``."""
     return sum(batch.num_rows for batch in read_rows(path).get(entity, []))  # type: ignore[attr-defined]
