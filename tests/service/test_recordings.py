@@ -19,6 +19,7 @@ from finaldrive.service.main import create_app
 from finaldrive.service.recording import (
     PARTS,
     PLOTS,
+    chunk_counts,
     frame_count,
     properties_of,
     record,
@@ -63,6 +64,22 @@ def test_two_geometries_every_part_every_frame(rrd: Path) -> None:
     static = {c.entity_path for c in reader.stream().to_chunks() if c.is_static}
     assert {"/world/g1/road", "/world/g2/road"} <= static
     verify(rrd)
+
+
+def test_every_entity_is_a_few_chunks_however_slow_the_writer(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 31: rerun's web viewer took up to minutes over a file of 855 chunks (176 frames, two geometries).
+    The batcher flushes every RERUN_FLUSH_TICK_SECS, so frames logged one by one split into a chunk per flush, more
+    the slower the writer; at 1 ms that was 41 to 49 chunks on one entity here. Columns are one chunk each."""
+    monkeypatch.setenv("RERUN_FLUSH_TICK_SECS", "0.001")
+    path = tmp_path / "columns.rrd"
+    record(path, DESIGNS, ROAD, duration=1.0, fps=FPS)
+    counts = chunk_counts(path)
+    for key in ("g1", "g2"):
+        assert frame_count(path, f"/world/{key}/chain") == 51
+        for entity in (f"/world/{key}", *(f"/world/{key}/{part}" for part in (*PARTS, "tyre_forces", "force_labels",
+                                                                             "label", "road"))):
+            assert counts[entity] <= 20, (entity, counts[entity])
+    assert max(counts.values()) <= 20, counts
 
 
 def test_each_geometry_carries_its_outcome_and_exact_extremes(rrd: Path) -> None:
@@ -192,17 +209,23 @@ def _bounds(path: Path) -> tuple[list[float], list[float]]:
 
 
 def _world(path: Path) -> dict[str, dict[int | None, dict[str, Any]]]:
-    """Entity -> time [ns] (None: static) -> column -> value, for everything under /world."""
-    out: dict[str, dict[int | None, dict[str, Any]]] = {}
+    """Entity -> time [ns] (None: static) -> column -> value, for everything under /world. An entity's static
+    components hold at every time (as the viewer shows them): merged into its timed rows, None only for an
+    entity with nothing timed."""
+    static: dict[str, dict[str, Any]] = {}
+    timed: dict[str, dict[int | None, dict[str, Any]]] = {}
     for chunk in RrdReader(str(path)).stream().to_chunks():
         if not chunk.entity_path.startswith("/world/"):
             continue
         batch = chunk.to_record_batch()
-        times = [None] * batch.num_rows if chunk.is_static else batch.column("sim_time").cast("int64").to_pylist()
         columns = [n for n in batch.schema.names if ":" in n]
-        for row, t in enumerate(times):
-            out.setdefault(chunk.entity_path, {})[t] = {n: batch.column(n)[row].as_py() for n in columns}
-    return out
+        if chunk.is_static:
+            static.setdefault(chunk.entity_path, {}).update({n: batch.column(n)[0].as_py() for n in columns})
+            continue
+        for row, t in enumerate(batch.column("sim_time").cast("int64").to_pylist()):
+            timed.setdefault(chunk.entity_path, {})[t] = {n: batch.column(n)[row].as_py() for n in columns}
+    return {entity: {t: {**static.get(entity, {}), **row} for t, row in timed[entity].items()} if entity in timed
+            else {None: static[entity]} for entity in static.keys() | timed.keys()}
 
 
 def _to_view(transform: dict[str, Any], points: Any) -> np.ndarray:

@@ -217,7 +217,28 @@ def _run_pixels(png: bytes) -> list[int]:
     return [int((np.abs(left - np.array(c)).sum(axis=2) < 40).sum()) for c in RUN_COLOURS]
 
 
+#: the viewer has the whole recording within this time of the design page asking for the viewer [s] (issue 31)
+VIEWER_S = 10.0
+
+
 def test_the_design_page_plays_both_designs_in_rerun_s_viewer(tab: Page, tmp_path: Path) -> None:
+    """Both bikes drawn in the viewer's 2D view (pixels of each run's colour in screenshots of the viewer), and
+    together: no screenshot shows one without the other (over a file of a thousand chunks the viewer drew design B
+    seconds to a minute after A; issue 31). The .rrd is downloaded in full within :data:`VIEWER_S` of the page
+    asking for the viewer (``/viewer/``); the time to the drawing is the viewer's own start in headless Chromium
+    drawing without a GPU (docs/performance.md), measured and shown on failure but not bounded here."""
+    seen: dict[str, float] = {}
+
+    def asked(request: Any) -> None:
+        if urlsplit(request.url).path == "/viewer/":
+            seen.setdefault("viewer", time.monotonic())
+
+    def finished(request: Any) -> None:
+        if urlsplit(request.url).path.endswith("/recording.rrd"):
+            seen.setdefault("rrd", time.monotonic())
+
+    tab.page.on("request", asked)
+    tab.page.on("requestfinished", finished)
     tab.goto("/design?road=flat&a=0,0.08,0.093&label_a=A&b=180,0.1,0.093&label_b=B")
     tab.ready(timeout_s=180)
     assert tab.page.locator("#series svg").count() == 7
@@ -229,16 +250,18 @@ def test_the_design_page_plays_both_designs_in_rerun_s_viewer(tab: Page, tmp_pat
     assert "36.8" in tab.page.inner_text("#travel-table tbody tr:first-child")   # R_WS 93 mm: 36.8 teeth of a 520
     viewer = tab.page.locator("#viewer")
     deadline = time.monotonic() + 120
-    pixels = [0, 0]
+    shots: list[tuple[float, list[int]]] = []  # (seconds after the viewer was asked for, pixels of each colour)
     while time.monotonic() < deadline:
         png = viewer.screenshot()
-        pixels = _run_pixels(png)
-        if min(pixels) > 300:  # both bikes drawn: the whole recording is loaded
+        shots.append((round(time.monotonic() - seen["viewer"], 1), _run_pixels(png)))
+        if min(shots[-1][1]) > 300:  # both bikes drawn
             break
-        time.sleep(2)
+        time.sleep(0.2)
     (tmp_path / "viewer.png").write_bytes(png)
-    assert min(pixels) > 300, f"the viewer drew {pixels} pixels of each bike's colour (see {tmp_path / 'viewer.png'})"
+    assert min(shots[-1][1]) > 300, f"pixels of each bike's colour: {shots} (see {tmp_path / 'viewer.png'})"
+    assert all(max(pixels) <= 300 for _, pixels in shots[:-1]), f"one design drawn before the other: {shots}"
     assert any(urlsplit(u).path.endswith("/recording.rrd") and "signature=" in u for u in tab.requests)
+    assert seen.get("rrd", np.inf) - seen["viewer"] <= VIEWER_S, (seen, shots)
 
 
 @pytest.mark.parametrize(("path", "selector"), [("/docs", ".swagger-ui .opblock"), ("/redoc", "[role=menuitem]")])
