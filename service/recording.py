@@ -154,7 +154,10 @@ def _log_run(rec: rr.RecordingStream, run: Run, key: str, index: int, road: Road
     d = run.design
     offset = _offset(index)
     root = f"/world/{key}"
-    values: dict[str, Any] = {"label": run.label, "a2_deg": d.a2_deg, "l2_m": d.l2, "rws_m": d.rws, **run.outcome}
+    # as floats: a design built from integers (L2 = 0) would type the property as an integer, and rerun
+    # would then drop the other designs' decimal values
+    values: dict[str, Any] = {"label": run.label, "a2_deg": float(d.a2_deg), "l2_m": float(d.l2),
+                              "rws_m": float(d.rws), **run.outcome}
     rec.send_property(key, rr.AnyValues(**values))
     t = run.series["t_s"]
     times = rr.TimeColumn(TIMELINE, duration=t)

@@ -32,7 +32,8 @@ from tests.service.svc_helpers import ToyTask, running_scheduler, wait_done
 
 ROAD = Road.parse("sine:0.04:3")
 DURATION, FPS = 0.4, 50
-DESIGNS = [("geometry 1", Design.from_deg(0.0, 0.0, 0.093)), ("geometry 2", Design.from_deg(270.0, 0.15, 0.15))]
+# geometry 1 from integers, as a script would write it: its design's properties still floats beside geometry 2's
+DESIGNS = [("geometry 1", Design.from_deg(0, 0, 0.093)), ("geometry 2", Design.from_deg(270.0, 0.15, 0.15))]
 
 
 def verify(path: Path) -> None:
@@ -87,6 +88,7 @@ def test_each_geometry_carries_its_outcome_and_exact_extremes(rrd: Path) -> None
         result = simulate(design, ROAD, series_settings(DURATION, FPS))
         props = properties_of(rrd, f"g{i + 1}")
         assert props["label"] == label and props["a2_deg"] == design.a2_deg and props["rws_m"] == design.rws
+        assert props["l2_m"] == design.l2
         for name in ("distance_m", "fitness_m", "slack_m", *DIAGNOSTICS):
             assert props[name] == pytest.approx(getattr(result, name), rel=1e-12, abs=1e-12), name
         # the extremes are the integrator's, not the 50 fps series': at least as wide as what is drawn
