@@ -1,4 +1,5 @@
-"""One import package: finaldrive.{engine,workers,service,migrations}; nothing under the folders' own names."""
+"""One import package, in finaldrive/: finaldrive.{engine,workers,service,migrations}, the top-level folders
+of those names links into it; nothing importable under the folders' own names."""
 
 from __future__ import annotations
 
@@ -27,13 +28,20 @@ def test_the_folders_are_not_importable_under_their_own_names(name: str, tmp_pat
 
 def test_every_package_folder_is_listed_in_pyproject() -> None:
     config = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]
-    mapping = {folder: package for package, folder in config["package-dir"].items()}
+    assert "package-dir" not in config   # the folders are where the names say: tools read them as they are
+    package = REPO / "finaldrive"
     found = {
-        ".".join([mapping[path.relative_to(REPO).parts[0]], *path.relative_to(REPO).parts[1:]])
-        for folder in FOLDERS for path in [REPO / folder, *(REPO / folder).rglob("*")]
+        ".".join(path.relative_to(REPO).parts) for path in [package, *package.rglob("*")]
         if path.is_dir() and "__pycache__" not in path.parts and any(path.glob("*.py"))
     }
     assert found == set(config["packages"])
+
+
+@pytest.mark.parametrize("name", FOLDERS)
+def test_the_top_level_folders_are_links_to_the_subpackages(name: str) -> None:
+    link = REPO / name
+    assert link.is_symlink() and link.readlink() == Path("finaldrive") / name
+    assert (REPO / "finaldrive" / name).is_dir() and not (REPO / "finaldrive" / name).is_symlink()
 
 
 @pytest.mark.slow
@@ -42,7 +50,7 @@ def test_the_wheel_carries_the_data_and_the_migrations(tmp_path: Path) -> None:
     tracked = subprocess.run(["git", "ls-files"], cwd=REPO, capture_output=True, text=True, check=True).stdout.split()
     for name in tracked:
         (source / name).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy2(REPO / name, source / name)
+        shutil.copy2(REPO / name, source / name, follow_symlinks=False)   # the top-level links as links
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path), str(source)],
                    check=True, capture_output=True)
     (wheel,) = tmp_path.glob("finaldrive-*.whl")
