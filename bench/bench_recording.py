@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from finaldrive.engine import Design, Road
-from finaldrive.service.recording import chunk_counts, series_settings, simulate_runs, write_recording
+from finaldrive.service.media.recording import chunk_counts, series_settings, simulate_runs, write_recording
 
 ROAD = "sine:0.04:3"
 DESIGNS = [("geometry 1", Design.from_deg(0.0, 0.0, 0.093)), ("geometry 2", Design.from_deg(270.0, 0.15, 0.15))]

@@ -26,7 +26,7 @@ from finaldrive.service.cli import main
 from finaldrive.service.config import Settings
 from finaldrive.service.db.models import Base
 from finaldrive.service.main import create_app
-from finaldrive.service.recording import PLOTS
+from finaldrive.service.media.recording import PLOTS
 
 ROOT = Path(__file__).resolve().parents[1]
 #: spellings of units the rule does not use (SI, angles in degrees)

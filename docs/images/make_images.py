@@ -10,8 +10,8 @@ import numpy as np
 from finaldrive.engine import Design, Road, SimSettings, evaluate
 from finaldrive.engine.model import coordinates as C
 from finaldrive.engine.study.sweep import parse_grid
-from finaldrive.service import plots
-from finaldrive.service.recording import record, scene_at
+from finaldrive.service.media import plots
+from finaldrive.service.media.recording import record, scene_at
 
 HERE = Path(__file__).resolve().parent
 ROAD = Road.parse("sine:0.04:3")

@@ -13,9 +13,9 @@ from matplotlib.figure import Figure
 from matplotlib.projections.polar import PolarAxes
 
 from finaldrive.engine.study.sweep import parse_grid
-from finaldrive.service import plots
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
+from finaldrive.service.media import plots
 from tests.service.svc_helpers import DE, SWEEP, ToyTask, running_scheduler, wait_done
 
 PNG = b"\x89PNG\r\n\x1a\n"

@@ -16,7 +16,7 @@ from rerun.chunk import RrdReader
 from finaldrive.engine import DIAGNOSTICS, Design, Road, SimSettings, simulate
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
-from finaldrive.service.recording import (
+from finaldrive.service.media.recording import (
     PARTS,
     PLOTS,
     chunk_counts,
@@ -26,7 +26,7 @@ from finaldrive.service.recording import (
     scalars_of,
     series_settings,
 )
-from finaldrive.service.scene import ROW_OFFSET_M
+from finaldrive.service.media.scene import ROW_OFFSET_M
 from tests.service.processes import console_script
 from tests.service.svc_helpers import ToyTask, running_scheduler, wait_done
 
@@ -171,7 +171,7 @@ def test_api_errors(client: TestClient) -> None:
 
 def test_scene_read_back_matches_the_engine(rrd: Path) -> None:
     from finaldrive.engine.model import coordinates as C
-    from finaldrive.service.recording import scene_at
+    from finaldrive.service.media.recording import scene_at
 
     strips, arrows = scene_at(rrd, 0.2)
     assert {f"/world/g1/{p}" for p in PARTS} <= set(strips) and len(arrows) == 2

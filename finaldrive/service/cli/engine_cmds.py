@@ -56,7 +56,7 @@ def run_geometry(args: argparse.Namespace) -> int:
     g["wall_s"] = time.perf_counter() - start
     drive = drive_squat(design, road, settings, vehicle) if road is not None and settings is not None else None
     if png is not None and travel is not None:
-        from finaldrive.service.plots import travel_png
+        from finaldrive.service.media.plots import travel_png
 
         travel_png(png, travel, title=design_label(design.a2_deg, design.l2, design.rws))
     if args.json:
@@ -96,7 +96,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     if series_path is not None and result.series is not None:
         _write_series(series_path, result.series)
     if record_path is not None and result.ok:
-        from finaldrive.service.recording import record
+        from finaldrive.service.media.recording import record
 
         label = design_label(design.a2_deg, design.l2, design.rws)
         try:

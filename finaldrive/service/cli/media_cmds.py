@@ -45,7 +45,7 @@ def run_record(args: argparse.Namespace) -> int:
         raise UsageError("give --compare/--design (local) or --job-id/--server (through the service)")
     if args.road is None:
         raise UsageError("--road is required for a local recording")
-    from finaldrive.service.recording import RecordingError, record
+    from finaldrive.service.media.recording import RecordingError, record
 
     road = road_from_arg(args.road)
     out = writable(args.out, "--out")
@@ -107,8 +107,8 @@ def run_plot(args: argparse.Namespace) -> int:
     if not args.series or args.road is None:
         raise UsageError("give a job ID (through the service) or --series DESIGN... --road ROAD (local)")
     from finaldrive.engine import SimSettings
-    from finaldrive.service import plots
-    from finaldrive.service.recording import RecordingError, simulate_runs
+    from finaldrive.service.media import plots
+    from finaldrive.service.media.recording import RecordingError, simulate_runs
 
     road = road_from_arg(args.road)
     writable(args.out, "--out")

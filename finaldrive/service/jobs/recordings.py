@@ -27,7 +27,7 @@ log = logging.getLogger(__name__)
 def produce(spec: dict[str, Any], path: Path) -> None:
     """Simulate the spec's designs and write the recording to ``path``."""
     from finaldrive.engine import Design, Road, SimSettings, load_vehicle_dict, resolve_roads
-    from finaldrive.service.recording import record
+    from finaldrive.service.media.recording import record
 
     if spec.get("profile"):  # a measured road: its points are in the spec
         xs, ys = spec["profile"]

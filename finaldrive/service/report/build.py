@@ -69,7 +69,7 @@ def write_paper_study(data: StudyData, out: Path, *, figures: bool = True) -> Re
 
 def _figures(data: StudyData, report: dict[str, Any], series: dict[str, Any], fig_dir: Path) -> dict[str, Path]:
     """Sweep map and DE history per road, Table 14 time series; keys ``map:i``, ``de:i``, ``table14``."""
-    from finaldrive.service.plots import de_history_png, series_png, sweep_map_png
+    from finaldrive.service.media.plots import de_history_png, series_png, sweep_map_png
 
     fig_dir.mkdir(parents=True, exist_ok=True)
     out: dict[str, Path] = {}

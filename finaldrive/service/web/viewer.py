@@ -109,7 +109,7 @@ def _extract(folder: Path, timeout: float) -> None:
 
 def _serve(port: int) -> None:
     """Child process: serve the viewer on ``port`` until stdin closes."""
-    from finaldrive.service.recording import serve_viewer
+    from finaldrive.service.media.recording import serve_viewer
 
     serve_viewer(port)
     sys.stdin.read()

@@ -136,7 +136,7 @@ def test_record_and_plot_need_their_arguments(capsys: pytest.CaptureFixture[str]
 
 
 def test_local_record_simulate_record_and_series_plot(tmp_path: Any, capsys: pytest.CaptureFixture[str]) -> None:
-    from finaldrive.service.recording import frame_count
+    from finaldrive.service.media.recording import frame_count
 
     two = tmp_path / "two.rrd"
     assert main(["record", "--compare", "0,0,0.093", "270,0.15,0.15", "--road", "sine:0.04:3", "--duration", "0.2",

@@ -17,7 +17,7 @@ from finaldrive.service.cli import main
 from finaldrive.service.cli.common import stop_process
 from finaldrive.service.cli.remote import EXIT_HTTP, EXIT_JOB_NOT_SUCCEEDED, EXIT_UNREACHABLE
 from finaldrive.service.machine import free_port
-from finaldrive.service.recording import frame_count
+from finaldrive.service.media.recording import frame_count
 from tests.service.processes import console_script
 
 pytestmark = pytest.mark.slow  # starts servers or subprocesses

@@ -21,7 +21,7 @@ from tests.service.processes import Server
 from tests.service.web.browser import TOKEN, Page
 
 pytestmark = pytest.mark.slow
-#: run colours of the recording's first two geometries (service/recording.py)
+#: run colours of the recording's first two geometries (service/media/recording.py)
 RUN_COLOURS = ((31, 119, 180), (214, 39, 40))
 #: a small sweep: 4 x 3 designs, 0.5 s each (the map draws a grid of cells)
 GRID = "a2_deg=0:270:90,l2_m=0.04:0.12:0.04,rws_m=0.093"

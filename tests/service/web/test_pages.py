@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from finaldrive.service.recording import properties_of, scalars_of
+from finaldrive.service.media.recording import properties_of, scalars_of
 from finaldrive.service.web import viewer
 from finaldrive.service.web.pages import STATIC, policy
 from tests.service.svc_helpers import DE, wait_done

@@ -80,7 +80,7 @@ def geometry(a2_deg: A2, l2_m: L2, rws_m: RWS, services: ServicesDep, travel: An
     **documented(404, 422)}, summary="SR, anti-squat and chain growth over the rear travel, as PNG")
 def travel_png(a2_deg: A2, l2_m: L2, rws_m: RWS, services: ServicesDep, points: Points = TRAVEL_POINTS,
                job: JobVehicle = None) -> Response:
-    from finaldrive.service.plots import travel_png as draw
+    from finaldrive.service.media.plots import travel_png as draw
 
     design = _design(a2_deg, l2_m, rws_m)
     t = _travel(design, _vehicle(services, job), points)

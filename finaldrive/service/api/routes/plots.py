@@ -52,7 +52,7 @@ async def plot(
 
 
 def _sweep_map(services: Services, job_id: int, road: str | None, value: str, tolerance_pct: float) -> bytes:
-    from finaldrive.service import plots
+    from finaldrive.service.media import plots
 
     with services.db.read() as session:
         job, chosen = job_road(session, job_id, road)
@@ -71,7 +71,7 @@ def _sweep_map(services: Services, job_id: int, road: str | None, value: str, to
 
 
 def _de_history(services: Services, job_id: int, road: str | None, value: str, tolerance_pct: float) -> bytes:
-    from finaldrive.service import plots
+    from finaldrive.service.media import plots
 
     with services.db.read() as session:
         job, chosen = job_road(session, job_id, road)

@@ -164,7 +164,7 @@ def file(recording_id: RecordingId, services: ServicesDep) -> Response:
             summary="A finished recording's Fig. 13 time series and each design's outcome, as JSON")
 def series(recording_id: RecordingId, services: ServicesDep) -> RecordingSeriesOut:
     """Read back from the stored .rrd: one row per frame, the same numbers the viewer plots."""
-    from finaldrive.service.recording import PLOTS, properties_of, run_key, scalars_of
+    from finaldrive.service.media.recording import PLOTS, properties_of, run_key, scalars_of
 
     content, count = _content(services, recording_id)
     with tempfile.TemporaryDirectory(prefix="finaldrive-series-") as tmp:

@@ -25,7 +25,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from finaldrive.engine import Design, Road, SimSettings, Vehicle, default_vehicle, simulate
-from finaldrive.service.scene import (
+from finaldrive.service.media.scene import (
     ROW_OFFSET_M,
     Run,
     force_labels,

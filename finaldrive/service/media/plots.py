@@ -26,7 +26,7 @@ from matplotlib.text import Text
 from matplotlib.ticker import MaxNLocator
 
 from finaldrive.engine import default_vehicle
-from finaldrive.service.scene import ROW_OFFSET_M
+from finaldrive.service.media.scene import ROW_OFFSET_M
 
 #: Fig. 13 panels: (series key, axis label).
 SERIES_PANELS: tuple[tuple[str, str], ...] = (
@@ -274,7 +274,7 @@ def series_png(path: str | Path, runs: list[tuple[str, Mapping[str, np.ndarray]]
 def scene_png(path: str | Path, strips: Mapping[str, Sequence[np.ndarray]],
               arrows: Sequence[tuple[np.ndarray, np.ndarray]], *, title: str, xlim: tuple[float, float]) -> None:
     """A recording's 2D scene at one instant (entity path -> line strips, as read back from the
-    .rrd by service.recording.scene_at); geometries keep the recording's vertical offsets."""
+    .rrd by service.media.recording.scene_at); geometries keep the recording's vertical offsets."""
     colours = ("tab:blue", "tab:red", "tab:green", "tab:purple")
     fig = _figure((11, 6.5))
     ax = fig.add_subplot(111)

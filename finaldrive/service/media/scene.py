@@ -1,7 +1,7 @@
 """The 2D scene of a simulated motorcycle, frame by frame, as plain numpy (no drawing library).
 
-Shared by the Rerun recording (service/recording.py) and the matplotlib frame render
-(service/plots.py), so both show exactly the same lines. Points are the natural
+Shared by the Rerun recording (service/media/recording.py) and the matplotlib frame render
+(service/media/plots.py), so both show exactly the same lines. Points are the natural
 coordinates of engine/model/coordinates.py, in metres; ``offset`` shifts a run vertically
 so that several geometries can ride the same road one above the other.
 """
