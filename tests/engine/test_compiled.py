@@ -505,7 +505,8 @@ def test_an_untested_numba_makes_plain_kernels_cached_apart(monkeypatch: pytest.
 @pytest.mark.slow
 def test_plain_kernels_give_the_same_results(tmp_path: Path) -> None:
     """FINALDRIVE_PLAIN_NUMBA=1 (what an untested numba gets): every kernel a plain numba.njit(cache=True)
-    function, compiled afresh into a cache of its own; both methods' results equal this process's."""
+    function, compiled afresh into a cache of its own; the fast method's results equal this process's (the
+    reference method's kernels are made the same way: compiling them too would double the test's minute)."""
     import json
 
     from finaldrive.engine import Design, Road, SimSettings, simulate
@@ -514,14 +515,14 @@ def test_plain_kernels_give_the_same_results(tmp_path: Path) -> None:
             "from finaldrive.engine.jit import cache; assert cache.plain(); "
             "d = Design.from_deg(270, 0.15, 0.15); "
             "print(json.dumps([simulate(d, Road.parse('sine:0.04:3'), SimSettings(method=m, duration=0.5)).summary() "
-            "for m in ('fast', 'reference')]))")
+            "for m in ('fast',)]))")
     env = {**os.environ, "FINALDRIVE_PLAIN_NUMBA": "1", "NUMBA_CACHE_DIR": str(tmp_path)}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=900)
     assert out.returncode == 0, out.stderr[-3000:]
     plain = json.loads(out.stdout)
     design = Design.from_deg(270, 0.15, 0.15)
     here = [simulate(design, Road.parse("sine:0.04:3"), SimSettings(method=m, duration=0.5)).summary()
-            for m in ("fast", "reference")]
+            for m in ("fast",)]
     assert [p.pop("wall_s") >= 0 for p in plain] and [h.pop("wall_s") >= 0 for h in here]
     assert plain == json.loads(json.dumps(here))
     assert any(tmp_path.rglob("*.nbi"))   # numba's own cache, in the directory given
