@@ -86,7 +86,9 @@ def _radial_labels(fig: Figure, ax: PolarAxes, r_max: float, avoid: Sequence[flo
     labelled = [r for r in rings if r >= RADIAL_LABEL_CLEAR * r_max]
     texts = {r: f"{1000 * r:.4g} mm" for r in labelled}
     ax.set_yticks(rings, [texts.get(r, "") for r in rings])
-    pad = RADIAL_LABEL_PAD * RADIAL_LABEL_PT * fig.dpi / 72.0 + 6.0   # the box's pad and a marker's radius [px]
+    # the box's pad, a marker's radius (5 px) and 2 px for where each matplotlib puts the label (3.9 and 3.11 differ by
+    # a px or two; with 6 px a label touched a marker under 3.9, with 8 px or more no direction is free in a test) [px]
+    pad = RADIAL_LABEL_PAD * RADIAL_LABEL_PT * fig.dpi / 72.0 + 7.0
     half = []
     for r in labelled:
         probe = Text(0.0, 0.0, texts[r], fontsize=RADIAL_LABEL_PT)
