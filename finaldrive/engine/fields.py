@@ -114,6 +114,9 @@ _TRAVEL = [
     _f("sag_pct", "static sag as a share of the rear wheel travel", 1),
     _f("cog_height_m", "centre of gravity height used by anti-squat (Table 3)", 4),
     _f("wheelbase_m", "wheelbase of the model at the design pose", 4),
+    _f("fork_angle_deg", "the fork axis's angle from the vertical at the design pose (rake; points 4-5, eq. 14)", 2),
+    _f("anti_dive_pct", "anti-dive under front braking, caliper on the fork slider: -100 tan(epsilon) / tan(sigma), "
+                        "epsilon = fork_angle_deg (negative: braking compresses the fork beyond the load transfer)", 1),
     _f("travel_mean_m", "simulated: mean rear travel over the run", 4),
     _f("travel_min_m", "simulated: smallest rear travel over the run", 4),
     _f("travel_max_m", "simulated: largest rear travel over the run", 4),

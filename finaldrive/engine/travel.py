@@ -16,7 +16,7 @@ import numpy as np
 
 from finaldrive.engine.api import Design, SimSettings
 from finaldrive.engine.model import params as P
-from finaldrive.engine.model.coordinates import PHI, THETA, X1, X6, X10, X11, X14, X15, Y1, Y6, Y10, Y11
+from finaldrive.engine.model.coordinates import PHI, THETA, X1, X4, X5, X6, X10, X11, X14, X15, Y1, Y4, Y5, Y6, Y10, Y11
 from finaldrive.engine.model.kinematics import design_pose, squat_line, taut_length, whole_chain_length
 from finaldrive.engine.model.rear_travel import angle_at, extension_angle, spring_length
 from finaldrive.engine.model.road import Road
@@ -33,6 +33,10 @@ ANTI_SQUAT_DEFINITION = ("anti_squat_pct = 100 tan(tau) / tan(sigma) (textbook; 
 ANTI_RISE_DEFINITION = ("anti_rise_pct = 100 tan(lambda) / tan(sigma) (Foale, Motorcycle Handling and Chassis "
                         "Design; a rear brake caliper on the swingarm): tan(lambda) the slope of the line from the "
                         "rear contact point to the swingarm pivot, tan(sigma) as for anti-squat")
+ANTI_DIVE_DEFINITION = ("anti_dive_pct = -100 tan(epsilon) / tan(sigma) (a telescopic fork, the front brake caliper on "
+                        "its slider; Cossalter, Motorcycle Dynamics; Foale): epsilon the fork axis's angle from the "
+                        "vertical (fork_angle_deg, points 4-5, eq. 14), tan(sigma) as for anti-squat; negative: the "
+                        "braking force's component along the fork compresses it beyond the load transfer")
 #: Half the swingarm-angle step of the leverage ratio's central difference [rad].
 _LEVERAGE_STEP = 1e-6
 
@@ -68,7 +72,8 @@ def travel_kinematics(design: Design, vehicle: Vehicle, points: int = TRAVEL_POI
     extension) and the kickback it gives, the rear spring's length and leverage ratio, and the
     sprocket-pivot geometry from full extension to full compression, with the design pose and the
     static sag (equilibrium on flat ground) as points of their own; the sprockets' teeth (pitch radii
-    and chain_pitch, not rounded) and the whole chain's length in links at the design pose."""
+    and chain_pitch, not rounded) and the whole chain's length in links at the design pose; the fork's
+    angle and anti-dive (the fork's axis is fixed in the chassis: one value for the whole travel)."""
     from finaldrive.engine.simulation import pack_parameters, prepare  # the solvers' machinery: only here
 
     if not 2 <= points <= MAX_TRAVEL_POINTS:
@@ -82,6 +87,8 @@ def travel_kinematics(design: Design, vehicle: Vehicle, points: int = TRAVEL_POI
     wheelbase = float(design_q[X15] - design_q[X14])
     tan_sigma = v["target_cog_height"] / wheelbase
     base = taut_length(design_pose(_with_angle(p, extended)))
+    fork_x, fork_y = design_q[X5] - design_q[X4], design_q[Y5] - design_q[Y4]   # down the fork (eq. 14)
+    fork_angle = math.atan2(fork_x, -fork_y)            # from the vertical, + with the axle ahead of the head
 
     def point(angle: float) -> dict[str, float]:
         out = {"travel_m": _travel_of(angle, extended, v), **_pose_quantities(p, angle, tan_sigma)}
@@ -105,6 +112,8 @@ def travel_kinematics(design: Design, vehicle: Vehicle, points: int = TRAVEL_POI
         "extension_angle_deg": math.degrees(extended), "compression_angle_deg": math.degrees(compressed),
         "cog_height_m": v["target_cog_height"], "wheelbase_m": wheelbase,
         "anti_squat_definition": ANTI_SQUAT_DEFINITION, "anti_rise_definition": ANTI_RISE_DEFINITION,
+        "fork_angle_deg": math.degrees(fork_angle), "anti_dive_pct": -100.0 * math.tan(fork_angle) / tan_sigma,
+        "anti_dive_definition": ANTI_DIVE_DEFINITION,
         "chain_pitch_m": v["chain_pitch"],
         "engine_sprocket_teeth": sprocket_teeth(p[P.R_ES], v["chain_pitch"]),
         "wheel_sprocket_teeth": sprocket_teeth(p[P.R_WS], v["chain_pitch"]),

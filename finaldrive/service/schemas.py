@@ -531,6 +531,10 @@ class TravelOut(BaseModel):
     wheelbase_m: float = Field(description="p of tan(sigma) = h / p, at the design pose [m]")
     anti_squat_definition: str
     anti_rise_definition: str
+    fork_angle_deg: float = Field(description="the fork axis's angle from the vertical at the design pose [deg]")
+    anti_dive_pct: float = Field(description="-100 tan(epsilon) / tan(sigma), epsilon = fork_angle_deg (front brake "
+                                 "caliper on the fork slider; one value: the fork's axis is fixed in the chassis) [%]")
+    anti_dive_definition: str
     chain_pitch_m: float = Field(description="the chain's pitch (vehicle chain_pitch) [m]")
     engine_sprocket_teeth: float = Field(description="N = pi / asin(p / 2 R_ES), not rounded [-]")
     wheel_sprocket_teeth: float = Field(description="N = pi / asin(p / 2 R_WS), not rounded [-]")

@@ -131,3 +131,27 @@ def test_teeth_and_links(vehicle):
     slack = math.sqrt(taut**2 + vehicle["chain_free_play"] ** 2) - taut
     circles = math.pi**2 / 12 * (1 / n1 + 1 / n2)
     assert t["chain_links"] - textbook == pytest.approx(slack / p + circles, abs=0.005)
+
+
+def test_anti_dive_is_the_braking_force_along_the_fork_over_the_load_transfer(vehicle):
+    """Virtual work through the model's kinematics (eqs. 14-16): the front contact point's motion per unit
+    of fork slide gives each force's share along the fork; a braking force F (rearward at the front
+    contact point) against the load transfer F tan(sigma) it brings (upward). Negative: a telescopic fork
+    dives more than the load transfer alone makes it; the fork is the same for every design."""
+    from finaldrive.engine.model.coordinates import ALPHA, BETA, FS, PHI, THETA, X1, X13, Y1, Y13
+    from finaldrive.engine.model.kinematics import assemble, design_pose
+    from finaldrive.engine.simulation import pack_parameters
+
+    t = travel_kinematics(OFFSET, vehicle, 2)
+    p = pack_parameters(vehicle, OFFSET, SimSettings())
+    q = design_pose(p)
+    h = 1e-6
+    up, down = (assemble(p, Road(), q[X1], q[Y1], q[THETA], q[PHI], q[FS] + s, q[BETA], q[ALPHA]) for s in (h, -h))
+    dx, dy = (up[X13] - down[X13]) / (2 * h), (up[Y13] - down[Y13]) / (2 * h)   # per unit of fork extension
+    tan_sigma = vehicle["target_cog_height"] / t["wheelbase_m"]
+    brake, transfer = -1.0 * dx, tan_sigma * dy          # generalised forces on the slide, F = 1 N
+    assert t["anti_dive_pct"] == pytest.approx(-100.0 * brake / transfer, rel=1e-6)
+    assert t["fork_angle_deg"] == pytest.approx(math.degrees(math.atan2(dx, -dy)), abs=1e-6)
+    assert 15.0 < t["fork_angle_deg"] < 35.0 and t["anti_dive_pct"] < 0.0   # a motorcycle's rake: pro-dive
+    other = travel_kinematics(Design.from_deg(10.0, 0.15, 0.12), vehicle, 2)
+    assert other["anti_dive_pct"] == t["anti_dive_pct"]

@@ -28,6 +28,8 @@ def travel_lines(t: dict[str, Any]) -> list[str]:
         "from the pivot",
         f"sprockets: {t['engine_sprocket_teeth']:.1f} and {t['wheel_sprocket_teeth']:.1f} teeth of a "
         f"{1000 * t['chain_pitch_m']:.3f} mm pitch chain (not rounded); chain: {t['chain_links']:.1f} links",
+        f"fork: {t['fork_angle_deg']:.1f} deg from the vertical; anti-dive {t['anti_dive_pct']:.0f} % over the whole "
+        "travel (front brake caliper on the fork slider: -100 tan(fork angle) / tan(sigma))",
         "SR: the paper's squat ratio K / tan(tau); anti-squat: 100 tan(tau) / tan(sigma), tan(sigma) = "
         f"{t['cog_height_m']:.3f} m / {t['wheelbase_m']:.3f} m; anti-rise: the same for the line from the rear "
         "contact point to the pivot (rear brake caliper on the swingarm); chain growth: change of the taut run from "

@@ -22,6 +22,7 @@ const TRAVEL_FACTS = [
   [(t) => t.chain_links, "chain links", 1], [(t) => t.static_sag.anti_squat_pct, "anti-squat at sag [%]", 0],
   [(t) => t.static_sag.anti_rise_pct, "anti-rise at sag [%]", 0], [(t) => t.static_sag.leverage_ratio, "leverage at sag", 2],
   [(t) => t.curve.at(-1).kickback_deg, "kickback, full compression [deg]", 2],
+  [(t) => t.fork_angle_deg, "fork angle from vertical [deg]", 1], [(t) => t.anti_dive_pct, "anti-dive [%]", 0],
 ];
 
 function fromQuery() {
