@@ -2,12 +2,31 @@
 
 from __future__ import annotations
 
+import fcntl
+import os
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from finaldrive.engine import default_vehicle, paper_tables
+
+
+@pytest.fixture(autouse=True)
+def _alone_if_exclusive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Under pytest-xdist, a test marked ``exclusive`` runs with no other test beside it: every test holds
+    the run's machine lock shared, an exclusive one holds it alone. A turnstile taken before it keeps an
+    exclusive test from waiting forever: while one waits, no other test starts."""
+    if "PYTEST_XDIST_WORKER" not in os.environ:
+        yield
+        return
+    run = tmp_path_factory.getbasetemp().parent        # the run's folder, shared by its workers
+    alone = request.node.get_closest_marker("exclusive") is not None
+    with open(run / "turnstile.lock", "a") as turnstile, open(run / "machine.lock", "a") as machine:
+        fcntl.flock(turnstile, fcntl.LOCK_EX)
+        fcntl.flock(machine, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
+        fcntl.flock(turnstile, fcntl.LOCK_UN)
+        yield                                           # both released when the files close
 
 
 @pytest.fixture(scope="session")

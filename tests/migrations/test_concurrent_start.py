@@ -99,6 +99,7 @@ def _wait_for_files(files: list[Path], procs: list[subprocess.Popen[bytes]], log
         time.sleep(0.002)
 
 
+@pytest.mark.slow   # three processes start ten times
 @pytest.mark.parametrize("store", ["sqlite", "postgresql"])
 def test_three_processes_start_together_on_an_empty_store(store: str, tmp_path: Path,
                                                           request: pytest.FixtureRequest) -> None:

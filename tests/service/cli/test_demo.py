@@ -93,6 +93,7 @@ def _spin() -> None:
         pass
 
 
+@pytest.mark.slow   # compiles the fast method into an empty cache
 def test_a_compilation_tells_its_progress(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A cold cache: compile_engine's build writes how many kernels it has compiled, which grows to all of
     them; once the method is compiled there is no progress to tell."""
@@ -115,6 +116,7 @@ def test_a_compilation_tells_its_progress(tmp_path: Path, monkeypatch: pytest.Mo
 
 
 @pytest.mark.slow
+@pytest.mark.exclusive   # its busy processes would slow another test's timed steps
 def test_the_readme_demo_on_a_loaded_machine_says_what_it_waited_for(tmp_path: Path) -> None:
     """`finaldrive demo` (the README's first command) with LOAD busy processes beside it: it succeeds, its
     output says what it waited for, and the best comes with its near-optimal set. (The engine is compiled

@@ -214,6 +214,7 @@ def test_cancel_is_obeyed_by_the_owner_within_two_seconds(settings: Settings) ->
     assert job["state"] == "cancelled" and time.monotonic() - start < 10
 
 
+@pytest.mark.slow   # holds the lock 5 s, past the scheduler's lock timeout
 def test_a_store_locked_for_a_while_delays_the_job_but_never_fails_it(settings: Settings) -> None:
     path = settings.db_url.removeprefix("sqlite:///")
     with TestClient(create_app(settings)) as c, running_scheduler(settings, ToyTask(delay=0.01)):
