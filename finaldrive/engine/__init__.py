@@ -23,6 +23,7 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("DIAGNOSTICS", "RECORD", "VALUES", "Value"), "finaldrive.engine.record"),
     **dict.fromkeys(("evaluate", "simulate"), "finaldrive.engine.simulation"),
     **dict.fromkeys(("PROFILE_MAX_POINTS", "Road", "RoadError"), "finaldrive.engine.model.road"),
+    "enveloped": "finaldrive.engine.model.road_envelope",
     **dict.fromkeys(("coordinate_index", "point_positions"), "finaldrive.engine.model.coordinates"),
     **dict.fromkeys(("VEHICLE_VALUE_LIMIT", "Vehicle", "VehicleError", "default_vehicle", "load_vehicle",
                      "load_vehicle_dict"), "finaldrive.engine.vehicle"),
@@ -114,6 +115,7 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         Road as Road,
         RoadError as RoadError,
     )
+    from finaldrive.engine.model.road_envelope import enveloped as enveloped
     from finaldrive.engine.optimize import (
         CMAES as CMAES,
         OPTIMISERS as OPTIMISERS,

@@ -4,8 +4,7 @@ alternatives to the model, with the rank correlation of each against the vehicle
 The differences between good designs (millimetres) are smaller than some modelling choices move a
 run (the issue measured up to 155 mm from the Magic Formula's load range, and a reversed ranking from
 a harder drive). :data:`ALTERNATIVES` are those choices, each a named change of the vehicle or the
-road; a road it does not apply to (a phase of a road that is not a sine) is skipped. Road enveloping
-(a rigid-ring tyre over the road) is not modelled by the engine, so it is not among them.
+road; a road it does not apply to (a phase of a road that is not a sine) is skipped.
 See docs/optimisation.md#model-bands.
 """
 
@@ -21,6 +20,7 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from finaldrive.engine.api import STATUS_OK, SimSettings
+from finaldrive.engine.model.road_envelope import enveloped
 from finaldrive.engine.simulation import evaluate
 from finaldrive.engine.vehicle import default_vehicle
 
@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from finaldrive.engine.model.road import Road
     from finaldrive.engine.vehicle import Vehicle
 
-Change = Callable[["Road", "Vehicle"], "tuple[Road, Vehicle] | None"]
+Change = Callable[["Road", "Vehicle", SimSettings], "tuple[Road, Vehicle] | None"]
 
 
 @dataclass(frozen=True)
@@ -42,27 +42,41 @@ class Alternative:
 
 
 def _vehicle(**scale: float) -> Change:
-    def change(road: Road, vehicle: Vehicle) -> tuple[Road, Vehicle]:
+    def change(road: Road, vehicle: Vehicle, settings: SimSettings) -> tuple[Road, Vehicle]:
         return road, vehicle.replace(**{key: vehicle[key] * factor for key, factor in scale.items()})
     return change
 
 
 def _load_range(fz_max_n: float) -> Change:
-    def change(road: Road, vehicle: Vehicle) -> tuple[Road, Vehicle]:
+    def change(road: Road, vehicle: Vehicle, settings: SimSettings) -> tuple[Road, Vehicle]:
         return road, vehicle.replace(Fz_max=fz_max_n)
     return change
 
 
 def _phase(degrees: float) -> Change:
-    def change(road: Road, vehicle: Vehicle) -> tuple[Road, Vehicle] | None:
+    def change(road: Road, vehicle: Vehicle, settings: SimSettings) -> tuple[Road, Vehicle] | None:
         if road.kind != "sine":
             return None
         return dataclasses.replace(road, phase_deg=(road.phase_deg + degrees) % 360.0), vehicle
     return change
 
 
-def _launch(road: Road, vehicle: Vehicle) -> tuple[Road, Vehicle] | None:
+def _launch(road: Road, vehicle: Vehicle, settings: SimSettings) -> tuple[Road, Vehicle] | None:
     return None if vehicle["drive_model"] == 1.0 else (road, vehicle.replace(drive_model=1.0))
+
+
+#: Largest mean acceleration of a run [m/s^2], for the length an enveloped road must cover: 1.5 g, above
+#: what the rear tyre can drive (tc_friction 1.0: about 1 g) on any of the alternatives.
+RUN_ACCELERATION_BOUND = 1.5 * 9.81
+#: An enveloped road starts this far behind the rear tyre's start and ends this far past the bound [m].
+ENVELOPE_MARGIN_M = 3.0
+
+
+def _enveloped(road: Road, vehicle: Vehicle, settings: SimSettings) -> tuple[Road, Vehicle] | None:
+    if road.kind == "flat":
+        return None
+    reach = 0.5 * RUN_ACCELERATION_BOUND * settings.duration ** 2 + ENVELOPE_MARGIN_M
+    return enveloped(road, vehicle["rt0"], -ENVELOPE_MARGIN_M, reach), vehicle
 
 
 #: The Magic Formula's upper load bound the issue compared (vehicle file: Fz_max 6,400 N, 4 Fz0).
@@ -78,6 +92,8 @@ ALTERNATIVES: tuple[Alternative, ...] = (
                 "(docs/engine.md#the-launch-drive; skipped when the vehicle has it already)", _launch),
     Alternative("road_phase_90", "a sine road started a quarter period later (sine roads only)", _phase(90.0)),
     Alternative("road_phase_180", "a sine road started half a period later (sine roads only)", _phase(180.0)),
+    Alternative("road_enveloped", "the road under a rigid ring of the rear tyre's unloaded radius rt0 (a tyre "
+                "bridges dips narrower than itself; docs/engine.md#road-enveloping; not for flat)", _enveloped),
 )
 
 
@@ -94,7 +110,7 @@ def model_bands(designs: np.ndarray, road: Road, settings: SimSettings = SimSett
     base_f = _fitness(base)
     out: dict[str, Any] = {"baseline": _runs(base, base_f, base_f), "alternatives": {}, "skipped": []}
     for alt in ALTERNATIVES:
-        changed = alt.change(road, vehicle)
+        changed = alt.change(road, vehicle, settings)
         if changed is None:
             out["skipped"].append(alt.name)
             continue
