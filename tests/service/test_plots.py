@@ -156,3 +156,17 @@ def test_failed_evaluations_are_nulls_in_points(settings: Settings) -> None:
     failed = [i for i, s in enumerate(points["status"]) if s == "failed"]
     assert len(failed) == 4 and all(points["fitness_m"][i] is None for i in failed)
     assert all(points["l2_m"][i] == 0.15 for i in failed)
+
+
+def test_the_maps_swingarm_is_where_the_dashboard_draws_it(client: TestClient) -> None:
+    """The PNG's swingarm line is at the static sag GET /v1/geometry gives (the dashboard's map draws that), not
+    at the design angle phi0 - theta0 (0.36 deg apart on the paper's bike); with a softer rear spring, lower."""
+    grid = parse_grid("a2_deg=0:350:10,l2_m=0:0.2:0.02,rws_m=0.093")
+    fig = plots.sweep_map_figure(grid, np.ones(len(grid)), title="t")
+    line = next(ln for ln in fig.axes[0].get_lines() if ln.get_label().startswith("swingarm"))
+    drawn = math.degrees(line.get_xdata()[0])
+    served = client.get("/v1/geometry", params={"a2_deg": 0, "l2_m": 0, "rws_m": 0.093}).json()["swingarm_angle_deg"]
+    assert drawn == pytest.approx(served, abs=0.01)
+    v = plots.default_vehicle()
+    assert abs(drawn - math.degrees(v["phi0"] - v["theta0"])) > 0.3
+    assert plots.swingarm_at_sag_deg(v.replace(k_rs=0.8 * v["k_rs"])) < drawn - 0.1   # more sag: a lower swingarm

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from sqlalchemy.orm import Session
 
+from finaldrive.engine import Vehicle, default_vehicle, load_vehicle_dict
 from finaldrive.service.api.deps import MAX_ID, ServicesDep
 from finaldrive.service.api.problems import ApiProblem, validation_problem
 from finaldrive.service.api.views import job_out
@@ -31,6 +32,12 @@ def load_job(services: ServicesDep, job_id: int) -> JobOut:
         if job is None:
             raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
         return job_out(session, job, roads_of(session, [job_id])[job_id], detail=True)
+
+
+def job_vehicle(services: ServicesDep, job_id: int | None) -> Vehicle:
+    """The job's vehicle (its spec's, as its simulations used), else the paper's; 404 without the job."""
+    spec = None if job_id is None else load_job(services, job_id).spec.vehicle
+    return default_vehicle() if spec is None else load_vehicle_dict(spec.model_dump())
 
 
 def job_version(services: ServicesDep, job_id: int) -> tuple[str, int, int]:

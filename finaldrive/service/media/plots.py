@@ -3,7 +3,7 @@
 The only module that imports matplotlib. Designs are rows (a2 [rad], L2 [m], R_WS [m]).
 Polar maps follow the paper's Figs. 9-11: the engine sprocket axis around the swingarm
 pivot, angle a2 (from the chassis x axis, 0 deg = forward; the model's definition) and
-radius L2, with the swingarm at its design angle phi0 - theta0 drawn as a line.
+radius L2, with the swingarm at static sag drawn as a line (as the dashboard's map).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from matplotlib.projections.polar import PolarAxes
 from matplotlib.text import Text
 from matplotlib.ticker import MaxNLocator
 
-from finaldrive.engine import default_vehicle
+from finaldrive.engine import Design, Vehicle, default_vehicle, static_geometry
 from finaldrive.service.media.scene import ROW_OFFSET_M
 
 #: Fig. 13 panels: (series key, axis label).
@@ -67,12 +67,21 @@ def _polar_axes(fig: Figure, rect: Any = 111) -> PolarAxes:
     return ax
 
 
-def _swingarm(ax: Axes, r_max: float) -> float:
-    """The swingarm at its design angle, from the pivot; returns that angle [rad]."""
-    v = default_vehicle()
-    angle = float(v["phi0"] - v["theta0"])
+def swingarm_at_sag_deg(vehicle: Vehicle | None = None, design: Design | None = None) -> float:
+    """The swingarm's direction at static sag on flat ground (the engine's equilibrium; pivot to rear axle,
+    in a2's frame), as the dashboard's map draws it: at ``design``, by default the vehicle's calibration
+    design (over the paper's design space it moves by about a thousandth of a degree)."""
+    v = vehicle or default_vehicle()
+    d = design or Design.from_deg(v["calibration_a2_deg"], v["calibration_l2"], v["calibration_rws"])
+    return float(static_geometry(d, v)["swingarm_angle_deg"])
+
+
+def _swingarm(ax: Axes, r_max: float, swingarm_deg: float | None) -> float:
+    """The swingarm at static sag (:func:`swingarm_at_sag_deg` unless given), from the pivot; returns its
+    angle [rad]."""
+    angle = math.radians(swingarm_at_sag_deg() if swingarm_deg is None else swingarm_deg)
     ax.plot([angle, angle], [0.0, r_max], color="black", lw=3, solid_capstyle="butt",
-            label=f"swingarm (to the rear axle, {math.degrees(angle):.0f}°)")
+            label=f"swingarm at static sag, {math.degrees(angle):.1f}°")
     ax.plot([0.0], [0.0], "o", color="black", ms=6)
     return angle
 
@@ -124,12 +133,14 @@ def sweep_map_png(path: str | Path, designs: np.ndarray, values: np.ndarray, **k
 
 def sweep_map_figure(designs: np.ndarray, values: np.ndarray, *, title: str, value_label: str = "distance [m]",
                      best: tuple[float, float] | None = None, best_label: str = "best",
-                     near: np.ndarray | None = None, near_label: str = "near-optimal") -> Figure:
+                     near: np.ndarray | None = None, near_label: str = "near-optimal",
+                     swingarm_deg: float | None = None) -> Figure:
     """A sweep's values over the engine sprocket position (polar a2, L2), as Figs. 9-11.
 
     Failed designs (NaN) are left blank. With several R_WS per (a2, L2) the highest value
     is shown. ``best`` is (a2 [rad], L2 [m]). ``near`` (a bool a design) outlines the
     near-optimal set: a red line around its cells on a grid, red rings on scattered designs.
+    ``swingarm_deg``: the swingarm's line (default: :func:`swingarm_at_sag_deg`, the paper's vehicle).
     """
     designs = np.asarray(designs, dtype=float).reshape(-1, 3)
     values = np.asarray(values, dtype=float)
@@ -163,7 +174,7 @@ def sweep_map_figure(designs: np.ndarray, values: np.ndarray, *, title: str, val
                        label=near_label)
     r_max = max(float(designs[:, 1].max()), 1e-3) * 1.05
     ax.set_ylim(0, r_max)
-    swingarm = _swingarm(ax, r_max)
+    swingarm = _swingarm(ax, r_max, swingarm_deg)
     _mark_best(ax, best, best_label)
     ax.set_xlabel("a2 [deg] (0° = forward)   ·   radius: L2")
     fig.colorbar(mappable, ax=ax, label=value_label, pad=0.1, shrink=0.8)
@@ -203,12 +214,14 @@ def _edges(centres: np.ndarray, periodic: bool = False) -> np.ndarray:
     return np.concatenate([[max(0.0, 2 * centres[0] - mid[0])], mid, [2 * centres[-1] - mid[-1]]]).astype(float)
 
 
-def de_history_png(path: str | Path, history: list[dict[str, Any]], population: np.ndarray, *, title: str) -> None:
+def de_history_png(path: str | Path, history: list[dict[str, Any]], population: np.ndarray, *, title: str,
+                   swingarm_deg: float | None = None) -> None:
     """:func:`de_history_figure` as a PNG file."""
-    _save(de_history_figure(history, population, title=title), path)
+    _save(de_history_figure(history, population, title=title, swingarm_deg=swingarm_deg), path)
 
 
-def de_history_figure(history: list[dict[str, Any]], population: np.ndarray, *, title: str) -> Figure:
+def de_history_figure(history: list[dict[str, Any]], population: np.ndarray, *, title: str,
+                      swingarm_deg: float | None = None) -> Figure:
     """Best and mean fitness per generation (left) and the final population on the polar map (right).
 
     ``history`` holds generation records in the outputs' names (``finaldrive.engine.history_record``):
@@ -243,7 +256,7 @@ def de_history_figure(history: list[dict[str, Any]], population: np.ndarray, *, 
     else:
         pax.scatter(population[:, 0], population[:, 1], s=45, edgecolors="k", lw=0.3, label="designs")
     pax.set_ylim(0, r_max)
-    marked.append(_swingarm(pax, r_max))
+    marked.append(_swingarm(pax, r_max, swingarm_deg))
     pax.set_xlabel("final population: a2 [deg], radius L2")
     pax.legend(loc="upper left", bbox_to_anchor=(-0.25, 1.15), fontsize=8)
     fig.suptitle(title)

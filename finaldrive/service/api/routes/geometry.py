@@ -15,13 +15,11 @@ from finaldrive.engine import (
     TRAVEL_POINTS,
     Design,
     Vehicle,
-    default_vehicle,
-    load_vehicle_dict,
     static_geometry,
     travel_kinematics,
 )
 from finaldrive.service.api.deps import MAX_ID, ServicesDep
-from finaldrive.service.api.lookups import load_job
+from finaldrive.service.api.lookups import job_vehicle
 from finaldrive.service.api.problems import ApiProblem, documented
 from finaldrive.service.schemas import GeometryOut
 
@@ -43,12 +41,6 @@ def _design(a2_deg: float, l2_m: float, rws_m: float) -> Design:
         raise ApiProblem(422, str(exc), slug="invalid-design") from None
 
 
-def _vehicle(services: ServicesDep, job: int | None) -> Vehicle:
-    """The job's vehicle (its spec's, as its simulations used), else the paper's; 404 without the job."""
-    spec = None if job is None else load_job(services, job).spec.vehicle
-    return default_vehicle() if spec is None else load_vehicle_dict(spec.model_dump())
-
-
 def _travel(design: Design, vehicle: Vehicle, points: int) -> dict[str, Any]:
     try:
         return travel_kinematics(design, vehicle, points)
@@ -63,7 +55,7 @@ def geometry(a2_deg: A2, l2_m: L2, rws_m: RWS, services: ServicesDep, travel: An
                  description="add SR, anti-squat, chain growth and the sprocket-pivot geometry over the rear travel")]
              = False, points: Points = TRAVEL_POINTS, job: JobVehicle = None) -> GeometryOut:
     design = _design(a2_deg, l2_m, rws_m)
-    vehicle = _vehicle(services, job)
+    vehicle = job_vehicle(services, job)
     try:
         g = static_geometry(design, vehicle)
     except (ValueError, ArithmeticError) as exc:
@@ -83,7 +75,7 @@ def travel_png(a2_deg: A2, l2_m: L2, rws_m: RWS, services: ServicesDep, points: 
     from finaldrive.service.media.plots import travel_png as draw
 
     design = _design(a2_deg, l2_m, rws_m)
-    t = _travel(design, _vehicle(services, job), points)
+    t = _travel(design, job_vehicle(services, job), points)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "travel.png"
         draw(path, t, title=f"a2 = {a2_deg:g} deg, L2 = {l2_m:g} m, R_WS = {rws_m:g} m")

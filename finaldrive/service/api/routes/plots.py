@@ -12,9 +12,9 @@ import numpy as np
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
-from finaldrive.engine import DEFAULT_TOLERANCE_PCT, MAX_TOLERANCE_PCT, near_mask
+from finaldrive.engine import DEFAULT_TOLERANCE_PCT, MAX_TOLERANCE_PCT, Design, near_mask
 from finaldrive.service.api.deps import JobId, RendersDep, ServicesDep
-from finaldrive.service.api.lookups import job_road, job_version
+from finaldrive.service.api.lookups import job_road, job_vehicle, job_version
 from finaldrive.service.api.problems import ApiProblem, documented
 from finaldrive.service.db.columns import road_points
 from finaldrive.service.db.results import generation_records, last_generations
@@ -65,8 +65,9 @@ def _sweep_map(services: Services, job_id: int, road: str | None, value: str, to
     near = near_mask(points["fitness_m"], tolerance_pct)[0]
     b = int(np.nanargmax(values))
     title = f"job {job_id} ({job.kind}) on {chosen.name}: {value} over the engine sprocket position"
+    swingarm = plots.swingarm_at_sag_deg(job_vehicle(services, job_id), Design(*designs[b]))  # as the dashboard
     return _png(plots.sweep_map_png, designs, values, title=title, value_label=f"{value} [m]",
-                best=(designs[b, 0], designs[b, 1]), near=near,
+                best=(designs[b, 0], designs[b, 1]), near=near, swingarm_deg=swingarm,
                 near_label=f"fitness within {tolerance_pct:g} % of the best ({int(near.sum())} designs)")
 
 
@@ -87,4 +88,7 @@ def _de_history(services: Services, job_id: int, road: str | None, value: str, t
     history = [{k: (math.nan if v is None else v) for k, v in r.items()}  # up to the population drawn
                for r in records if r["generation"] < generation.generation]
     where = "all roads" if job.kind == "robust-de" else chosen.name
-    return _png(plots.de_history_png, history, population, title=f"job {job_id} ({job.kind}) on {where}")
+    best = population[int(np.nanargmax(population[:, 3]))] if np.isfinite(population[:, 3]).any() else population[0]
+    swingarm = plots.swingarm_at_sag_deg(job_vehicle(services, job_id), Design(*best[:3]))
+    return _png(plots.de_history_png, history, population, title=f"job {job_id} ({job.kind}) on {where}",
+                swingarm_deg=swingarm)

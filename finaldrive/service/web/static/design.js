@@ -22,7 +22,7 @@ const TRAVEL_FACTS = [
   [(t) => t.chain_links, "chain links", 1], [(t) => t.static_sag.anti_squat_pct, "anti-squat at sag [%]", 0],
   [(t) => t.static_sag.anti_rise_pct, "anti-rise at sag [%]", 0], [(t) => t.static_sag.leverage_ratio, "leverage at sag", 2],
   [(t) => t.curve.at(-1).kickback_deg, "kickback, full compression [deg]", 2],
-  [(t) => t.fork_angle_deg, "fork angle from vertical [deg]", 1], [(t) => t.anti_dive_pct, "anti-dive [%]", 0],
+  [(t) => t.fork_angle_deg, "fork angle [deg]", 1], [(t) => t.anti_dive_pct, "anti-dive [%]", 0],
 ];
 
 function fromQuery() {
@@ -100,7 +100,7 @@ async function showTravel(runs) {
   const curves = await Promise.all(runs.map((r) => api(`/v1/geometry?${new URLSearchParams({
     a2_deg: r.a2_deg, l2_m: r.l2_m, rws_m: r.rws_m, travel: "true" })}`)));
   $("travel-table").tHead.replaceChildren(el("tr", {}, el("th", {}, "design"),
-    ...TRAVEL_FACTS.map(([, label]) => el("th", { class: "num" }, label))));
+    ...TRAVEL_FACTS.map(([, label]) => el("th", { class: "num", style: "white-space: normal" }, label))));
   $("travel-table").tBodies[0].replaceChildren(...curves.map((g, k) => el("tr", {},
     el("td", {}, el("span", { style: `color:${COLOURS[k]}` }, "■ "), runs[k].label),
     ...TRAVEL_FACTS.map(([get, , d]) => el("td", { class: "num" }, num(get(g.travel_curve), d))))));

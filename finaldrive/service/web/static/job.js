@@ -50,7 +50,7 @@ function bestTable() {
       el("td", { class: "num" }, num(r.best?.distance_m, 4)), el("td", { class: "num" }, num(r.best?.fitness_m, 4)),
       bandCell(s),
       el("td", { class: "num" }, s ? `${s.count} of ${s.evaluated} within ${s.tolerance_pct} %` : "–"),
-      el("td", { class: "muted", style: "white-space: normal" }, s ? [...s.sentences, ...tieSentence(s)].join(" ") : ""),
+      el("td", { class: "muted", style: "white-space: normal" }, ...lines(s ? [...s.sentences, ...tieSentence(s)] : [])),
       el("td", {}, r.best ? link(r.best, r.spec) : "")));
   }
   if (job.robust_best) {
@@ -58,12 +58,15 @@ function bestTable() {
     const s = sharp.get(null);
     rows.push(el("tr", {}, el("td", {}, `all roads (${rb.aggregate})`), ...design(rb), el("td", {}, ""),
       el("td", { class: "num" }, num(rb.score_m, 4)), el("td", {}, ""), el("td", { class: "num" }, s ? `${s.count} of ${s.evaluated}` : "–"),
-      el("td", { class: "muted", style: "white-space: normal" }, s ? s.sentences.join(" ") : ""),
+      el("td", { class: "muted", style: "white-space: normal" }, ...lines(s ? s.sentences : [])),
       el("td", {}, link(rb, job.roads[0].spec))));
   }
   $("best").tBodies[0].replaceChildren(...rows);
   $("bands").hidden = !TERMINAL.has(job.state) || banded;
 }
+
+/** Sentences one a line (each is a whole verdict, none ends in a full stop). */
+const lines = (sentences) => sentences.map((t) => el("div", {}, t));
 
 /** A road's numerical band (engine.study.band): +-x mm, flagged above 1 mm; pending while its jobs run. */
 function bandCell(s) {
