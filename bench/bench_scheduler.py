@@ -249,9 +249,9 @@ def _count_submissions(executor: Any) -> list[int]:
     count = [0]
     submit = executor.submit
 
-    def counted(*args: Any) -> int:
+    def counted(*args: Any, **kwargs: Any) -> int:
         count[0] += 1
-        return submit(*args)
+        return submit(*args, **kwargs)
 
     executor.submit = counted
     return count
