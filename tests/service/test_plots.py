@@ -170,3 +170,5 @@ def test_the_maps_swingarm_is_where_the_dashboard_draws_it(client: TestClient) -
     v = plots.default_vehicle()
     assert abs(drawn - math.degrees(v["phi0"] - v["theta0"])) > 0.3
     assert plots.swingarm_at_sag_deg(v.replace(k_rs=0.8 * v["k_rs"])) < drawn - 0.1   # more sag: a lower swingarm
+    refused = plots.Design.from_deg(190.0, 0.55, 0.15)   # L2 beyond the vehicle's l2_max: no equilibrium drawn from
+    assert plots.swingarm_at_sag_deg(v, refused) == pytest.approx(math.degrees(v["phi0"] - v["theta0"]))

@@ -70,10 +70,14 @@ def _polar_axes(fig: Figure, rect: Any = 111) -> PolarAxes:
 def swingarm_at_sag_deg(vehicle: Vehicle | None = None, design: Design | None = None) -> float:
     """The swingarm's direction at static sag on flat ground (the engine's equilibrium; pivot to rear axle,
     in a2's frame), as the dashboard's map draws it: at ``design``, by default the vehicle's calibration
-    design (over the paper's design space it moves by about a thousandth of a degree)."""
+    design (over the paper's design space it moves by about a thousandth of a degree). Where the engine
+    finds no equilibrium for them, the vehicle's design angle phi0 - theta0."""
     v = vehicle or default_vehicle()
-    d = design or Design.from_deg(v["calibration_a2_deg"], v["calibration_l2"], v["calibration_rws"])
-    return float(static_geometry(d, v)["swingarm_angle_deg"])
+    try:
+        d = design or Design.from_deg(v["calibration_a2_deg"], v["calibration_l2"], v["calibration_rws"])
+        return float(static_geometry(d, v)["swingarm_angle_deg"])
+    except (ValueError, ArithmeticError):
+        return math.degrees(v["phi0"] - v["theta0"])
 
 
 def _swingarm(ax: Axes, r_max: float, swingarm_deg: float | None) -> float:
