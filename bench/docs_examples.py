@@ -1,7 +1,7 @@
 """Generate the docs' example outputs: run each example command again and write what it printed.
 
     python bench/docs_examples.py            # run every example of README.md and docs/, rewrite its block
-    python bench/docs_examples.py --check    # run them, list the blocks that differ (timings aside), exit 1 if any
+    python bench/docs_examples.py --check    # run them, list the blocks that differ (times, ports aside), exit 1 if any
 
 An example is a code block right after a marker ``<!-- example: COMMAND -->``; the block is
 ``$ COMMAND`` and then what the command printed (stdout and stderr, as a terminal shows them). Each
@@ -25,10 +25,11 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 #: The marker, its code block (no language) and what follows it.
 _EXAMPLE = re.compile(r"<!-- example( cold)?: (?P<command>[^\n]+?) -->\n```\n(?P<block>.*?)```\n", re.S)
-#: Times and free ports: what differs between two runs of the same command.
+#: Times, free ports and the executor a machine's core count picks: what differs between two runs.
 _VOLATILE = (
     (re.compile(r"\b\d+(\.\d+)? s\b"), "<t> s"),
     (re.compile(r"127\.0\.0\.1:\d+"), "127.0.0.1:<port>"),
+    (re.compile(r"executor (serial|process|ray)\b"), "executor <kind>"),
 )
 #: Longest an example may run [s].
 TIMEOUT_S = 900.0

@@ -34,9 +34,11 @@ def test_no_output_block_is_typed() -> None:
             assert m.start() + 4 in marked, f"{path.name}: a typed output block at offset {m.start()}"
 
 
-def test_masking_hides_times_and_ports_only() -> None:
+def test_masking_hides_times_ports_and_the_executor_only() -> None:
     assert masked("service up after 20 s at http://127.0.0.1:45839, 84 simulations, 1.6 s") == (
         "service up after <t> s at http://127.0.0.1:<port>, 84 simulations, <t> s")
+    assert masked("6 generations, stop: max_iter, executor process, 2.6 s") == (
+        "6 generations, stop: max_iter, executor <kind>, <t> s")
     assert masked("a2 = 344.1 deg") == "a2 = 344.1 deg"
 
 
