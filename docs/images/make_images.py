@@ -92,7 +92,9 @@ def dashboard() -> None:
                     pass
                 time.sleep(0.2)
             job = _call(base + "/v1/jobs", SWEEP)["id"]
-            while _call(f"{base}/v1/jobs/{job}")["state"] != "succeeded":
+            while (state := _call(f"{base}/v1/jobs/{job}")["state"]) != "succeeded":
+                if state in ("failed", "cancelled"):
+                    raise RuntimeError(f"the screenshot's sweep {state}")
                 time.sleep(0.5)
             best = _call(f"{base}/v1/jobs/{job}")["roads"][0]["best"]
             chromium = os.environ.get("FINALDRIVE_CHROMIUM") or shutil.which("chromium")

@@ -12,6 +12,7 @@ from matplotlib.colors import to_rgba
 from matplotlib.figure import Figure
 from matplotlib.projections.polar import PolarAxes
 
+from finaldrive.engine import Design, default_vehicle
 from finaldrive.engine.study.sweep import parse_grid
 from finaldrive.service.config import Settings
 from finaldrive.service.main import create_app
@@ -167,8 +168,8 @@ def test_the_maps_swingarm_is_where_the_dashboard_draws_it(client: TestClient) -
     drawn = math.degrees(line.get_xdata()[0])
     served = client.get("/v1/geometry", params={"a2_deg": 0, "l2_m": 0, "rws_m": 0.093}).json()["swingarm_angle_deg"]
     assert drawn == pytest.approx(served, abs=0.01)
-    v = plots.default_vehicle()
+    v = default_vehicle()
     assert abs(drawn - math.degrees(v["phi0"] - v["theta0"])) > 0.3
     assert plots.swingarm_at_sag_deg(v.replace(k_rs=0.8 * v["k_rs"])) < drawn - 0.1   # more sag: a lower swingarm
-    refused = plots.Design.from_deg(190.0, 0.55, 0.15)   # L2 beyond the vehicle's l2_max: no equilibrium drawn from
+    refused = Design.from_deg(190.0, 0.55, 0.15)   # L2 beyond the vehicle's l2_max: no equilibrium drawn from
     assert plots.swingarm_at_sag_deg(v, refused) == pytest.approx(math.degrees(v["phi0"] - v["theta0"]))
