@@ -96,14 +96,22 @@ def mixed_cluster() -> Iterator[tuple[str, dict[str, str]]]:
         stop_node(head, head_dir)
 
 
-def _workers() -> list[Any]:
-    """Ray's worker processes on this machine (Ray names them ``ray::<task>`` or ``ray::IDLE``)."""
-    found = []
+def _other_cpu_workers_cpu_s() -> float:
+    """User CPU seconds of the Ray worker processes on this machine (Ray names them ``ray::<task>`` or
+    ``ray::IDLE``) that run under OTHER_CPU. Other tests' workers come and go beside this one (pytest-xdist):
+    one that exits while it is read is skipped."""
+    busy = 0.0
     for proc in psutil.process_iter(["name", "cmdline"]):
         words = " ".join(proc.info["cmdline"] or ())
-        if ((proc.info["name"] or "").startswith("ray::") and "Agent" not in words) or "default_worker.py" in words:
-            found.append(proc)
-    return found
+        if not (((proc.info["name"] or "").startswith("ray::") and "Agent" not in words)
+                or "default_worker.py" in words):
+            continue
+        try:
+            if proc.environ().get("GLIBC_TUNABLES") == OTHER_CPU["GLIBC_TUNABLES"]:
+                busy += proc.cpu_times().user
+        except (psutil.NoSuchProcess, psutil.AccessDenied):   # ZombieProcess is a NoSuchProcess
+            continue
+    return busy
 
 
 def _items(client: Any, job_id: int) -> list[dict[str, Any]]:
@@ -120,6 +128,7 @@ def _assert_same_bits(item: dict[str, Any], batch: Any, i: int) -> None:
         assert item[name] == (value if math.isfinite(value) else None), name
 
 
+@pytest.mark.exclusive   # two Ray nodes, PostgreSQL and the service on two cores: alone, as a cluster test
 def test_a_seeded_de_and_a_sweep_on_a_mixed_cluster_equal_the_serial_run(
         mixed_cluster: tuple[str, dict[str, str]], postgres: Any, tmp_path: Path) -> None:
     address, env = mixed_cluster
@@ -156,8 +165,7 @@ def test_a_seeded_de_and_a_sweep_on_a_mixed_cluster_equal_the_serial_run(
         assert best["fitness_m"] == de.best_f
         # the other-CPU node computed its share: its workers (alive while the scheduler is, the only
         # ones with its environment) took CPU time
-        workers = [w for w in _workers() if w.environ().get("GLIBC_TUNABLES") == OTHER_CPU["GLIBC_TUNABLES"]]
-        busy = sum(p.cpu_times().user for p in workers)
+        busy = _other_cpu_workers_cpu_s()
         assert busy > 0.3, f"the other node's workers used {busy:.2f} s of CPU"
     finally:
         server.terminate()

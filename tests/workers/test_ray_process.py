@@ -92,7 +92,7 @@ for i in range(4):                                       # two running, two queu
     executor.submit(toyfns.sleep_marked, i, d, s)
 while len(list(directory.glob("*.pid"))) < 2:
     time.sleep(0.05)
-ray_processes = [p.pid for p in psutil.Process().children(recursive=True)]
+ray_processes = {p.pid: p.name() for p in psutil.Process().children(recursive=True)}
 start = time.monotonic()
 executor.close()
 close_s = time.monotonic() - start
@@ -101,6 +101,7 @@ print(json.dumps({"close_s": close_s, "tasks": [int(p.read_text()) for p in dire
 """
 
 
+@pytest.mark.exclusive   # a timed promise: beside another test's Ray it took 2.7 s
 def test_close_with_running_tasks_stops_the_local_ray_within_2s(tmp_path: Path) -> None:
     psutil = pytest.importorskip("psutil")
     env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
@@ -121,7 +122,8 @@ def test_close_with_running_tasks_stops_the_local_ray_within_2s(tmp_path: Path) 
             return False
 
     assert not any(running(pid) for pid in out["tasks"])              # the workers, at once
-    deadline = time.monotonic() + 5.0
-    while any(running(pid) for pid in out["ray_processes"]) and time.monotonic() < deadline:
+    # and the rest of that Ray: about 0.5 s; once (Ray 2.40, CI) one of them was still there after 5 s
+    deadline = time.monotonic() + 10.0
+    while any(running(int(pid)) for pid in out["ray_processes"]) and time.monotonic() < deadline:
         time.sleep(0.1)
-    assert not [pid for pid in out["ray_processes"] if running(pid)]  # and the rest of that Ray
+    assert not [name for pid, name in out["ray_processes"].items() if running(int(pid))]
