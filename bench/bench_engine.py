@@ -6,6 +6,7 @@ once, loading it in a fresh process, `finaldrive geometry`); 2-process throughpu
 
     taskset -c 1 python bench/bench_engine.py [--repeat 5] [--methods fast,reference] [--designs 401]
         [--roads sine:0.04:3,sine:0.04:2] [--compare fast_tolerance=1e-4] [--quick]
+    (--compare takes SimSettings fields and vehicle parameters, e.g. --compare front_wheel_spin=1)
     python bench/bench_engine.py --cold-start [--repeat 5] [--no-demo]   # the cold start alone, `finaldrive demo` too
 
 Prints the machine it ran on and its load average. The machine is shared and noisy: compare
@@ -33,7 +34,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from finaldrive.engine import Design, Road, SimSettings, evaluate, simulate  # noqa: E402
+from finaldrive.engine import Design, Road, SimSettings, Vehicle, default_vehicle, evaluate, simulate  # noqa: E402
 from finaldrive.service.machine import describe  # noqa: E402
 
 TABLE11 = Design.from_deg(195.3, 0.037, 0.088)
@@ -64,32 +65,39 @@ def random_designs(n: int, seed: int = 1) -> np.ndarray:
     return np.column_stack([rng.uniform(0, 2 * np.pi, n), rng.uniform(0, 0.2, n), rng.uniform(0.05, 0.15, n)])
 
 
-def distributions(variants: list[SimSettings], road: str, n: int) -> list[dict[str, float]]:
-    """Per settings: the wall time of each of n random designs' runs (simulate's own wall_s), the
-    variants interleaved design by design so that the machine's noise hits them alike; median real-
+Variant = tuple[SimSettings, Vehicle]
+
+
+def distributions(variants: list[Variant], road: str, n: int) -> list[dict[str, float]]:
+    """Per (settings, vehicle): the wall time of each of n random designs' runs (simulate's own wall_s),
+    the variants interleaved design by design so that the machine's noise hits them alike; median real-
     time ratio, median / p90 / max wall [ms], failures."""
     r = Road.parse(road)
     designs = [Design(*row) for row in random_designs(n)]
-    for s in variants:
-        simulate(designs[0], r, s)
+    for s, v in variants:
+        simulate(designs[0], r, s, v)
     walls: list[list[float]] = [[] for _ in variants]
     failures = [0] * len(variants)
     for d in designs:
-        for i, s in enumerate(variants):
-            res = simulate(d, r, s)
+        for i, (s, v) in enumerate(variants):
+            res = simulate(d, r, s, v)
             walls[i].append(res.wall_s)
             failures[i] += not res.ok
     out = []
-    for s, w, f in zip(variants, walls, failures, strict=True):
+    for (s, _), w, f in zip(variants, walls, failures, strict=True):
         a = np.array(w)
         out.append({"ratio median": s.duration / float(np.median(a)), "ms median": 1e3 * float(np.median(a)),
                     "ms p90": 1e3 * float(np.percentile(a, 90)), "ms max": 1e3 * float(a.max()), "failures": f})
     return out
 
 
-def parse_settings(spec: str) -> dict[str, float]:
-    """``key=value,key=value`` -> SimSettings fields (numbers)."""
-    return {k: float(v) for k, v in (item.split("=") for item in spec.split(",") if item)}
+def parse_variant(spec: str) -> Variant:
+    """``key=value,key=value`` -> the fast method's settings and the paper's vehicle with those of the keys
+    that are SimSettings fields and vehicle parameters changed (numbers)."""
+    values = {k: float(v) for k, v in (item.split("=") for item in spec.split(",") if item)}
+    fields = set(SimSettings.__dataclass_fields__)
+    settings = settings_for("fast", **{k: v for k, v in values.items() if k in fields})
+    return settings, default_vehicle().replace(**{k: v for k, v in values.items() if k not in fields})
 
 
 def batch_throughput(method: str, n: int, repeat: int) -> float:
@@ -243,7 +251,8 @@ def main() -> None:
     ap.add_argument("--designs", type=int, default=401, help="random designs per road (fast method)")
     ap.add_argument("--reference-designs", type=int, default=21, help="random designs per road (reference)")
     ap.add_argument("--roads", default="sine:0.04:3,sine:0.04:2", help="roads of the random-design distributions")
-    ap.add_argument("--compare", default="", help="fast settings to compare with the default, e.g. fast_tolerance=1e-4")
+    ap.add_argument("--compare", default="", help="fast settings or vehicle parameters to compare with the default, "
+                    "e.g. fast_tolerance=1e-4 or front_wheel_spin=1")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--cold-start", action="store_true",
                     help="only the cold start, `finaldrive demo` with an empty and a filled cache included")
@@ -262,13 +271,13 @@ def main() -> None:
     print(f"\n== random designs ({n_designs} fast, {args.reference_designs} reference), wall time a run, 1 core")
     methods = args.methods.split(",")
     for road in args.roads.split(","):
-        variants = [settings_for(m) for m in methods]
+        variants = [(settings_for(m), default_vehicle()) for m in methods]
         names = list(methods)
         if args.compare:
-            variants.append(settings_for("fast", **parse_settings(args.compare)))
+            variants.append(parse_variant(args.compare))
             names.append(f"fast {args.compare}")
-        fast = [i for i, s in enumerate(variants) if s.method == "fast"]
-        slow = [i for i, s in enumerate(variants) if s.method != "fast"]
+        fast = [i for i, (s, _) in enumerate(variants) if s.method == "fast"]
+        slow = [i for i, (s, _) in enumerate(variants) if s.method != "fast"]
         stats: dict[int, dict[str, float]] = {}
         for group, n in ((fast, n_designs), (slow, args.reference_designs)):
             if group:

@@ -61,6 +61,7 @@ PARAMETERS: tuple[tuple[str, Rule], ...] = (
     ("engine_speed_4", _POSITIVE), ("engine_torque_1", _NON_NEGATIVE), ("engine_torque_2", _NON_NEGATIVE),
     ("engine_torque_3", _NON_NEGATIVE), ("engine_torque_4", _NON_NEGATIVE), ("launch_speed", _POSITIVE),
     ("tc_friction", _POSITIVE), ("wheelie_force", _POSITIVE),
+    ("I_front_wheel", _POSITIVE), ("front_wheel_spin", (0.0, True, 1.0)),
 )
 #: The launch drive (docs/engine.md#the-launch-drive), added after files were written: (key, value, unit). A
 #: file without them has the paper's constant torque (drive_model 0) and these values, engine/data/vehicle.json's.
@@ -80,6 +81,8 @@ ADDED_LATER: dict[str, tuple[str, float, str]] = {
     "fork_travel": ("suspension", 0.120, "m"),
     "tyre_airborne_relax": ("tyre", 0.0, "-"),
     **{key: ("drive", value, unit) for key, value, unit in LAUNCH_DEFAULTS},
+    "I_front_wheel": ("inertia", 0.47, "kg m^2"),
+    "front_wheel_spin": ("inertia", 0.0, "-"),
     "chain_pitch": ("design_limits", 0.015875, "m"),
     "min_sprocket_teeth": ("design_limits", 9.0, "-"),
 }
@@ -273,6 +276,9 @@ def load_vehicle_dict(data: Any) -> Vehicle:
     if v["tyre_airborne_relax"] not in (0.0, 1.0):
         raise VehicleError("vehicle parameter 'tyre_airborne_relax': must be 0 (eq. 42 as printed) or 1 (relaxed "
                            "while airborne)")
+    if v["front_wheel_spin"] not in (0.0, 1.0):
+        raise VehicleError("vehicle parameter 'front_wheel_spin': must be 0 (the paper: no front wheel rotation) or 1 "
+                           "(the front wheel's inertia, rolling)")
     if v["drive_model"] not in (0.0, 1.0):
         raise VehicleError("vehicle parameter 'drive_model': must be 0 (the paper's constant torque) or 1 (the launch "
                            "drive)")

@@ -16,7 +16,13 @@ with m_F the fork's and front wheel's masses, alpha_k = d(alpha)/dz_k. The veloc
 h = sum m J^T (J' z') are -theta'^2 S_theta - phi'^2 S_phi + 2 fs' theta' m_F perp(u) on (x1, y1),
 the fork's Coriolis and centrifugal terms, and I_sprocket alpha_k alpha'' (z'' = 0).
 
-M is solved by its structure: x1, y1 (m_total I) and beta (coupled to theta and phi only through
+A rolling front wheel (the vehicle's front_wheel_spin; engine.model.mass.front_wheel_spin_mass
+k = I_front_wheel / ft0^2) adds k x_13'^2 / 2 with x_13' = a . z' the front axle's forward speed,
+a = (1, 0, -(w_y), 0, u_x, 0) for w = r_1->13 in the world: M gains k a a^T (M_xx = m_total + k, no
+longer M_yy) and h gains k a (a' . z'), a' . z' = -theta'^2 w_x - 2 theta' fs' u_y (x_13 is a
+function of z, so Lagrange's equations leave only these terms).
+
+M is solved by its structure: x1 (M_xx), y1 (m_total) and beta (coupled to theta and phi only through
 the sprocket) are eliminated, leaving a 3 x 3 system in (theta, phi, fs) (LDL^T). Nothing is
 allocated: the entries and factors live in the caller's workspace ``ws``.
 """
@@ -27,6 +33,7 @@ import numpy as np
 
 from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model import libm, params as P
+from finaldrive.engine.model.mass import front_wheel_spin_mass
 
 N_DOF = 6
 ZX1, ZY1, ZTHETA, ZPHI, ZFS, ZBETA = range(N_DOF)
@@ -35,8 +42,8 @@ ZX1, ZY1, ZTHETA, ZPHI, ZFS, ZBETA = range(N_DOF)
 # of mass and points 2, 3, 4, the fork axis unit vector, and the bodies' mass moments.
 (G_COG_X, G_COG_Y, G_P2_X, G_P2_Y, G_P3_X, G_P3_Y, G_P4_X, G_P4_Y, G_AXIS_X, G_AXIS_Y,
  G_MASS, G_MASS_FORK, G_S_RIGID_X, G_S_RIGID_Y, G_J_RIGID, G_P4_DOT_U, G_P4_CROSS_U, G_S_SWING,
- G_J_SWING, G_FORK_MOMENT, G_FORK_SECOND) = range(21)
-N_GEO = 21
+ G_J_SWING, G_FORK_MOMENT, G_FORK_SECOND, G_SPIN, G_MASS_X) = range(23)
+N_GEO = 23
 
 # Workspace slots (ws): the generalized forces Q = F - h; b, the generalized force of a unit F_x
 # at the rear contact (its lever arm included); c, d(u')/dz'; the entries of M that are not constant
@@ -44,9 +51,9 @@ N_GEO = 21
 W_Q = 0
 W_B = 6
 W_C = 12
-(W_MXT, W_MYT, W_MXP, W_MYP, W_MXS, W_MYS, W_MTT, W_MPP, W_MTP, W_MTS, W_MTB, W_MPB, W_MBB,
- W_D1, W_D2, W_D3, W_L21, W_L31, W_L32, W_KT, W_KP) = range(18, 39)
-N_WS = 39
+(W_MXT, W_MYT, W_MXP, W_MYP, W_MXS, W_MYS, W_MTT, W_MPP, W_MTP, W_MTS, W_MTB, W_MPB, W_MBB, W_MSS,
+ W_D1, W_D2, W_D3, W_L21, W_L31, W_L32, W_KT, W_KP) = range(18, 40)
+N_WS = 40
 
 
 @jit(allocates=True)
@@ -67,6 +74,8 @@ def design_constants(p: np.ndarray) -> np.ndarray:
     m_fork = m_f + m_fw
     g[G_MASS] = m_c + m_sp + m_fork + p[P.M_SWINGARM] + p[P.M_REAR_WHEEL]
     g[G_MASS_FORK] = m_fork
+    g[G_SPIN] = front_wheel_spin_mass(p)
+    g[G_MASS_X] = g[G_MASS] + g[G_SPIN]
     # chassis bodies, the fork's at point 4 (their slide along u is added per state)
     p4x, p4y = g[G_P4_X], g[G_P4_Y]
     g[G_S_RIGID_X] = m_c * g[G_COG_X] + m_sp * g[G_P2_X] + m_fork * p4x
@@ -120,6 +129,7 @@ def inertia(geo: np.ndarray, p: np.ndarray, ct: float, st: float, cp: float, sp:
     ws[W_MTB] = i_sp * ja_t * rho
     ws[W_MPB] = i_sp * ja_p * rho
     ws[W_MBB] = p[P.I_REAR_WHEEL] + i_sp * rho * rho
+    ws[W_MSS] = m_fork
     # Q = gravity - h
     wt2, wp2 = wt * wt, wp * wp
     cor = 2.0 * fs_dot * wt * m_fork
@@ -129,14 +139,28 @@ def inertia(geo: np.ndarray, p: np.ndarray, ct: float, st: float, cp: float, sp:
     ws[W_Q + ZPHI] = -g * spx - i_sp * ja_p * alpha_c
     ws[W_Q + ZFS] = -m_fork * g * uy + wt2 * fork_dot
     ws[W_Q + ZBETA] = -i_sp * rho * alpha_c
+    k = geo[G_SPIN]
+    if k != 0.0:   # the rolling front wheel: k a a^T into M, k a (a' . z') into h (module doc)
+        s = fs + p[P.L8]                                  # point 13 along the fork axis from point 4
+        wx = ct * geo[G_P4_X] - st * geo[G_P4_Y] + s * ux
+        wy = st * geo[G_P4_X] + ct * geo[G_P4_Y] + s * uy
+        a_t = -wy
+        conv = k * (-wt2 * wx - 2.0 * wt * fs_dot * uy)
+        ws[W_MXT] += k * a_t
+        ws[W_MXS] += k * ux
+        ws[W_MTT] += k * a_t * a_t
+        ws[W_MTS] += k * a_t * ux
+        ws[W_MSS] += k * ux * ux
+        ws[W_Q + ZX1] -= conv
+        ws[W_Q + ZTHETA] -= a_t * conv
+        ws[W_Q + ZFS] -= ux * conv
     return ux, uy
 
 
 @jit
 def mass_factor(geo: np.ndarray, ws: np.ndarray) -> None:
     """Factor M: x1, y1 and beta eliminated, LDL^T of the remaining 3 x 3 in (theta, phi, fs)."""
-    m = geo[G_MASS]
-    m_fork = geo[G_MASS_FORK]
+    m, mx = geo[G_MASS], geo[G_MASS_X]
     mxt, myt, mxp, myp, mxs, mys = ws[W_MXT], ws[W_MYT], ws[W_MXP], ws[W_MYP], ws[W_MXS], ws[W_MYS]
     kt, kp = ws[W_MTB] / ws[W_MBB], ws[W_MPB] / ws[W_MBB]
     a11 = ws[W_MTT] - (mxt * mxt + myt * myt) / m - kt * ws[W_MTB]
@@ -144,7 +168,15 @@ def mass_factor(geo: np.ndarray, ws: np.ndarray) -> None:
     a31 = ws[W_MTS] - (mxt * mxs + myt * mys) / m
     a22 = ws[W_MPP] - (mxp * mxp + myp * myp) / m - kp * ws[W_MPB]
     a32 = -(mxp * mxs + myp * mys) / m
-    a33 = m_fork - (mxs * mxs + mys * mys) / m
+    a33 = ws[W_MSS] - (mxs * mxs + mys * mys) / m
+    if mx != m:   # x1 eliminated with M_xx = mx (a rolling front wheel), not m: the x terms' share corrected
+        d = 1.0 / m - 1.0 / mx
+        a11 += mxt * mxt * d
+        a21 += mxt * mxp * d
+        a31 += mxt * mxs * d
+        a22 += mxp * mxp * d
+        a32 += mxp * mxs * d
+        a33 += mxs * mxs * d
     d1 = a11
     l21, l31 = a21 / d1, a31 / d1
     d2 = a22 - l21 * a21
@@ -159,9 +191,9 @@ def mass_factor(geo: np.ndarray, ws: np.ndarray) -> None:
 def mass_solve(geo: np.ndarray, ws: np.ndarray, r: np.ndarray, x: np.ndarray, r0: int = 0, x0: int = 0) -> None:
     """x[x0:x0 + 6] = M^-1 r[r0:r0 + 6] with the factors of mass_factor (distinct 6-vectors; offsets instead
     of slices, which would cost a reference count each in the right-hand side)."""
-    m = geo[G_MASS]
+    m, mx = geo[G_MASS], geo[G_MASS_X]
     mxt, myt, mxp, myp, mxs, mys = ws[W_MXT], ws[W_MYT], ws[W_MXP], ws[W_MYP], ws[W_MXS], ws[W_MYS]
-    rx, ry, rb = r[r0 + ZX1] / m, r[r0 + ZY1] / m, r[r0 + ZBETA] / ws[W_MBB]
+    rx, ry, rb = r[r0 + ZX1] / mx, r[r0 + ZY1] / m, r[r0 + ZBETA] / ws[W_MBB]
     g1 = r[r0 + ZTHETA] - mxt * rx - myt * ry - ws[W_MTB] * rb
     g2 = r[r0 + ZPHI] - mxp * rx - myp * ry - ws[W_MPB] * rb
     g3 = r[r0 + ZFS] - mxs * rx - mys * ry
@@ -172,7 +204,7 @@ def mass_solve(geo: np.ndarray, ws: np.ndarray, r: np.ndarray, x: np.ndarray, r0
     a2 = g2 * ws[W_D2] - l32 * a3
     a1 = g1 * ws[W_D1] - l21 * a2 - l31 * a3
     x[x0 + ZTHETA], x[x0 + ZPHI], x[x0 + ZFS] = a1, a2, a3
-    x[x0 + ZX1] = rx - (mxt * a1 + mxp * a2 + mxs * a3) / m
+    x[x0 + ZX1] = rx - (mxt * a1 + mxp * a2 + mxs * a3) / mx
     x[x0 + ZY1] = ry - (myt * a1 + myp * a2 + mys * a3) / m
     x[x0 + ZBETA] = rb - ws[W_KT] * a1 - ws[W_KP] * a2
 
@@ -182,10 +214,10 @@ def mass_product(geo: np.ndarray, ws: np.ndarray, x: np.ndarray, out: np.ndarray
     """out = M x (6-vectors, distinct)."""
     m = geo[G_MASS]
     xt, xp, xs, xb = x[ZTHETA], x[ZPHI], x[ZFS], x[ZBETA]
-    out[ZX1] = m * x[ZX1] + ws[W_MXT] * xt + ws[W_MXP] * xp + ws[W_MXS] * xs
+    out[ZX1] = geo[G_MASS_X] * x[ZX1] + ws[W_MXT] * xt + ws[W_MXP] * xp + ws[W_MXS] * xs
     out[ZY1] = m * x[ZY1] + ws[W_MYT] * xt + ws[W_MYP] * xp + ws[W_MYS] * xs
     out[ZTHETA] = (ws[W_MXT] * x[ZX1] + ws[W_MYT] * x[ZY1] + ws[W_MTT] * xt + ws[W_MTP] * xp + ws[W_MTS] * xs
                    + ws[W_MTB] * xb)
     out[ZPHI] = ws[W_MXP] * x[ZX1] + ws[W_MYP] * x[ZY1] + ws[W_MTP] * xt + ws[W_MPP] * xp + ws[W_MPB] * xb
-    out[ZFS] = ws[W_MXS] * x[ZX1] + ws[W_MYS] * x[ZY1] + ws[W_MTS] * xt + geo[G_MASS_FORK] * xs
+    out[ZFS] = ws[W_MXS] * x[ZX1] + ws[W_MYS] * x[ZY1] + ws[W_MTS] * xt + ws[W_MSS] * xs
     out[ZBETA] = ws[W_MTB] * xt + ws[W_MPB] * xp + ws[W_MBB] * xb

@@ -4,6 +4,10 @@ Each rigid body is carried by two basic points i, j of the natural coordinates; 
 point is r = r_i + a (r_j - r_i) + b R (r_j - r_i) with R the +90 deg rotation, so M is
 constant (section 6): M_ii = (m - 2 m a_G + J) I, M_ij = (m a_G - J) I + m b_G R,
 M_jj = J I, with J = I_i / L_ij^2 and I_i the polar inertia about point i.
+
+The front wheel is a point mass at point 13 (the paper does not turn it, section 2.1); with the
+vehicle's ``front_wheel_spin`` it also rolls, at the angular speed x_13' / ft0, and its rotational
+energy I_front_wheel x_13'^2 / (2 ft0^2) adds :func:`front_wheel_spin_mass` to M at x_13 alone.
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model import libm, params as P
 from finaldrive.engine.model.coordinates import FS, FT, N_COORDS, RS, RT, X1, X2, X5, X6, X8, X9, X12, X13, Y13
 from finaldrive.engine.model.elements import spring_energy
@@ -52,6 +57,13 @@ def bodies(p: np.ndarray) -> list[Body]:
     ]
 
 
+@jit
+def front_wheel_spin_mass(p: np.ndarray) -> float:
+    """The front wheel's rotational inertia as a mass along x [kg]: I_front_wheel / ft0^2 when it turns
+    (front_wheel_spin = 1, rolling at x_13' / ft0 on its unloaded radius), else 0 (the paper)."""
+    return float(p[P.FRONT_WHEEL_SPIN] * p[P.I_FRONT_WHEEL] / (p[P.FT0] * p[P.FT0]))
+
+
 def mass_matrix(p: np.ndarray) -> np.ndarray:
     """The constant 39 x 39 mass matrix M."""
     M = np.zeros((N_COORDS, N_COORDS))
@@ -64,6 +76,7 @@ def mass_matrix(p: np.ndarray) -> np.ndarray:
         M[sj, si] += (b.mass * b.a_g - J) * eye + b.mass * b.b_g * _ROT.T
         M[sj, sj] += J * eye
     M[X13:X13 + 2, X13:X13 + 2] += p[P.M_FRONT_WHEEL] * eye
+    M[X13, X13] += front_wheel_spin_mass(p)
     return M
 
 

@@ -95,17 +95,19 @@ ENGINE_TORQUE_4 = 83
 LAUNCH_SPEED = 84
 TC_FRICTION = 85
 WHEELIE_FORCE = 86
-A2 = 87  # design: angle a2 of r_1->2 in the chassis frame [rad]
-L2 = 88  # design: pivot to engine sprocket axis [m]
-R_WS = 89  # design: wheel sprocket pitch radius [m]
-R_ES = 90  # design: engine sprocket pitch radius R_WS / sprocket_ratio [m]
-L_CHAIN = 91  # chain length L of eq. (69), set at t = 0 [m]
-L_LOOP = 92  # two chain runs: the whole chain's length, both runs and both wraps, set at t = 0 [m]
-AL_ALPHA = 93  # augmented Lagrangian penalty alpha, eqs. (57)-(58)
-AL_XI = 94  # Baumgarte xi, eq. (57)
-AL_OMEGA = 95  # Baumgarte omega, eq. (57)
-RS_BUMP = 96  # travel stops: the rear spring's length at full compression (rear_wheel_travel) [m]
-FS_BUMP = 97  # travel stops: the fork's length at full compression, s_fs - fork_travel [m]
+I_FRONT_WHEEL = 87
+FRONT_WHEEL_SPIN = 88
+A2 = 89  # design: angle a2 of r_1->2 in the chassis frame [rad]
+L2 = 90  # design: pivot to engine sprocket axis [m]
+R_WS = 91  # design: wheel sprocket pitch radius [m]
+R_ES = 92  # design: engine sprocket pitch radius R_WS / sprocket_ratio [m]
+L_CHAIN = 93  # chain length L of eq. (69), set at t = 0 [m]
+L_LOOP = 94  # two chain runs: the whole chain's length, both runs and both wraps, set at t = 0 [m]
+AL_ALPHA = 95  # augmented Lagrangian penalty alpha, eqs. (57)-(58)
+AL_XI = 96  # Baumgarte xi, eq. (57)
+AL_OMEGA = 97  # Baumgarte omega, eq. (57)
+RS_BUMP = 98  # travel stops: the rear spring's length at full compression (rear_wheel_travel) [m]
+FS_BUMP = 99  # travel stops: the fork's length at full compression, s_fs - fork_travel [m]
 
 VEHICLE_KEYS: tuple[str, ...] = (
     'L3',
@@ -195,6 +197,8 @@ VEHICLE_KEYS: tuple[str, ...] = (
     'launch_speed',
     'tc_friction',
     'wheelie_force',
+    'I_front_wheel',
+    'front_wheel_spin',
 )
-N_VEHICLE = 87
-N_PARAMS = 98
+N_VEHICLE = 89
+N_PARAMS = 100

@@ -27,6 +27,8 @@ def test_each_alternative_is_the_changed_model_simulated() -> None:
     launch = evaluate(DESIGNS, road, SETTINGS, vehicle.replace(drive_model=1.0))
     assert out["alternatives"]["drive_launch"]["fitness_m"] == launch.fitness_m.tolist()
     assert "drive_launch" in model_bands(DESIGNS[:1], road, SETTINGS, vehicle.replace(drive_model=1.0))["skipped"]
+    spin = evaluate(DESIGNS, road, SETTINGS, vehicle.replace(front_wheel_spin=1.0))
+    assert out["alternatives"]["front_wheel_spin"]["fitness_m"] == spin.fitness_m.tolist()
     ring = out["alternatives"]["road_enveloped"]
     assert ring["road"] == "profile:sine:0.04:3~ring0.3" and ring["failed"] == [""] * len(DESIGNS)
     covered = enveloped(road, vehicle["rt0"], -ENVELOPE_MARGIN_M, 0.5 * RUN_ACCELERATION_BOUND + ENVELOPE_MARGIN_M)
@@ -47,4 +49,5 @@ def test_what_the_changes_must_do_on_flat_ground() -> None:
     base_d = np.array(out["baseline"]["distance_m"])
     assert (np.array(out["alternatives"]["drive_double"]["distance_m"]) > base_d + 0.1).all()
     assert (np.array(out["alternatives"]["drive_half"]["distance_m"]) < base_d - 0.1).all()
+    assert (np.array(out["alternatives"]["front_wheel_spin"]["distance_m"]) < base_d - 0.01).all()  # more inertia
     assert out["skipped"] == ["road_phase_90", "road_phase_180", "road_enveloped"]
