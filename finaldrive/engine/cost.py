@@ -87,9 +87,11 @@ def reach_m(duration: float, vehicle: Vehicle, height_range_m: float) -> float:
 
 
 def fast_steps(settings: SimSettings, road: Road, vehicle: Vehicle) -> float:
-    """Upper estimate of the fast path's steps (accepted and rejected alike) on ``road``."""
-    two_runs = vehicle["chain_runs"] == 2.0
-    h_max = settings.fast_max_step * (0.5 if road.kind == "profile" or two_runs else 1.0)
+    """Upper estimate of the fast path's steps (accepted and rejected alike) on ``road``: with the engine
+    sprocket's own state (two chain runs: ROS2's halved step; the elastic chain: its torsional mode and
+    snatches, 1.2-1.7x the rigid chain's time, docs/engine.md) as many as at half the largest step."""
+    own_sprocket = vehicle["chain_runs"] == 2.0 or vehicle["chain_compliance"] == 1.0
+    h_max = settings.fast_max_step * (0.5 if road.kind == "profile" or own_sprocket else 1.0)
     smooth = START_STEPS + settings.duration / h_max
     if road.kind == "sine":
         lam, height = road.wavelength, abs(road.height)

@@ -43,8 +43,9 @@ RECORD: tuple[Value, ...] = (
     Value("wall_s", "wall time the simulation took", 3),
     _d("chain_tension_max_n", "largest tension of the chain's upper run", 1),
     _d("chain_tension_min_n", "smallest chain tension: negative when the upper run pushes (the paper's chain) or "
-                              "the lower run pulls (two runs)", 1),
-    _d("chain_compression_s", "time in overrun: the upper run pushing (the paper's chain) or not taut (two runs)", 3),
+                              "the lower run pulls (two runs); never below 0 for the elastic chain", 1),
+    _d("chain_compression_s", "time in overrun: the upper run pushing (the paper's chain) or not taut (two runs); 0 "
+                              "for the elastic chain, which does not push", 3),
     _d("fz_rear_max_n", "largest vertical load of the rear tyre", 1),
     _d("fz_rear_min_n", f"smallest vertical load of the rear tyre: {_LOAD_MIN}", 1),
     _d("fz_front_max_n", "largest vertical load of the front tyre", 1),

@@ -119,11 +119,11 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
         # series rows every series_stride x dt, by dense output (the steps do not land on them)
         n_out = max(1, math.ceil(settings.duration / (settings.dt * settings.series_stride) - 1e-9))
         n_rows = n_out + 1 if settings.series else 0
-        two_runs = bool(p[P.CHAIN_RUNS] == 2.0)
+        own_sprocket = bool(p[P.CHAIN_RUNS] == 2.0 or p[P.CHAIN_COMPLIANCE] == 1.0)  # e and alpha' in the state
         series = np.zeros((n_rows, outcome.N_SERIES))
-        states = np.zeros((n_rows, 2 * bodies.N_DOF + int(two_runs)))  # two runs: e too
+        states = np.zeros((n_rows, 2 * bodies.N_DOF + int(own_sprocket)))  # e too
         st = np.zeros(FAST_N_ST)
-        y = np.zeros(minimal.N_STATE_TWO_RUNS if two_runs else minimal.N_STATE)
+        y = np.zeros(minimal.N_STATE_TWO_RUNS if own_sprocket else minimal.N_STATE)
         y[:bodies.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
 
         def chunk() -> int:
@@ -169,6 +169,7 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
     if settings.method == "fast":
         x1_end = float(y[bodies.ZX1])
         kinetic = float(minimal.kinetic_energy(y, p, kind, rp, int(st[S_MODE])))
+        chain_energy = float(minimal.elastic_energy(y, p))   # the elastic chain's spring (0 at the start)
         x1, y1, theta, phi, fs = (float(c) for c in y[:bodies.ZBETA])
         q_end = assemble(p, road, x1, y1, theta, phi, fs, 0.0, 0.0)  # the pose, but for alpha and beta
         rows = int(st[S_ROW])
@@ -180,6 +181,7 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
         kinetic = 0.5 * dot(qd, Mqd)   # engine.model.linalg: not BLAS's CPU-chosen kernels
         q_end = y[:N_COORDS]
         rows = int(st[reference.S_ROW])
+        chain_energy = 0.0
     off_road = road.uncovered(float(setup.q0[X14]), float(q_end[X15]))
     if off_road:
         return _failed(off_road, setup.squat_ratio, chain, start)
@@ -188,7 +190,7 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
     fit = fitness(distance, setup.squat_ratio, slack_m, eps1=p[P.EPS1], eps2=p[P.EPS2],
                   sr_optimum=p[P.SR_OPTIMUM], floor=p[P.FLOOR])
     diagnostics = _diagnostics(ext, led, kinetic,
-                               potential_energy(q_end, p, qg) - potential_energy(setup.q0, p, qg))
+                               potential_energy(q_end, p, qg) - potential_energy(setup.q0, p, qg) + chain_energy)
     out = None
     if settings.series:
         if settings.method == "fast":

@@ -62,6 +62,7 @@ PARAMETERS: tuple[tuple[str, Rule], ...] = (
     ("engine_torque_3", _NON_NEGATIVE), ("engine_torque_4", _NON_NEGATIVE), ("launch_speed", _POSITIVE),
     ("tc_friction", _POSITIVE), ("wheelie_force", _POSITIVE),
     ("I_front_wheel", _POSITIVE), ("front_wheel_spin", (0.0, True, 1.0)),
+    ("chain_compliance", (0.0, True, 1.0)), ("k_chain", _POSITIVE), ("k_cush", _POSITIVE), ("c_cush", _NON_NEGATIVE),
 )
 #: The launch drive (docs/engine.md#the-launch-drive), added after files were written: (key, value, unit). A
 #: file without them has the paper's constant torque (drive_model 0) and these values, engine/data/vehicle.json's.
@@ -83,6 +84,10 @@ ADDED_LATER: dict[str, tuple[str, float, str]] = {
     **{key: ("drive", value, unit) for key, value, unit in LAUNCH_DEFAULTS},
     "I_front_wheel": ("inertia", 0.47, "kg m^2"),
     "front_wheel_spin": ("inertia", 0.0, "-"),
+    "chain_compliance": ("chain", 0.0, "-"),
+    "k_chain": ("chain", 2.0e6, "N/m"),
+    "k_cush": ("chain", 3000.0, "N m/rad"),
+    "c_cush": ("chain", 10.0, "N m s/rad"),
     "chain_pitch": ("design_limits", 0.015875, "m"),
     "min_sprocket_teeth": ("design_limits", 9.0, "-"),
 }
@@ -191,10 +196,13 @@ class Vehicle:
 
     def check_method(self, method: str) -> None:
         """Raise ValueError if the solver ``method`` cannot simulate this vehicle (the two-run chain
-        is modelled by the fast method only)."""
+        and the elastic chain are modelled by the fast method only)."""
         if self["chain_runs"] == 2 and method == "reference":
             raise ValueError("vehicle chain_runs = 2 (both chain runs) is supported by the fast method only; "
                              "the reference method models the paper's upper run (chain_runs = 1)")
+        if self["chain_compliance"] == 1 and method == "reference":
+            raise ValueError("vehicle chain_compliance = 1 (the elastic chain and cush drive) is supported by the "
+                             "fast method only; the reference method models the paper's rigid chain")
 
     def to_dict(self) -> dict[str, Any]:
         units, sources, groups = dict(self.units), dict(self.sources), dict(self.groups)
@@ -289,6 +297,12 @@ def load_vehicle_dict(data: Any) -> Vehicle:
         raise VehicleError("vehicle parameter 'fork_travel': must be less than the fork's unloaded length s_fs")
     if v["chain_runs"] not in (1.0, 2.0):
         raise VehicleError("vehicle parameter 'chain_runs': must be 1 (the paper's upper run) or 2 (both runs)")
+    if v["chain_compliance"] not in (0.0, 1.0):
+        raise VehicleError("vehicle parameter 'chain_compliance': must be 0 (the paper's rigid chain) or 1 (the chain "
+                           "and the cush drive elastic)")
+    if v["chain_compliance"] == 1.0 and v["chain_runs"] == 2.0:
+        raise VehicleError("vehicle parameter 'chain_compliance': the elastic chain is the paper's upper run made "
+                           "elastic (chain_runs = 1); it is not combined with both runs (chain_runs = 2)")
     if v["rws_tyre_margin"] >= v["rt0"]:
         raise VehicleError("vehicle parameter 'rws_tyre_margin': must be less than the rear tyre's radius rt0")
     return Vehicle(

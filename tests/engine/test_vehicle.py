@@ -14,7 +14,7 @@ from finaldrive.engine.vehicle import PARAMETERS
 def test_every_default_value_has_a_unit_and_a_source():
     d = default_vehicle().to_dict()
     entries = [e for group in d["parameters"].values() for e in group.values()]
-    assert len(entries) == 100
+    assert len(entries) == 104
     assert all(e["source"] and e["unit"] for e in entries)
 
 

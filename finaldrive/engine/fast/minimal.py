@@ -16,6 +16,13 @@ alpha = (1 - rho) gamma_l(D) - L_taut(D) / R_ES + rho beta + L_l / R_ES, gamma_l
 them the engine sprocket turns freely (its inertia leaves M); the state then carries the play the
 sprocket has turned beyond the upper run's engagement, e = alpha - alpha_u(z) (the upper run's gap is
 R_ES e), and alpha'.
+
+With the elastic chain (vehicle chain_compliance = 1, docs/engine.md#the-elastic-chain-and-cush-drive)
+the upper run and the cush drive are one spring-damper along the run, in series: the state carries e and
+alpha' as above, the run is stretched by s = -R_ES e, and its tension T = k s + c s' (k = 1 / (1 / k_chain
++ R_WS^2 / k_cush), c = c_cush / R_WS^2) pulls the sprocket (I alpha'' = -T_drive + T R_ES) and, by
+virtual work on alpha_u(z), the bodies (Q -= T R_ES d(alpha_u)/dz). A chain cannot push: slack (s <= 0)
+the run carries nothing, and its damper holds T >= 0 (engine.fast.minimal.elastic_tension).
 """
 
 from __future__ import annotations
@@ -74,8 +81,9 @@ ZU = 2 * N_DOF
 #: [rad], and alpha' (in an engaged mode both follow from z, z').
 ZPLAY, ZALPHA_DOT = N_STATE, N_STATE + 1
 N_STATE_TWO_RUNS = N_STATE + 2
-#: The chain's modes (the engaged run): upper, lower, none (the engine sprocket turning freely).
-UPPER, LOWER, FREE = 1, -1, 0
+#: The chain's modes (the engaged run): upper, lower, none (the engine sprocket turning freely); and the
+#: elastic upper run (chain_compliance = 1), in which the engine sprocket also turns on its own.
+UPPER, LOWER, FREE, ELASTIC = 1, -1, 0, 2
 
 
 @jit
@@ -124,10 +132,48 @@ def chain_terms(w2x, w2y, w6x, w6y, wt, wp, wb, p, run=1.0):
 
 
 @jit
-def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
-    """y' for y = (z, z', u), or (z, z', u, e, alpha') for the two-run chain; returns a failure code (0 = ok).
+def elastic_stiffness(p: np.ndarray) -> tuple[float, float]:
+    """(k [N/m], c [N s/m]) of the elastic chain: the upper run (k_chain) in series with the cush drive
+    (k_cush, c_cush about the wheel, seen along the run through R_WS)."""
+    rws2 = p[P.R_WS] * p[P.R_WS]
+    return 1.0 / (1.0 / p[P.K_CHAIN] + rws2 / p[P.K_CUSH]), p[P.C_CUSH] / rws2
 
-    run: the chain's mode, UPPER (the paper's), LOWER or FREE. aux[AUX_TENSION] is the chain's net
+
+@jit
+def elastic_tension(play: float, play_rate: float, p: np.ndarray, aux: np.ndarray) -> float:
+    """The elastic run's tension [N] for the sprocket's turn e = play beyond alpha_u(z): with the stretch
+    s = -R_ES e, T = k s + c s' while both s and that are positive, else 0 (a chain does not push). The
+    power it dissipates, T s' - k s s' (what does not go into the spring), into aux[AUX_P_DAMP]:
+    c s'^2 while it pulls, -k s s' > 0 while it is stretched but releasing faster than its damper allows."""
+    k, c = elastic_stiffness(p)
+    s, s_dot = -p[P.R_ES] * play, -p[P.R_ES] * play_rate
+    if s <= 0.0:
+        return 0.0
+    t = k * s + c * s_dot
+    if t <= 0.0:
+        aux[AUX_P_DAMP] -= k * s * s_dot
+        return 0.0
+    aux[AUX_P_DAMP] += c * s_dot * s_dot
+    return t
+
+
+@jit
+def elastic_energy(y: np.ndarray, p: np.ndarray) -> float:
+    """The elastic run's spring energy k s^2 / 2 at the state y [J], 0 when slack (s <= 0) or without
+    chain_compliance."""
+    if p[P.CHAIN_COMPLIANCE] == 0.0:
+        return 0.0
+    k, _ = elastic_stiffness(p)
+    s = max(0.0, -p[P.R_ES] * y[ZPLAY])
+    return 0.5 * k * s * s
+
+
+@jit
+def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
+    """y' for y = (z, z', u), or (z, z', u, e, alpha') for the two-run or the elastic chain; returns a failure
+    code (0 = ok).
+
+    run: the chain's mode, UPPER (the paper's), LOWER, FREE or ELASTIC. aux[AUX_TENSION] is the chain's net
     pull on the engine sprocket, T_upper - T_lower = (T + I alpha'') / R_ES: the upper run's tension
     in the paper's model (negative: pushing), the lower run's pull with its sign changed in LOWER.
 
@@ -150,7 +196,8 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
         w2x, w2y, w6x, w6y, wt, wp, wb, p, -1.0 if run == LOWER else 1.0)
     rho = p[P.R_WS] / p[P.R_ES]
     upper_rate = alpha_dot                                             # alpha_u', read when FREE (e' below)
-    if run == FREE:                                                    # no run engaged: alpha is free
+    stretch_t, stretch_p, stretch_b = ja_t, ja_p, rho                  # d(alpha_u)/dz: the elastic run's gradient
+    if run in (FREE, ELASTIC):                                         # alpha is the sprocket's own
         ja_t, ja_p, alpha_c, rho, alpha_dot = 0.0, 0.0, 0.0, 0.0, y[ZALPHA_DOT]
     ux, uy = inertia(geo, p, ct, st, cp, sp, fs, wt, wp, fsd, ja_t, ja_p, alpha_c, rho, ws)
     # rear tyre: radial (36) and longitudinal (38)-(52) forces at point 14, below point 6
@@ -169,6 +216,12 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
     q_p = ws[W_Q + ZPHI] - torque * ja_p
     q_s = ws[W_Q + ZFS]
     q_b = ws[W_Q + ZBETA] - torque * rho
+    pull = 0.0
+    if run == ELASTIC:   # the run's tension T, times R_ES: on the sprocket, and on z through alpha_u(z)
+        pull = elastic_tension(y[ZPLAY], alpha_dot - upper_rate, p, aux) * p[P.R_ES]
+        q_t -= pull * stretch_t
+        q_p -= pull * stretch_p
+        q_b -= pull * stretch_b
     q_x += fx - fz_rear * dhr
     q_y += fz_rear
     q_p += fz_rear * drt_phi - fx * w6y
@@ -212,14 +265,14 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
         out[i] = y[N_DOF + i]
     out[ZU] = aux[AUX_DUDT]                                            # (42)
     alpha_dd = alpha_c + ja_t * out[N_DOF + ZTHETA] + ja_p * out[N_DOF + ZPHI] + rho * out[N_DOF + ZBETA]
-    if run == FREE:
-        alpha_dd = -torque / p[P.I_SPROCKET]                           # the free sprocket: I alpha'' = -T
+    if run in (FREE, ELASTIC):
+        alpha_dd = (pull - torque) / p[P.I_SPROCKET]                   # its own: I alpha'' = -T_drive + T R_ES
     aux[AUX_TENSION] = sprocket_chain_tension(torque, alpha_dd, p)
     aux[AUX_TAUT] = taut
     aux[AUX_TAUT_RATE] = taut_rate
     aux[AUX_ALPHA_DOT] = alpha_dot
     if y.shape[0] == N_STATE_TWO_RUNS:  # e' (engaged: e follows from z, projected after each step)
-        out[ZPLAY] = alpha_dot - upper_rate if run == FREE else 0.0
+        out[ZPLAY] = alpha_dot - upper_rate if run in (FREE, ELASTIC) else 0.0
         out[ZALPHA_DOT] = alpha_dd
     for i in range(y.shape[0]):
         if not math.isfinite(out[i]):
@@ -230,7 +283,7 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
 @jit(allocates=True)
 def kinetic_energy(y, p, kind, rp, run=UPPER):
     """1/2 z'^T M(z) z' [J] at the state y, with the mass matrix of fast_rhs in the chain's mode run
-    (FREE: the engine sprocket's 1/2 I alpha'^2 added, its inertia being out of M)."""
+    (FREE, ELASTIC: the engine sprocket's 1/2 I alpha'^2 added, its inertia being out of M)."""
     out = np.zeros(y.shape[0])
     aux = np.zeros(N_AUX)
     ws = np.zeros(N_WS)
@@ -238,5 +291,5 @@ def kinetic_energy(y, p, kind, rp, run=UPPER):
     fast_rhs(y, p, geo, kind, rp, p[P.SIGMA_K0], False, out, aux, ws, run)
     mz = np.zeros(N_DOF)
     mass_product(geo, ws, y[N_DOF:ZU], mz)
-    free = 0.5 * p[P.I_SPROCKET] * y[ZALPHA_DOT] ** 2 if run == FREE else 0.0
+    free = 0.5 * p[P.I_SPROCKET] * y[ZALPHA_DOT] ** 2 if run in (FREE, ELASTIC) else 0.0
     return 0.5 * dot(y[N_DOF:ZU], mz) + free

@@ -21,7 +21,8 @@ grow to h_max elsewhere.
 With the two-run chain (a state of N_STATE_TWO_RUNS, engine.fast.chain_runs) each step is taken in
 one mode of the chain; a step whose end would see the engaged run push, or the free sprocket close a
 gap, is shortened (secant on the tension or the gap) until it ends at the event; the run is then
-released at the start of the next step, or re-engaged by its impact at the end of this one.
+released at the start of the next step, or re-engaged by its impact at the end of this one. The elastic
+chain (chain_compliance = 1) has the same state in one mode, ELASTIC, throughout: no events.
 """
 
 from __future__ import annotations
@@ -41,10 +42,21 @@ from finaldrive.engine.fast.chain_runs import (
     released,
     run_tension,
 )
-from finaldrive.engine.fast.minimal import FREE, N_STATE, N_STATE_TWO_RUNS, UPPER, ZALPHA_DOT, ZPLAY, ZU, fast_rhs
+from finaldrive.engine.fast.minimal import (
+    ELASTIC,
+    FREE,
+    LOWER,
+    N_STATE,
+    N_STATE_TWO_RUNS,
+    UPPER,
+    ZALPHA_DOT,
+    ZPLAY,
+    ZU,
+    fast_rhs,
+)
 from finaldrive.engine.fast.wstep import ERROR_ORDER, N_STAGES, attempt, w_solve
 from finaldrive.engine.jit.kernel import jit
-from finaldrive.engine.model import libm
+from finaldrive.engine.model import libm, params as P
 from finaldrive.engine.model.diagnostics import (
     E_CHAIN_COMPRESSION,
     E_TAUT_MAX,
@@ -97,7 +109,7 @@ N_ST = 10
 @jit
 def high_order(kind: int, two_runs: bool) -> bool:
     """Whether run_fast steps with ROS34PW2 (else ROS2, with half its largest step h_max): on a
-    smooth road (not a piecewise-linear profile) with the paper's single chain run."""
+    smooth road (not a piecewise-linear profile) without the two-run chain's events."""
     return kind != PROFILE and not two_runs
 
 
@@ -174,7 +186,7 @@ def _event_fraction(y, ynew, mode, tension, tension_end, p, geo):
 @jit(allocates=True)
 def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only, max_air_time, keep_series,
              st, ext, led, series, states, max_steps):
-    """Integrate y = (z, z', u), or (z, z', u, e, alpha') with the two-run chain, from rest to t_end
+    """Integrate y = (z, z', u), or (z, z', u, e, alpha') with the two-run or the elastic chain, from rest to t_end
     with step-size control; returns a code.
 
     Resumable: every quantity the loop carries between steps is in y and the arrays st (N_ST),
@@ -193,7 +205,8 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only,
     """
     geo = design_constants(p)
     n_state = y.shape[0]
-    two_runs = n_state == N_STATE_TWO_RUNS
+    elastic = p[P.CHAIN_COMPLIANCE] == 1.0           # the elastic chain's state: as the two runs', no events
+    two_runs = n_state == N_STATE_TWO_RUNS and not elastic
     order3 = high_order(kind, two_runs) and not ros2_only
     if not order3:
         h_max *= 0.5  # ROS2's largest step: half of ROS34PW2's
@@ -221,16 +234,16 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only,
     scale = np.full(n_state, tol)
     for i in range(N_DOF, ZU):
         scale[i] = 10.0 * tol
-    if two_runs:
+    if n_state == N_STATE_TWO_RUNS:
         scale[ZALPHA_DOT] = 10.0 * tol
     n_rows = series.shape[0] if keep_series else 0
     if st[S_STARTED] == 0.0:
         st[:] = 0.0
-        st[S_MODE] = UPPER
+        st[S_MODE] = ELASTIC if elastic else UPPER
         st[S_SIGMA] = relaxation_length(0.0, 0.0, 1.0, p)
         st[S_H] = min(h_max, FIRST_STEP)
         start_records(ext, led)
-        if fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, f1, aux, ws, UPPER) != OK:
+        if fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, f1, aux, ws, int(st[S_MODE])) != OK:
             return NONFINITE
         track_state(ext, aux, p)
         st[S_PREV_TAUT], st[S_PREV_RATE] = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
@@ -272,13 +285,13 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only,
             v[i] *= fx_u                                  # dz''/du = M^-1 b dF_x/du
         powers(aux, p, pw0)
         fz_rear, fz_front, tension = aux[AUX_FZ_REAR], aux[AUX_FZ_FRONT], aux[AUX_TENSION]
-        n_err = n_state if mode == FREE else N_STATE
+        n_err = N_STATE if mode in (UPPER, LOWER) else n_state   # the sprocket's own e and alpha' too
         tries = 0
         while True:
             h = min(h, h_max, t_end - t)
             if order3:
                 if attempt(y, f1, h, sigma, v, c_row, a_uu, p, geo, kind, rp, longitudinal, stages, y2, f2, aux,
-                           ws, ynew, err) != OK:
+                           ws, ynew, err, mode) != OK:
                     st[S_T] = t
                     return NONFINITE
                 e = _error_norm(err, scale, n_err)

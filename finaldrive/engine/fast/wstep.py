@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from finaldrive.engine.fast.bodies import N_DOF
-from finaldrive.engine.fast.minimal import N_STATE, ZU, fast_rhs
+from finaldrive.engine.fast.minimal import ZU, fast_rhs
 from finaldrive.engine.jit.kernel import jit
 from finaldrive.engine.model.elements import AUX_FX, AUX_FZ_REAR, AUX_KAPPA
 from finaldrive.engine.model.tyre import relaxation_length
@@ -69,19 +69,21 @@ def w_solve(r, gh, v, c_row, a_uu, k):
 
 
 @jit
-def attempt(y, f0, h, sigma, v, c_row, a_uu, p, geo, kind, rp, longitudinal, K, ys, fs, aux, ws, ynew, err):
-    """One trial step of size h from y = (z, z', u) (f0 = f(y) at sigma*, the paper's single chain
-    run); fills ynew and the local error estimate err (sigma*'s lag included); returns a failure
-    code of fast_rhs (0 = ok). K (N_STAGES x N_STATE), ys, fs, aux, ws: scratch."""
+def attempt(y, f0, h, sigma, v, c_row, a_uu, p, geo, kind, rp, longitudinal, K, ys, fs, aux, ws, ynew, err, run):
+    """One trial step of size h from y = (z, z', u), or with the elastic chain (z, z', u, e, alpha')
+    (f0 = f(y) at sigma*, in the chain's mode run: the paper's upper run or ELASTIC); fills ynew and
+    the local error estimate err (sigma*'s lag included); returns a failure code of fast_rhs (0 = ok).
+    K (N_STAGES x the state's size), ys, fs, aux, ws: scratch."""
+    n = y.shape[0]
     gh = GAMMA * h
     w_solve(f0, gh, v, c_row, a_uu, K[0])
     for s in range(1, N_STAGES):
-        for i in range(N_STATE):
+        for i in range(n):
             acc = y[i]
             for j in range(s):
                 acc += h * A[s, j] * K[j, i]
             ys[i] = acc
-        code = fast_rhs(ys, p, geo, kind, rp, sigma, longitudinal, fs, aux, ws)
+        code = fast_rhs(ys, p, geo, kind, rp, sigma, longitudinal, fs, aux, ws, run)
         if code != 0:
             return code
         # + h J sum_j g_sj k_j: J reads only z' and u, and acts on z'' and u
@@ -98,7 +100,7 @@ def attempt(y, f0, h, sigma, v, c_row, a_uu, p, geo, kind, rp, longitudinal, K, 
             fs[N_DOF + i] += h * v[i] * ju
         fs[ZU] += h * (jdu + a_uu * ju)
         w_solve(fs, gh, v, c_row, a_uu, K[s])
-    for i in range(N_STATE):
+    for i in range(n):
         sol = 0.0
         est = 0.0
         for s in range(N_STAGES):

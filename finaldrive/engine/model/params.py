@@ -97,17 +97,21 @@ TC_FRICTION = 85
 WHEELIE_FORCE = 86
 I_FRONT_WHEEL = 87
 FRONT_WHEEL_SPIN = 88
-A2 = 89  # design: angle a2 of r_1->2 in the chassis frame [rad]
-L2 = 90  # design: pivot to engine sprocket axis [m]
-R_WS = 91  # design: wheel sprocket pitch radius [m]
-R_ES = 92  # design: engine sprocket pitch radius R_WS / sprocket_ratio [m]
-L_CHAIN = 93  # chain length L of eq. (69), set at t = 0 [m]
-L_LOOP = 94  # two chain runs: the whole chain's length, both runs and both wraps, set at t = 0 [m]
-AL_ALPHA = 95  # augmented Lagrangian penalty alpha, eqs. (57)-(58)
-AL_XI = 96  # Baumgarte xi, eq. (57)
-AL_OMEGA = 97  # Baumgarte omega, eq. (57)
-RS_BUMP = 98  # travel stops: the rear spring's length at full compression (rear_wheel_travel) [m]
-FS_BUMP = 99  # travel stops: the fork's length at full compression, s_fs - fork_travel [m]
+CHAIN_COMPLIANCE = 89
+K_CHAIN = 90
+K_CUSH = 91
+C_CUSH = 92
+A2 = 93  # design: angle a2 of r_1->2 in the chassis frame [rad]
+L2 = 94  # design: pivot to engine sprocket axis [m]
+R_WS = 95  # design: wheel sprocket pitch radius [m]
+R_ES = 96  # design: engine sprocket pitch radius R_WS / sprocket_ratio [m]
+L_CHAIN = 97  # chain length L of eq. (69), set at t = 0 [m]
+L_LOOP = 98  # two chain runs: the whole chain's length, both runs and both wraps, set at t = 0 [m]
+AL_ALPHA = 99  # augmented Lagrangian penalty alpha, eqs. (57)-(58)
+AL_XI = 100  # Baumgarte xi, eq. (57)
+AL_OMEGA = 101  # Baumgarte omega, eq. (57)
+RS_BUMP = 102  # travel stops: the rear spring's length at full compression (rear_wheel_travel) [m]
+FS_BUMP = 103  # travel stops: the fork's length at full compression, s_fs - fork_travel [m]
 
 VEHICLE_KEYS: tuple[str, ...] = (
     'L3',
@@ -199,6 +203,10 @@ VEHICLE_KEYS: tuple[str, ...] = (
     'wheelie_force',
     'I_front_wheel',
     'front_wheel_spin',
+    'chain_compliance',
+    'k_chain',
+    'k_cush',
+    'c_cush',
 )
-N_VEHICLE = 89
-N_PARAMS = 100
+N_VEHICLE = 93
+N_PARAMS = 104

@@ -69,6 +69,12 @@ def _front_wheel_spin(road: Road, vehicle: Vehicle, settings: SimSettings) -> tu
     return None if vehicle["front_wheel_spin"] == 1.0 else (road, vehicle.replace(front_wheel_spin=1.0))
 
 
+def _elastic_chain(road: Road, vehicle: Vehicle, settings: SimSettings) -> tuple[Road, Vehicle] | None:
+    if vehicle["chain_compliance"] == 1.0 or vehicle["chain_runs"] == 2.0 or settings.method != "fast":
+        return None
+    return road, vehicle.replace(chain_compliance=1.0)
+
+
 #: Largest mean acceleration of a run [m/s^2], for the length an enveloped road must cover: 1.5 g, above
 #: what the rear tyre can drive (tc_friction 1.0: about 1 g) on any of the alternatives.
 RUN_ACCELERATION_BOUND = 1.5 * 9.81
@@ -97,6 +103,9 @@ ALTERNATIVES: tuple[Alternative, ...] = (
     Alternative("front_wheel_spin", "the front wheel turns, rolling, with Table 2's inertia 0.47 kg m^2 (the paper's "
                 "does not turn; docs/engine.md#front-wheel-rotation; skipped when the vehicle has it already)",
                 _front_wheel_spin),
+    Alternative("chain_elastic", "the chain and the rear wheel's cush drive elastic (docs/engine.md#the-elastic-chain-"
+                "and-cush-drive; fast method only; skipped when the vehicle has it already or has two chain runs)",
+                _elastic_chain),
     Alternative("road_phase_90", "a sine road started a quarter period later (sine roads only)", _phase(90.0)),
     Alternative("road_phase_180", "a sine road started half a period later (sine roads only)", _phase(180.0)),
     Alternative("road_enveloped", "the road under a rigid ring of the rear tyre's unloaded radius rt0 (a tyre "

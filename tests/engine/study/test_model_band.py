@@ -29,6 +29,8 @@ def test_each_alternative_is_the_changed_model_simulated() -> None:
     assert "drive_launch" in model_bands(DESIGNS[:1], road, SETTINGS, vehicle.replace(drive_model=1.0))["skipped"]
     spin = evaluate(DESIGNS, road, SETTINGS, vehicle.replace(front_wheel_spin=1.0))
     assert out["alternatives"]["front_wheel_spin"]["fitness_m"] == spin.fitness_m.tolist()
+    chain = evaluate(DESIGNS, road, SETTINGS, vehicle.replace(chain_compliance=1.0))
+    assert out["alternatives"]["chain_elastic"]["fitness_m"] == chain.fitness_m.tolist()
     ring = out["alternatives"]["road_enveloped"]
     assert ring["road"] == "profile:sine:0.04:3~ring0.3" and ring["failed"] == [""] * len(DESIGNS)
     covered = enveloped(road, vehicle["rt0"], -ENVELOPE_MARGIN_M, 0.5 * RUN_ACCELERATION_BOUND + ENVELOPE_MARGIN_M)

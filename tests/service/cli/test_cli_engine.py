@@ -63,7 +63,8 @@ def test_model_band_ranks_the_designs_under_each_alternative(tmp_path, capsys):
     r = json.loads(out)
     assert code == 0 and r["road"] == "sine:0.02:3" and len(r["designs"]) == 3 and r["skipped"] == []
     assert set(r["alternatives"]) == {"tyre_load_range_4800", "drive_half", "drive_double", "drive_launch",
-                                      "front_wheel_spin", "road_phase_90", "road_phase_180", "road_enveloped"}
+                                      "front_wheel_spin", "chain_elastic", "road_phase_90", "road_phase_180",
+                                      "road_enveloped"}
     for alt in r["alternatives"].values():
         assert len(alt["fitness_m"]) == 3 and -1 <= alt["rank_correlation"] <= 1 and alt["what"]
     code, out, _ = run(argv, capsys)
