@@ -40,7 +40,7 @@ _EXPORTS: dict[str, str] = {
                     "finaldrive.engine.calibrate"),
     **dict.fromkeys(("CMAES", "DifferentialEvolution", "OPTIMISERS", "Optimiser"), "finaldrive.engine.optimize"),
     **dict.fromkeys(("BAND_LIMIT_M", "TIE_CANDIDATES", "TIGHT_FACTOR", "band_of", "band_settings", "best_distinct",
-                     "numerical_bands", "tie_flags"), "finaldrive.engine.study.band"),
+                     "numerical_bands", "reference_refusal", "tie_flags"), "finaldrive.engine.study.band"),
     **dict.fromkeys(("ALTERNATIVES", "Alternative", "model_bands"), "finaldrive.engine.study.model_band"),
     **dict.fromkeys(("CONCENTRIC_L2_M", "DEFAULT_TOLERANCE_PCT", "MAX_TOLERANCE_PCT", "SENSITIVITY_STEPS", "angle_arc",
                      "finite_differences", "near_mask", "near_optimal", "near_summary", "sensitivities",
@@ -142,6 +142,7 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         band_settings as band_settings,
         best_distinct as best_distinct,
         numerical_bands as numerical_bands,
+        reference_refusal as reference_refusal,
         tie_flags as tie_flags,
     )
     from finaldrive.engine.study.model_band import (

@@ -139,7 +139,7 @@ _STUDY = [
     _f("score_m", "robust DE: the aggregate (mean or worst) fitness over the roads", 4),
     _f("numerical_band", "a design's numerical band: band_m, distance_band_m, exceeds_limit and each run's values"),
     _f("band_m", "numerical band of the fitness: its largest change when the run is re-simulated 100x tighter "
-                 "and with the reference method (engine.study.band)", 4),
+                 "and with the reference method where the vehicle allows it (engine.study.band)", 4),
     _f("distance_band_m", "numerical band of the distance, as band_m", 4),
     _f("exceeds_limit", "the band is wider than 1 mm: a 1 mm difference is not decided by the numerics"),
     _f("rank_correlation", "model band: Spearman rank correlation of the designs' fitness under an alternative "

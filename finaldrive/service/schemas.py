@@ -585,7 +585,8 @@ class BandRunOut(BaseModel):
 
 class BandOut(BaseModel):
     """A design's numerical band (engine.study.band): its fitness and distance re-simulated 100x
-    tighter and with the reference method; the band the largest change from the job's own run."""
+    tighter and with the reference method where the vehicle allows it (``failed`` says why not); the
+    band the largest change from the job's own run."""
 
     fitness_m: float | None = Field(None, description="the job's own run [m]")
     distance_m: float | None = None

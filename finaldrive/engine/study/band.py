@@ -3,7 +3,8 @@
 The band of a design on a road is how far its fitness (eq. 67) and distance move when the same
 run is integrated otherwise: with the production method's error control :data:`TIGHT_FACTOR` times
 tighter, and with the reference method (the paper's augmented Lagrangian with the ABM
-predictor-corrector, eqs. 57-66, at its own step). It is the largest difference from the
+predictor-corrector, eqs. 57-66, at its own step; not for a vehicle only the fast method models, the two-run
+or the elastic chain: :func:`reference_refusal`). It is the largest difference from the
 production value; a band above :data:`BAND_LIMIT_M` is flagged. Two designs whose fitness differs
 by less than the sum of their bands are a tie: the numerics do not say which is better.
 See docs/optimisation.md#numerical-bands-and-ties.
@@ -32,12 +33,25 @@ BAND_LIMIT_M = 1.0e-3
 TIE_CANDIDATES = 5
 
 
-def band_settings(settings: SimSettings) -> dict[str, SimSettings]:
-    """The re-runs of a band: label -> settings (the production ones' duration, drive and limits)."""
-    return {
-        "tight": settings.with_(method="fast", fast_tolerance=settings.fast_tolerance / TIGHT_FACTOR),
-        "reference": settings.with_(method="reference"),
-    }
+def reference_refusal(vehicle: Vehicle | None) -> str | None:
+    """Why a band cannot have its reference re-run for ``vehicle`` (a model the fast method alone
+    simulates), or None."""
+    if vehicle is None:
+        return None
+    try:
+        vehicle.check_method("reference")
+    except ValueError as exc:
+        return f"not run: {exc}"
+    return None
+
+
+def band_settings(settings: SimSettings, vehicle: Vehicle | None = None) -> dict[str, SimSettings]:
+    """The re-runs of a band: label -> settings (the production ones' duration, drive and limits); the
+    reference re-run only where ``vehicle`` allows it (:func:`reference_refusal`)."""
+    out = {"tight": settings.with_(method="fast", fast_tolerance=settings.fast_tolerance / TIGHT_FACTOR)}
+    if reference_refusal(vehicle) is None:
+        out["reference"] = settings.with_(method="reference")
+    return out
 
 
 def numerical_bands(designs: np.ndarray, road: Road, settings: SimSettings,
@@ -45,18 +59,21 @@ def numerical_bands(designs: np.ndarray, road: Road, settings: SimSettings,
     """Each design row's (a2 [rad], L2 [m], R_WS [m]) fitness and distance at ``settings`` and its
     band: ``band_m`` (fitness) and ``distance_band_m``, the largest difference to a re-run of
     :func:`band_settings`, ``exceeds_limit`` when ``band_m`` > :data:`BAND_LIMIT_M`, and each re-run's
-    values. A re-run that fails is left out of the band and named in ``failed`` with its reason (the
-    band is then of the re-runs that finished); a design whose production run fails, or whose every
-    re-run fails, has no band (None)."""
+    values. A re-run that fails, or that the vehicle does not allow (:func:`reference_refusal`), is left
+    out of the band and named in ``failed`` with its reason (the band is then of the re-runs that
+    finished); a design whose production run fails, or whose every re-run fails, has no band (None)."""
     rows = np.asarray(designs, dtype=float).reshape(-1, 3)
     runs = {"production": evaluate(rows, road, settings, vehicle),
-            **{label: evaluate(rows, road, s, vehicle) for label, s in band_settings(settings).items()}}
+            **{label: evaluate(rows, road, s, vehicle) for label, s in band_settings(settings, vehicle).items()}}
+    refusal = reference_refusal(vehicle)
     out = []
     for i in range(len(rows)):
+        failed = {label: batch.reason[i] for label, batch in runs.items() if batch.status[i] != STATUS_OK}
+        if refusal is not None:
+            failed["reference"] = refusal
         out.append(band_of(
             {label: (batch.fitness_m[i], batch.distance_m[i]) for label, batch in runs.items()
-             if batch.status[i] == STATUS_OK},
-            {label: batch.reason[i] for label, batch in runs.items() if batch.status[i] != STATUS_OK}))
+             if batch.status[i] == STATUS_OK}, failed))
     return out
 
 

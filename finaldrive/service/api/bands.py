@@ -1,9 +1,10 @@
 """Numerical bands of a finished job's best designs, with their ties (engine.study.band).
 
 The API process never simulates. For each road, the job's best distinct designs (at most
-``TIE_CANDIDATES``, the best first) are re-simulated by a scheduler as two small jobs of kind
+``TIE_CANDIDATES``, the best first) are re-simulated by a scheduler as small jobs of kind
 ``designs``, one a re-run of :func:`~finaldrive.engine.band_settings` (100x tighter; the reference
-method), each queued once per finished job (Idempotency-Key ``band:<re-run>:<job id>``). Their
+method, where the job's vehicle allows it: :func:`~finaldrive.engine.reference_refusal`), each queued
+once per finished job (Idempotency-Key ``band:<re-run>:<job id>``). Their
 stored evaluations, beside the job's own (the production run), give each design's band, and which
 designs tie with the best.
 """
@@ -17,7 +18,15 @@ import numpy as np
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from finaldrive.engine import SimSettings, band_of, band_settings, best_distinct, tie_flags
+from finaldrive.engine import (
+    SimSettings,
+    band_of,
+    band_settings,
+    best_distinct,
+    load_vehicle_dict,
+    reference_refusal,
+    tie_flags,
+)
 from finaldrive.service.api.problems import ApiProblem
 from finaldrive.service.api.sharpness import own_designs_job
 from finaldrive.service.db.models import TERMINAL_STATES, EvalStatus, Evaluation, Job, JobRoad
@@ -57,6 +66,14 @@ def top_designs(session: Session, job: Job) -> list[tuple[JobRoad, Top]]:
     return out
 
 
+def refused_re_runs(job: Job) -> dict[str, str]:
+    """The band's re-runs the job's vehicle does not allow: label -> why (engine.reference_refusal)."""
+    source = JobSpec.model_validate(job.spec)
+    vehicle = load_vehicle_dict(source.vehicle.model_dump()) if source.vehicle is not None else None
+    refusal = reference_refusal(vehicle)
+    return {} if refusal is None else {"reference": refusal}
+
+
 def band_jobs(services: Services, job: Job) -> dict[str, Job]:
     """The job's band re-runs (label -> its ``designs`` job), queued now unless they exist (409 while
     ``job`` has not finished, or when it has no successful evaluation)."""
@@ -69,8 +86,9 @@ def band_jobs(services: Services, job: Job) -> dict[str, Job]:
     if not roads:
         raise ApiProblem(409, f"job {job.id} has no successful evaluation to band", slug="no-result")
     source = JobSpec.model_validate(job.spec)
+    refused = refused_re_runs(job)
     out = {}
-    for label in RE_RUNS:
+    for label in (label for label in RE_RUNS if label not in refused):
         spec = JobSpec(kind="designs", roads=[road.spec for road, _ in roads], settings=re_run(source.settings, label),
                        vehicle=source.vehicle, designs=[[row[:3] for row in top] for _, top in roads])
         out[label] = own_designs_job(services, job, band_key(job.id, label), spec, existing[label], "band")
@@ -95,13 +113,16 @@ def stored_bands(session: Session, job: Job, jobs: dict[str, Job]) -> dict[int, 
                                  .where(Evaluation.job_id == designs_job.id)):
             runs.setdefault(label, {})[(roads[r.road_index], r.candidate)] = r
     out = {}
+    refused = refused_re_runs(job)
     for road, top in top_designs(session, job):
         bands = []
         for candidate, (_, _, _, fitness, distance) in enumerate(top):
             values, failed = {"production": (fitness, distance)}, {}
             for label in RE_RUNS:
                 row = runs.get(label, {}).get((road.spec, candidate))
-                if row is None:
+                if label in refused:
+                    failed[label] = refused[label]
+                elif row is None:
                     failed[label] = "not simulated"
                 elif row.status == EvalStatus.ok.value and row.fitness_m is not None:
                     values[label] = (row.fitness_m, _number(row.distance_m))

@@ -64,8 +64,11 @@ def sharpness_lines(sharp: dict[str, Any]) -> list[str]:
 def band_lines(band: dict[str, Any], ties: list[dict[str, Any]], *, what: str = "fitness",
                indent: str = "  ") -> list[str]:
     """A best's numerical band, and how many of the next best designs tie with it (engine.study.band)."""
-    lines = [f"{indent}numerical band of the best's {what}: {band_text(band)} (re-simulated 100x tighter and with "
-             "the reference method)"]
+    how = "re-simulated 100x tighter" + (" and with the reference method" if "reference" in band.get("runs", {})
+                                         else "")
+    left_out = band.get("failed", {}) if band["band_m"] is not None else {}
+    how += "".join(f"; {label} left out: {why}" for label, why in left_out.items())
+    lines = [f"{indent}numerical band of the best's {what}: {band_text(band)} ({how})"]
     if len(ties) > 1:
         tied = sum(t["tie"] for t in ties[1:])
         lines.append(f"{indent}  of the next {len(ties) - 1} best designs, {tied} tie with it (fitness closer than "

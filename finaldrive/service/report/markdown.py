@@ -257,7 +257,8 @@ def _sharpness(roads: list[dict[str, Any]]) -> list[str]:
             "value is smaller). Not decided: a variable whose range covers at least half of what the study "
             "explored (engine/study/sharpness.py; docs/optimisation.md#sharpness-of-an-optimum). Band: the "
             "numerical band of the road's best fitness, its largest change when re-simulated 100x tighter and "
-            "with the reference method; ties: how many of the next best distinct designs have a fitness closer "
+            "with the reference method where the vehicle allows it; ties: how many of the next best distinct "
+            "designs have a fitness closer "
             "to the best's than their two bands together (engine/study/band.py; "
             "docs/optimisation.md#numerical-bands-and-ties).", "",
             *_table(header, rows)]

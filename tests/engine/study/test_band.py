@@ -35,6 +35,19 @@ def test_the_band_is_the_largest_change_over_its_re_runs() -> None:
     assert band_settings(settings)["reference"].method == "reference"
 
 
+def test_a_vehicle_only_the_fast_method_models_is_banded_by_its_tight_re_run(vehicle) -> None:
+    """The two-run and the elastic chain: no reference re-run (it would raise), the band of the tight one,
+    and the reason the reference run is left out in ``failed``."""
+    settings = SimSettings(duration=1.0)
+    for changed in (vehicle.replace(chain_runs=2.0), vehicle.replace(chain_compliance=1.0)):
+        assert set(band_settings(settings, changed)) == {"tight"}
+        band = numerical_bands(np.array([TABLE11.row()]), Road.parse("flat"), settings, changed)[0]
+        tight = simulate(TABLE11, Road.parse("flat"), band_settings(settings)["tight"], changed)
+        assert set(band["runs"]) == {"production", "tight"} and "fast method only" in band["failed"]["reference"]
+        assert band["band_m"] == abs(tight.fitness_m - band["fitness_m"])
+    assert set(band_settings(settings, vehicle)) == {"tight", "reference"}
+
+
 def test_the_numerics_decide_a_smooth_road_and_not_a_rough_one() -> None:
     """Flat: every integration agrees within 0.1 mm (measured 0.01-0.03 mm). Geometry 2 on
     sine:0.04:2: the issue's 450 mm spread between tolerances and methods is found (measured 444 mm)."""

@@ -166,3 +166,20 @@ def test_best_bands_are_simulated_by_the_scheduler(client: TestClient, fake: Toy
         assert [t["band_m"] for t in ties] == [0.0] * 5 and [t["tie"] for t in ties] == [True] + [False] * 4
         assert len({(t["a2_deg"], t["l2_m"], t["rws_m"]) for t in ties}) == 5
         assert all(set(t["runs"]) == {"production", "tight", "reference"} for t in ties)
+
+
+def test_a_vehicle_only_the_fast_method_models_is_banded_without_the_reference_run(client: TestClient,
+                                                                                  fake: ToyTask) -> None:
+    """The elastic chain (and the two-run chain) cannot be re-run by the reference method: the band is the
+    tight re-run's alone and says why the reference run is left out; no reference job is queued."""
+    vehicle = default_vehicle().replace(chain_compliance=1.0).to_dict()
+    job = wait_done(client, client.post("/v1/jobs", json=SWEEP | {"roads": ["flat"], "vehicle": vehicle}).json()["id"])
+    url = f"/v1/jobs/{job['id']}/best"
+    jobs = client.get(url, params={"band": "true"}).json()["band_jobs"]
+    assert set(jobs) == {"tight"}
+    wait_done(client, jobs["tight"])
+    done = client.get(url, params={"band": "true"})
+    assert done.status_code == 200 and done.json()["band_state"] == "succeeded"
+    ties = done.json()["sharpness"][0]["ties"]
+    assert all(set(t["runs"]) == {"production", "tight"} and t["band_m"] == 0.0 for t in ties)
+    assert all("fast method only" in t["failed"]["reference"] for t in ties)

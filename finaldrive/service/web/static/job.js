@@ -75,7 +75,7 @@ function bandCell(s) {
   const text = band.band_m == null ? "unknown" : `±${(band.band_m * 1000).toFixed(2)} mm`;
   const failed = Object.entries(band.failed ?? {}).map(([k, v]) => `${k}: ${v}`).join("; ");
   return el("td", { class: band.exceeds_limit ? "num error" : "num", "data-band": String(band.band_m),
-                    title: `re-simulated 100x tighter and with the reference method${failed ? ` (failed: ${failed})` : ""}` }, text);
+                    title: `re-simulated 100x tighter${band.runs?.reference ? " and with the reference method" : ""}${failed ? ` (left out: ${failed})` : ""}` }, text);
 }
 
 /** Which of the next best designs tie with the best (fitness closer than their two bands), in words. */
