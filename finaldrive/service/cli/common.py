@@ -155,16 +155,20 @@ def design_from_args(args: argparse.Namespace, vehicle: Vehicle) -> Design:
     return design
 
 
-def settings_from_args(args: argparse.Namespace, **extra: Any) -> SimSettings:
+def settings_from_args(args: argparse.Namespace, vehicle: Vehicle, **extra: Any) -> SimSettings:
+    """The simulation settings of the options, for ``vehicle`` (a model the fast method alone simulates,
+    with --method reference, is a usage error naming the vehicle parameter)."""
     from finaldrive.engine import SimSettings
 
     changes: dict[str, Any] = {"duration": args.duration, "method": args.method, **extra}
     if args.dt is not None:
         changes["dt"] = args.dt
     try:
-        return SimSettings(**changes)
+        settings = SimSettings(**changes)
+        vehicle.check_method(settings.method)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    return settings
 
 
 def de_options(args: argparse.Namespace) -> dict[str, Any]:

@@ -44,7 +44,7 @@ def run_geometry(args: argparse.Namespace) -> int:
     vehicle = load_vehicle_arg(args.vehicle, args.drive)
     design = design_from_args(args, vehicle)
     road = road_from_arg(args.road) if args.road else None
-    settings = settings_from_args(args) if road is not None else None
+    settings = settings_from_args(args, vehicle) if road is not None else None
     png = writable(args.png, "--png") if args.png else None
     start = time.perf_counter()
     try:
@@ -85,7 +85,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     vehicle = load_vehicle_arg(args.vehicle, args.drive)
     design = design_from_args(args, vehicle)
     road = road_from_arg(args.road)
-    settings = settings_from_args(args, series=bool(args.series), series_stride=args.stride)
+    settings = settings_from_args(args, vehicle, series=bool(args.series), series_stride=args.stride)
     series_path = writable(args.series, "--series") if args.series else None
     record_path = writable(args.record, "--record") if args.record else None
     compile_s = compile_first(settings.method)
@@ -164,7 +164,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     vehicle = load_vehicle_arg(args.vehicle, args.drive)
     road = road_from_arg(args.road)
     designs = _checked_designs(args.designs, vehicle)
-    settings = settings_from_args(args)
+    settings = settings_from_args(args, vehicle)
     compile_first(settings.method)
     batch = evaluate(designs, road, settings, vehicle)
     rows = batch_rows(batch)
@@ -187,7 +187,7 @@ def run_model_band(args: argparse.Namespace) -> int:
         raise UsageError(f"designs file {args.designs!r}: a ranking needs at least 2 designs")
     out = {"road": road.spec, "designs": [{"a2_deg": math.degrees(a2), "l2_m": l2, "rws_m": rws}
                                           for a2, l2, rws in designs.tolist()],
-           **model_bands(designs, road, settings_from_args(args), vehicle)}
+           **model_bands(designs, road, settings_from_args(args, vehicle), vehicle)}
     if args.json:
         print_json(out)
         return 0

@@ -96,8 +96,8 @@ def run_optimize(args: argparse.Namespace) -> int:
     plans = [_plan("robust-de" if several else "de", args, bounds=bounds, de=de,
                    aggregate=args.aggregate if several else None, seed=args.seed + k) for k in range(args.repeat)]
     plan = plans[0]
-    settings = settings_from_args(args)
     vehicle = load_vehicle_arg(args.vehicle, args.drive)
+    settings = settings_from_args(args, vehicle)
     tally = Tally(len(plan.roads), Progress(sum(p.total() for p in plans), enabled=args.progress))
     start = time.monotonic()
     kind = args.executor or default_executor()
@@ -256,8 +256,8 @@ def run_sweep(args: argparse.Namespace) -> int:
     grid_label, designs = sweep_grid(args)
     plan = _plan("sweep", args, grid=designs)
     several = len(plan.roads) > 1
-    settings = settings_from_args(args)
     vehicle = load_vehicle_arg(args.vehicle, args.drive)
+    settings = settings_from_args(args, vehicle)
     out_path = writable(args.out, "--out") if args.out else None
     tally = Tally(len(plan.roads), Progress(plan.total(), enabled=args.progress))
     table = np.full((len(plan.roads), len(designs)), np.nan)

@@ -7,6 +7,7 @@ import subprocess
 
 import pytest
 
+from finaldrive.engine import default_vehicle
 from finaldrive.service.cli import main
 from tests.service.processes import console_script
 
@@ -125,3 +126,15 @@ def test_geometry_travel_text_marks_design_and_sag(capsys):
                        capsys)
     assert code == 0
     assert "<- design pose" in out and "<- static sag" in out and "anti-squat" in out
+
+
+@pytest.mark.parametrize("change", [{"chain_compliance": 1.0}, {"chain_runs": 2.0}])
+@pytest.mark.parametrize("command", [["simulate", "--a2-deg", "0", "--l2-m", "0", "--rws-m", "0.09"],
+                                     ["sweep", "--grid", "a2_deg=0,l2_m=0,rws_m=0.09"], ["optimize"]])
+def test_a_fast_only_vehicle_with_the_reference_method_exits_2_naming_the_parameter(change, command, tmp_path,
+                                                                                  capsys):
+    vehicle = tmp_path / "vehicle.json"
+    vehicle.write_text(json.dumps(default_vehicle().replace(**change).to_dict()))
+    code, _, err = run([*command, "--road", "flat", "--vehicle", str(vehicle), "--method", "reference"], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert next(iter(change)) in err and "fast method only" in err
