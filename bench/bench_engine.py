@@ -95,8 +95,13 @@ def parse_variant(spec: str) -> Variant:
     """``key=value,key=value`` -> the fast method's settings and the paper's vehicle with those of the keys
     that are SimSettings fields and vehicle parameters changed (numbers)."""
     values = {k: float(v) for k, v in (item.split("=") for item in spec.split(",") if item)}
+    defaults = SimSettings()
     fields = set(SimSettings.__dataclass_fields__)
-    settings = settings_for("fast", **{k: v for k, v in values.items() if k in fields})
+    def typed(key: str, value: float) -> object:   # a bool or int field as its own type (fast_ros2=1: True)
+        default = getattr(defaults, key)
+        return type(default)(value) if isinstance(default, (bool, int)) else value
+
+    settings = settings_for("fast", **{k: typed(k, v) for k, v in values.items() if k in fields})
     return settings, default_vehicle().replace(**{k: v for k, v in values.items() if k not in fields})
 
 

@@ -55,7 +55,10 @@ def _record(energies: np.ndarray, rest_j: float, landed: bool) -> Drop:
 
 def fast_drop(vehicle: Vehicle, design: Design, tolerance: float, max_step: float, ros2: bool,
               drop_m: float = DROP_M, duration_s: float = DROP_S) -> Drop:
-    """The drop with the fast path at ``tolerance`` and ``max_step`` (ROS2 if ``ros2``, else ROS34PW2)."""
+    """The drop with the fast path at ``tolerance`` and ``max_step`` (ROS2 if ``ros2``, else ROS34PW2), for
+    the paper's chain (ValueError for the elastic one, whose sprocket state the drop does not carry)."""
+    if vehicle["chain_compliance"] == 1.0:
+        raise ValueError("fast_drop: vehicle chain_compliance = 1 is not supported (the drop checks the paper's chain)")
     road = Road()
     setup = prepare(design, road, SimSettings(), conservative(vehicle))
     p = setup.p

@@ -78,7 +78,7 @@ from finaldrive.engine.model.road_height import road_height
 N_STATE = 2 * N_DOF + 1
 ZU = 2 * N_DOF
 #: The two-run chain's state adds e, the engine sprocket's turn beyond the upper run's engagement
-#: [rad], and alpha' (in an engaged mode both follow from z, z').
+#: [rad], and alpha' (in an engaged mode both follow from z, z'); so does the elastic chain's.
 ZPLAY, ZALPHA_DOT = N_STATE, N_STATE + 1
 N_STATE_TWO_RUNS = N_STATE + 2
 #: The chain's modes (the engaged run): upper, lower, none (the engine sprocket turning freely); and the
@@ -160,8 +160,8 @@ def elastic_tension(play: float, play_rate: float, p: np.ndarray, aux: np.ndarra
 @jit
 def elastic_energy(y: np.ndarray, p: np.ndarray) -> float:
     """The elastic run's spring energy k s^2 / 2 at the state y [J], 0 when slack (s <= 0) or without
-    chain_compliance."""
-    if p[P.CHAIN_COMPLIANCE] == 0.0:
+    chain_compliance (or without the sprocket's state in y)."""
+    if p[P.CHAIN_COMPLIANCE] == 0.0 or y.shape[0] != N_STATE_TWO_RUNS:
         return 0.0
     k, _ = elastic_stiffness(p)
     s = max(0.0, -p[P.R_ES] * y[ZPLAY])
@@ -195,7 +195,7 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
     ja_t, ja_p, alpha_c, taut, taut_rate, alpha_dot = chain_terms(
         w2x, w2y, w6x, w6y, wt, wp, wb, p, -1.0 if run == LOWER else 1.0)
     rho = p[P.R_WS] / p[P.R_ES]
-    upper_rate = alpha_dot                                             # alpha_u', read when FREE (e' below)
+    upper_rate = alpha_dot                                             # alpha_u', read when FREE or ELASTIC (e')
     stretch_t, stretch_p, stretch_b = ja_t, ja_p, rho                  # d(alpha_u)/dz: the elastic run's gradient
     if run in (FREE, ELASTIC):                                         # alpha is the sprocket's own
         ja_t, ja_p, alpha_c, rho, alpha_dot = 0.0, 0.0, 0.0, 0.0, y[ZALPHA_DOT]
@@ -267,7 +267,8 @@ def fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, out, aux, ws, run=UPPER):
     alpha_dd = alpha_c + ja_t * out[N_DOF + ZTHETA] + ja_p * out[N_DOF + ZPHI] + rho * out[N_DOF + ZBETA]
     if run in (FREE, ELASTIC):
         alpha_dd = (pull - torque) / p[P.I_SPROCKET]                   # its own: I alpha'' = -T_drive + T R_ES
-    aux[AUX_TENSION] = sprocket_chain_tension(torque, alpha_dd, p)
+    # the elastic run's own tension (through alpha'' it would be T only up to rounding: a slack run pushing 1e-12 N)
+    aux[AUX_TENSION] = pull / p[P.R_ES] if run == ELASTIC else sprocket_chain_tension(torque, alpha_dd, p)
     aux[AUX_TAUT] = taut
     aux[AUX_TAUT_RATE] = taut_rate
     aux[AUX_ALPHA_DOT] = alpha_dot

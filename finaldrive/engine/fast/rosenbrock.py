@@ -101,7 +101,7 @@ FIRST_STEP = 1.0e-3
 MAX_EVENT_TRIES = 40
 
 # Slots of the loop's saved state (st): everything a paused run needs to continue exactly; S_MODE:
-# the chain's mode (engine.fast.minimal: UPPER, LOWER, FREE).
+# the chain's mode (engine.fast.minimal: UPPER, LOWER, FREE, ELASTIC).
 S_T, S_H, S_SIGMA, S_PREV_TAUT, S_PREV_RATE, S_AIR_REAR, S_AIR_FRONT, S_ROW, S_STARTED, S_MODE = range(10)
 N_ST = 10
 
@@ -115,7 +115,8 @@ def high_order(kind: int, two_runs: bool) -> bool:
 
 @jit
 def _store(states, row, y):
-    """A row of the recorded states: z, z' and, in a third column block of one, the two-run chain's e."""
+    """A row of the recorded states: z, z' and, in a third column block of one, the two-run or the elastic
+    chain's e."""
     for i in range(2 * N_DOF):   # a loop, not a slice: no compiled shape check
         states[row, i] = y[i]
     if states.shape[1] > 2 * N_DOF:
@@ -205,7 +206,8 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only,
     """
     geo = design_constants(p)
     n_state = y.shape[0]
-    elastic = p[P.CHAIN_COMPLIANCE] == 1.0           # the elastic chain's state: as the two runs', no events
+    # the elastic chain: the state of the two runs (the caller sizes it), one mode, no events
+    elastic = p[P.CHAIN_COMPLIANCE] == 1.0 and n_state == N_STATE_TWO_RUNS
     two_runs = n_state == N_STATE_TWO_RUNS and not elastic
     order3 = high_order(kind, two_runs) and not ros2_only
     if not order3:

@@ -18,7 +18,7 @@ is off as if u were off by -u d_sigma / sigma*, so the local error gains (h / 2)
 
 The embedded estimate assumes a smooth right-hand side: a kink of the road's slope inside a step
 (piecewise-linear profiles) is invisible to it, so engine.fast.rosenbrock uses this step on smooth
-roads and with the paper's single chain run.
+roads, with the paper's chain or the elastic one (not the two-run chain's events).
 """
 
 from __future__ import annotations
