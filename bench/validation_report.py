@@ -29,6 +29,7 @@ from finaldrive.engine import (  # noqa: E402
     Road,
     SimResult,
     SimSettings,
+    Vehicle,
     default_vehicle,
     evaluate,
     simulate,
@@ -80,6 +81,29 @@ BEFORE = {
         "bump:0.04:0.2": (19.4908, 20.5303, (190.0, 0.08), 0), "sine:0.04:2": (17.8128, 18.7907, (0.0, 0.04), 0),
     },
 }
+
+
+def peak_table(vehicle: Vehicle, runs: tuple[tuple[str, Design, Road], ...]) -> tuple[list[float], list[float]]:
+    """Print each run's peaks (and distance) at the production tolerance and 10x and 100x tighter; return
+    the largest peaks' and the distances' errors at the production tolerance against the tightest."""
+    print("| run | quantity | 5e-5 | 5e-6 | 5e-7 | error at 5e-5 |\n|---|---|---|---|---|---|")
+    peak_errors: list[float] = []
+    distance_errors: list[float] = []
+    for label, d, road in runs:
+        results = [simulate(d, road, SimSettings(fast_tolerance=tol, max_airborne_time=3.5), vehicle)
+                   for tol in (5e-5, 5e-6, 5e-7)]
+        for field, unit in (("chain_tension_max_n", "N"), ("chain_tension_min_n", "N"), ("fz_rear_max_n", "N"),
+                            ("distance_m", "m")):
+            values = [float(getattr(r, field)) for r in results]
+            error = (f"{(values[0] - values[2]) * 1e3:+.1f} mm" if unit == "m" else
+                     f"{values[0] - values[2]:+,.0f} N ({(values[0] - values[2]) / max(abs(values[2]), 1.0):+.1%})")
+            shown = [f"{x:.4f}" if unit == "m" else f"{x:,.0f}" for x in values]
+            if field.endswith("_max_n"):
+                peak_errors.append(abs(values[0] - values[2]) / abs(values[2]))
+            elif unit == "m":
+                distance_errors.append(abs(values[0] - values[2]))
+            print(f"| {label}, {road.spec} | `{field}` | {' | '.join(shown)} | {error} |")
+    return peak_errors, distance_errors
 
 
 def machine() -> str:
@@ -321,29 +345,40 @@ def main() -> None:
     print("the production tolerance (5e-5) and at 10x and 100x tighter ones; the last column is the production")
     print("value's error against the tightest. The model's limits are on (`suspension_stops = 1`,")
     print("`tyre_airborne_relax = 1`, docs/engine.md), as for a designer's use.\n")
-    print("| run | quantity | 5e-5 | 5e-6 | 5e-7 | error at 5e-5 |\n|---|---|---|---|---|---|")
     limited = v.replace(suspension_stops=1.0, tyre_airborne_relax=1.0)
-    peak_errors: list[float] = []
-    distance_errors: list[float] = []
-    for label, d, road in (("T11", TABLE11, sine3), ("T11", TABLE11, sine2),
-                           ("T14 geometry 2", GEOMETRIES["g2"], sine3), ("T14 geometry 2", GEOMETRIES["g2"], sine2)):
-        runs = [simulate(d, road, SimSettings(fast_tolerance=tol, max_airborne_time=3.5), limited)
-                for tol in (5e-5, 5e-6, 5e-7)]
-        for field, unit in (("chain_tension_max_n", "N"), ("chain_tension_min_n", "N"), ("fz_rear_max_n", "N"),
-                            ("distance_m", "m")):
-            values = [float(getattr(r, field)) for r in runs]
-            error = (f"{(values[0] - values[2]) * 1e3:+.1f} mm" if unit == "m" else
-                     f"{values[0] - values[2]:+,.0f} N ({(values[0] - values[2]) / abs(values[2]):+.1%})")
-            shown = [f"{x:.4f}" if unit == "m" else f"{x:,.0f}" for x in values]
-            if field.endswith("_max_n"):
-                peak_errors.append(abs(values[0] - values[2]) / abs(values[2]))
-            elif unit == "m":
-                distance_errors.append(abs(values[0] - values[2]))
-            print(f"| {label}, {road.spec} | `{field}` | {' | '.join(shown)} | {error} |")
+    runs = ((("T11", TABLE11, sine3), ("T11", TABLE11, sine2), ("T14 geometry 2", GEOMETRIES["g2"], sine3),
+             ("T14 geometry 2", GEOMETRIES["g2"], sine2)))
+    peak_errors, distance_errors = peak_table(limited, runs)
     print(f"\nAt the production tolerance the largest tension and load are within {max(peak_errors):.0%} on these runs")
     print(f"(median {np.median(peak_errors):.1%}; the worst where a landing's short spike is stepped over), the")
     print(f"distance within {max(distance_errors) * 1e3:.1f} mm; the smallest tension (whether the upper run pushes,")
     print("and by how much) is not decided by it.\n")
+
+    print("### The same with the elastic chain and cush drive (`chain_compliance = 1`, docs/engine.md)\n")
+    peak_errors, distance_errors = peak_table(limited.replace(chain_compliance=1.0), runs)
+    print(f"\nWith the elastic chain the largest tension and load are within {max(peak_errors):.0%} at the production")
+    print(f"tolerance (median {np.median(peak_errors):.1%}), the distance within {max(distance_errors) * 1e3:.1f} mm;")
+    print("the smallest tension is 0 (the run goes slack; it does not push).\n")
+
+    print("## Options beyond the paper, against the paper's model (docs/engine.md)\n")
+    print("The rolling front wheel (`front_wheel_spin = 1`) in both methods, each in its own coordinates")
+    print("(the reference: k = I / ft0^2 on its constant M; the fast method: k a a^T in its closed form), and")
+    print("the elastic chain made 1,000x stiffer against the paper's rigid chain (fast):\n")
+    print("| run | paper's model | option, fast | option, reference / 1,000x stiffer | difference |")
+    print("|---|---|---|---|---|")
+    spin = v.replace(front_wheel_spin=1.0)
+    stiff = v.replace(chain_compliance=1.0, k_chain=v["k_chain"] * 1e3, k_cush=v["k_cush"] * 1e3,
+                      c_cush=v["c_cush"] * math.sqrt(1e3))
+    for label, d, road in (("T11", TABLE11, flat), ("T11", TABLE11, sine3),
+                           ("T14 geometry 2", GEOMETRIES["g2"], sine3)):
+        base = simulate(d, road, fast).distance_m
+        a, b = simulate(d, road, fast, spin).distance_m, simulate(d, road, ref.with_(dt=2.5e-4), spin).distance_m
+        print(f"| {label}, {road.spec}, front wheel turning | {base:.5f} m | {a:.5f} m | {b:.5f} m (dt 0.25 ms) | "
+              f"{(a - b) * 1e3:+.3f} mm |")
+        c = simulate(d, road, fast, stiff).distance_m
+        print(f"| {label}, {road.spec}, elastic chain x1,000 | {base:.5f} m | | {c:.5f} m | "
+              f"{(c - base) * 1e3:+.3f} mm |")
+    print()
 
     print("## Time step (reference method)\n")
     print("| case | d at dt = 1 ms | d at dt = 0.5 ms | change |\n|---|---|---|---|")

@@ -41,7 +41,8 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("CMAES", "DifferentialEvolution", "OPTIMISERS", "Optimiser"), "finaldrive.engine.optimize"),
     **dict.fromkeys(("BAND_LIMIT_M", "TIE_CANDIDATES", "TIGHT_FACTOR", "band_of", "band_settings", "best_distinct",
                      "numerical_bands", "reference_refusal", "tie_flags"), "finaldrive.engine.study.band"),
-    **dict.fromkeys(("ALTERNATIVES", "Alternative", "model_bands"), "finaldrive.engine.study.model_band"),
+    **dict.fromkeys(("ALTERNATIVES", "Alternative", "model_bands", "ranking_change"),
+                    "finaldrive.engine.study.model_band"),
     **dict.fromkeys(("CONCENTRIC_L2_M", "DEFAULT_TOLERANCE_PCT", "MAX_TOLERANCE_PCT", "SENSITIVITY_STEPS", "angle_arc",
                      "finite_differences", "near_mask", "near_optimal", "near_summary", "sensitivities",
                      "sensitivity_sentences", "sensitivity_stencil", "spread", "upper_limits"),
@@ -149,6 +150,7 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         ALTERNATIVES as ALTERNATIVES,
         Alternative as Alternative,
         model_bands as model_bands,
+        ranking_change as ranking_change,
     )
     from finaldrive.engine.study.plan import (
         PAPER_SWEEP_STEP as PAPER_SWEEP_STEP,

@@ -104,11 +104,12 @@ class ServiceClient:
         return self.object("POST", f"/v1/jobs/{job_id}/cancel")
 
     def best(self, job_id: int, tolerance_pct: float | None = None, sensitivity: bool = False,
-             wait_s: float = 600.0, band: bool = False) -> dict[str, Any]:
-        """The job's best designs; with ``sensitivity`` (``band``), polled (as Retry-After asks) until the
-        scheduler has simulated the finite differences (the numerical bands), at most ``wait_s``
-        (then ApiError 504)."""
-        params = {name: "true" for name, wanted in (("sensitivity", sensitivity), ("band", band)) if wanted}
+             wait_s: float = 600.0, band: bool = False, model_band: bool = False) -> dict[str, Any]:
+        """The job's best designs; with ``sensitivity`` (``band``, ``model_band``), polled (as Retry-After
+        asks) until the scheduler has simulated the finite differences (the numerical bands, the model
+        bands), at most ``wait_s`` (then ApiError 504)."""
+        params = {name: "true" for name, wanted in (("sensitivity", sensitivity), ("band", band),
+                                                    ("model_band", model_band)) if wanted}
         if tolerance_pct is not None:
             params["tolerance_pct"] = repr(tolerance_pct)
         deadline = time.monotonic() + wait_s
@@ -119,8 +120,9 @@ class ServiceClient:
                 return body
             if time.monotonic() > deadline:
                 body = response.json()
-                raise ApiError(504, f"job {job_id}: its sensitivity job {body.get('sensitivity_job')} or band jobs "
-                               f"{body.get('band_jobs')} have not finished within {wait_s:g} s")
+                raise ApiError(504, f"job {job_id}: its sensitivity job {body.get('sensitivity_job')}, band jobs "
+                               f"{body.get('band_jobs')} or model-band jobs {body.get('model_band_jobs')} have not "
+                               f"finished within {wait_s:g} s")
             retry = response.headers.get("Retry-After", "")
             time.sleep(min(float(retry), 10.0) if retry.isdigit() else 2.0)
 

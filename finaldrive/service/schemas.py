@@ -331,6 +331,10 @@ class BestOut(BaseModel):
                                              "re-runs, tight and reference")
     band_state: JobStateName | None = Field(None, description="band=true: the least finished of those jobs' states "
                                             "(the bands are there once both have succeeded)")
+    model_band_jobs: dict[str, int] | None = Field(None, description="model_band=true: the jobs (kind designs), one "
+                                                   "an alternative")
+    model_band_state: JobStateName | None = Field(None, description="model_band=true: the least finished of those "
+                                                  "jobs' states (the model bands are there once all have succeeded)")
 
 
 class RoadOut(BaseModel):
@@ -604,6 +608,34 @@ class TieOut(BandOut):
     tie: bool = Field(description=_described("tie"))
 
 
+class RankingOut(BaseModel):
+    """The designs' results under a model (engine.study.model_band.ranking_change), in the designs' order."""
+
+    fitness_m: list[float | None] = Field(description="each design's fitness; null: its run failed")
+    distance_m: list[float | None]
+    failed: list[str] = Field(description="each design's failure reason; empty where it succeeded")
+    rank_correlation: float | None = Field(description="Spearman's of the fitness with the model as given, over "
+                                           "the designs that succeeded in both (null below 3)")
+    best: int | None = Field(description="the index of the best design")
+    same_best: bool = Field(description="the best is the model as given's best")
+    largest_change_m: float | None = Field(description=_described("largest_change_m"))
+
+
+class ModelAlternativeOut(RankingOut):
+    what: str = Field(description="what the alternative changes")
+    road: str = Field(description="the road it is simulated on")
+
+
+class ModelBandsOut(BaseModel):
+    """A road's best distinct designs under the documented modelling alternatives (docs/optimisation.md#model-bands)."""
+
+    designs: list[dict[str, float]] = Field(description="the designs, best first (a2_deg, l2_m, rws_m)")
+    baseline: RankingOut = Field(description="the job's own results")
+    alternatives: dict[str, ModelAlternativeOut]
+    skipped: list[str] = Field(description="the alternatives left out on this road")
+    skipped_reasons: dict[str, str] = Field(description="why each was left out")
+
+
 class SharpnessOut(BaseModel):
     """How sharp a best design is: the evaluated designs within a tolerance of the best fitness."""
 
@@ -623,6 +655,8 @@ class SharpnessOut(BaseModel):
                                            "numerical band")
     ties: list[TieOut] | None = Field(None, description="with band=true, single roads: the best distinct designs "
                                       "(the best first) with their bands, and which tie with the best")
+    model_bands: ModelBandsOut | None = Field(None, description="with model_band=true, single roads: the best "
+                                              "designs under each modelling alternative")
     final_population: PopulationOut | None = Field(None, description="a DE's last stored population")
 
 

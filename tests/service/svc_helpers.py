@@ -82,6 +82,17 @@ def running_scheduler(settings: Settings, task: Any, *, executor: Executor | Non
         db.dispose()
 
 
+def best_when_done(client: Any, url: str, option: str, jobs: dict[str, int]) -> dict[str, Any]:
+    """GET ``url`` (a job's /best) with ``option``=true once the service's own ``jobs`` for it have
+    finished: 200, and ``<option>_state`` succeeded."""
+    for job_id in jobs.values():
+        wait_done(client, job_id)
+    done = client.get(url, params={option: "true"})
+    assert done.status_code == 200 and done.json()[f"{option}_state"] == "succeeded", done.json()
+    body: dict[str, Any] = done.json()
+    return body
+
+
 def wait_done(client: Any, job_id: int, timeout: float = 30.0, poll: float = 0.02) -> dict[str, Any]:
     """Poll GET /v1/jobs/{id} until the job reaches a terminal state."""
     deadline = time.monotonic() + timeout

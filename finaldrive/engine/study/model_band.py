@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -34,11 +34,13 @@ Change = Callable[["Road", "Vehicle", SimSettings], "tuple[Road, Vehicle] | None
 @dataclass(frozen=True)
 class Alternative:
     """A documented alternative to the model: its name, what it changes, and the change (None where
-    it does not apply)."""
+    it does not apply); ``changes``: "vehicle" (the change does not read the road, and gives it back as
+    it is) or "road"."""
 
     name: str
     what: str
     change: Change
+    changes: str = "vehicle"
 
 
 def _vehicle(**scale: float) -> Change:
@@ -106,10 +108,11 @@ ALTERNATIVES: tuple[Alternative, ...] = (
     Alternative("chain_elastic", "the chain and the rear wheel's cush drive elastic (docs/engine.md#the-elastic-chain-"
                 "and-cush-drive; fast method only; skipped when the vehicle has it already or has two chain runs)",
                 _elastic_chain),
-    Alternative("road_phase_90", "a sine road started a quarter period later (sine roads only)", _phase(90.0)),
-    Alternative("road_phase_180", "a sine road started half a period later (sine roads only)", _phase(180.0)),
+    Alternative("road_phase_90", "a sine road started a quarter period later (sine roads only)", _phase(90.0), "road"),
+    Alternative("road_phase_180", "a sine road started half a period later (sine roads only)", _phase(180.0),
+                "road"),
     Alternative("road_enveloped", "the road under a rigid ring of the rear tyre's unloaded radius rt0 (a tyre "
-                "bridges dips narrower than itself; docs/engine.md#road-enveloping; not for flat)", _enveloped),
+                "bridges dips narrower than itself; docs/engine.md#road-enveloping; not for flat)", _enveloped, "road"),
 )
 
 
@@ -124,7 +127,8 @@ def model_bands(designs: np.ndarray, road: Road, settings: SimSettings = SimSett
     vehicle = vehicle or default_vehicle()
     base = evaluate(rows, road, settings, vehicle)
     base_f = _fitness(base)
-    out: dict[str, Any] = {"baseline": _runs(base, base_f, base_f), "alternatives": {}, "skipped": []}
+    out: dict[str, Any] = {"baseline": ranking_change(base_f, base.distance_m, base.reason, base_f),
+                           "alternatives": {}, "skipped": []}
     for alt in ALTERNATIVES:
         changed = alt.change(road, vehicle, settings)
         if changed is None:
@@ -132,7 +136,7 @@ def model_bands(designs: np.ndarray, road: Road, settings: SimSettings = SimSett
             continue
         batch = evaluate(rows, changed[0], settings, changed[1])
         out["alternatives"][alt.name] = {"what": alt.what, "road": changed[0].spec,
-                                         **_runs(batch, _fitness(batch), base_f)}
+                                         **ranking_change(_fitness(batch), batch.distance_m, batch.reason, base_f)}
     return out
 
 
@@ -141,7 +145,12 @@ def _fitness(batch: Any) -> np.ndarray:
     return np.where(ok, batch.fitness_m, np.nan)
 
 
-def _runs(batch: Any, fitness: np.ndarray, base: np.ndarray) -> dict[str, Any]:
+def ranking_change(fitness: np.ndarray, distance: np.ndarray, failed: Sequence[str],
+                   base: np.ndarray) -> dict[str, Any]:
+    """The designs' ``fitness`` and ``distance`` under an alternative (NaN fitness: failed, with its
+    reason in ``failed``; "" where it succeeded) against their fitness as given (``base``): the record of
+    :func:`model_bands`' alternatives."""
+    fitness, base = np.asarray(fitness, dtype=float), np.asarray(base, dtype=float)
     both = np.isfinite(fitness) & np.isfinite(base)
     rho = None
     if both.sum() >= 3:
@@ -150,8 +159,8 @@ def _runs(batch: Any, fitness: np.ndarray, base: np.ndarray) -> dict[str, Any]:
     best = int(np.nanargmax(fitness)) if np.isfinite(fitness).any() else None
     base_best = int(np.nanargmax(base)) if np.isfinite(base).any() else None
     return {
-        "fitness_m": [_plain(v) for v in fitness], "distance_m": [_plain(v) for v in batch.distance_m],
-        "failed": list(batch.reason), "rank_correlation": rho, "best": best,
+        "fitness_m": [_plain(v) for v in fitness], "distance_m": [_plain(float(v)) for v in distance],
+        "failed": list(failed), "rank_correlation": rho, "best": best,
         "same_best": best is not None and best == base_best,
         "largest_change_m": _plain(float(np.max(np.abs(fitness[both] - base[both])))) if both.any() else None,
     }

@@ -78,8 +78,8 @@ def job_sharpness(session: Session, job: Job, tolerance_pct: float,
                   sensitivity: dict[int, dict[str, Any]] | None = None,
                   bands: dict[int, dict[str, Any]] | None = None) -> list[SharpnessOut]:
     """Near-optimal set on each road (and by the aggregate score of a robust-de), with each road's
-    ``sensitivity`` (road index -> derivatives) and ``bands`` (road index -> its best's band and
-    ties, service.api.bands) where given."""
+    ``sensitivity`` (road index -> derivatives) and ``bands`` (road index -> its best's band and ties,
+    service.api.bands, and its model bands, service.api.model_bands) where given."""
     roads = [r for r, _ in roads_of(session, [job.id])[job.id]]
     generations = last_generations(session, job.id) if job.kind not in ("sweep", "designs") else {}
     out: list[SharpnessOut] = []
@@ -108,8 +108,9 @@ def _population(generation: Generation | None) -> PopulationOut | None:
 
 #: The Idempotency-Keys the service keeps for itself: a job's sensitivity job (clients may not use them).
 SENSITIVITY_KEY_PREFIX = "sensitivity:"
-#: Every prefix of the service's own keys (a job's sensitivity job, its band jobs: service.api.bands).
-OWN_KEY_PREFIXES = (SENSITIVITY_KEY_PREFIX, "band:")
+#: Every prefix of the service's own keys (a job's sensitivity job, its band jobs: service.api.bands, its
+#: model-band jobs: service.api.model_bands).
+OWN_KEY_PREFIXES = (SENSITIVITY_KEY_PREFIX, "band:", "model-band:")
 
 
 def sensitivity_key(job_id: int) -> str:

@@ -32,7 +32,13 @@ from finaldrive.service.cli.remote import (
     follow,
     progress_line,
 )
-from finaldrive.service.cli.sharpness_view import band_lines, near_lines, sensitivity_lines, spread_text
+from finaldrive.service.cli.sharpness_view import (
+    band_lines,
+    model_band_lines,
+    near_lines,
+    sensitivity_lines,
+    spread_text,
+)
 
 if TYPE_CHECKING:
     from finaldrive.service.client import ServiceClient
@@ -189,6 +195,8 @@ def _print_best(best: dict[str, Any]) -> None:
             print("\n".join(sensitivity_lines(sharp["sensitivity"], sharp["tolerance_m"])))
         if sharp.get("numerical_band"):
             print("\n".join(band_lines(sharp["numerical_band"], sharp["ties"])))
+        if sharp.get("model_bands"):
+            print("\n".join(model_band_lines(sharp["model_bands"])))
         pop = sharp.get("final_population")
         if pop:
             print(f"  final DE population ({pop['count']} designs): {spread_text(pop['ranges'])}")
@@ -197,7 +205,7 @@ def _print_best(best: dict[str, Any]) -> None:
 @client_command
 def run_best(args: argparse.Namespace) -> int:
     with remote.connect(args) as client:
-        best = client.best(args.id, args.tolerance_pct, args.sensitivity, band=args.band)
+        best = client.best(args.id, args.tolerance_pct, args.sensitivity, band=args.band, model_band=args.model_band)
     if args.json:
         print_json(best)
     else:
@@ -275,6 +283,9 @@ def register(sub: Any) -> None:
     p.add_argument("--band", action="store_true",
                    help="also each road's best designs' numerical bands and ties (of a finished job: its scheduler "
                    "re-simulates up to 5 designs a road 100x tighter and with the reference method; waits for them)")
+    p.add_argument("--model-band", action="store_true",
+                   help="also each road's best designs under each documented modelling alternative, with the rank "
+                   "correlation of each (of a finished job: its scheduler simulates them; waits for them)")
     add_server_args(p)
     p.set_defaults(run=run_best)
 

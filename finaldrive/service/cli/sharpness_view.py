@@ -76,6 +76,25 @@ def band_lines(band: dict[str, Any], ties: list[dict[str, Any]], *, what: str = 
     return lines
 
 
+def model_band_lines(bands: dict[str, Any], indent: str = "  ") -> list[str]:
+    """A road's best designs under each modelling alternative (engine.study.model_band): the rank
+    correlation with the model as given, whether the best stays the best, the largest change."""
+    lines = [f"{indent}model bands of its {len(bands['designs'])} best distinct designs (rank correlation with the "
+             "model as given; the same best?; the largest change of a fitness):"]
+    for name, alt in bands["alternatives"].items():
+        rho = "-" if alt["rank_correlation"] is None else f"{alt['rank_correlation']:+.2f}"
+        change = "-" if alt["largest_change_m"] is None else (
+            f"{alt['largest_change_m'] * 1000:.1f} mm" if alt["largest_change_m"] < 1.0
+            else f"{alt['largest_change_m']:.3f} m")
+        failed = sum(bool(f) for f in alt["failed"])
+        lines.append(f"{indent}  {name:<22} {rho:>6}  {'same best' if alt['same_best'] else 'another best':<12} "
+                     f"{change}" + (f"  ({failed} failed)" if failed else ""))
+    if bands["skipped"]:
+        lines.append(f"{indent}  left out: " + "; ".join(f"{name} ({bands['skipped_reasons'].get(name, '')})"
+                                                         for name in bands["skipped"]))
+    return lines
+
+
 def band_text(band: dict[str, Any]) -> str:
     """A band as people read it: +-x mm, flagged above 1 mm, or why it is unknown."""
     if band["band_m"] is None:

@@ -14,7 +14,7 @@ from finaldrive.engine import default_vehicle, finite_differences, resolve_roads
 from finaldrive.service.api.routes import results
 from finaldrive.service.api.sharpness import stencil
 from finaldrive.service.db import columns
-from tests.service.svc_helpers import SWEEP, ToyTask, toy_batch, wait_done
+from tests.service.svc_helpers import SWEEP, ToyTask, best_when_done, toy_batch, wait_done
 
 
 def test_csv_pages_stream_the_same_rows_as_json(client: TestClient, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -95,10 +95,11 @@ def test_a_cancelled_sensitivity_job_is_queued_again(client: TestClient, fake: T
     assert client.get(url, params={"sensitivity": "true"}).json()["sensitivity_state"] == "succeeded"
 
 
-def test_best_sensitivity_waits_for_the_job_to_finish(client: TestClient, fake: ToyTask) -> None:
+@pytest.mark.parametrize("option", ["sensitivity", "band", "model_band"])
+def test_best_simulations_wait_for_the_job_to_finish(client: TestClient, fake: ToyTask, option: str) -> None:
     fake.gate.clear()
     job = client.post("/v1/jobs", json=SWEEP).json()
-    r = client.get(f"/v1/jobs/{job['id']}/best", params={"sensitivity": "true"})
+    r = client.get(f"/v1/jobs/{job['id']}/best", params={option: "true"})
     fake.gate.set()
     assert r.status_code == 409 and "once it has finished" in r.json()["detail"]
     assert client.get(f"/v1/jobs/{job['id']}/best").status_code == 200
@@ -134,7 +135,7 @@ def test_a_designs_job_evaluates_each_roads_own_designs(client: TestClient) -> N
 
 def test_a_client_cannot_take_a_sensitivity_or_band_key(client: TestClient) -> None:
     job = wait_done(client, client.post("/v1/jobs", json=SWEEP | {"roads": ["flat"]}).json()["id"])
-    for key in (f"sensitivity:{job['id']}", f"band:tight:{job['id']}"):
+    for key in (f"sensitivity:{job['id']}", f"band:tight:{job['id']}", f"model-band:drive_half:{job['id']}"):
         r = client.post("/v1/jobs", json=SWEEP, headers={"Idempotency-Key": key})
         assert r.status_code == 422 and "idempotency-key" in r.json()["detail"]
 
@@ -156,11 +157,7 @@ def test_best_bands_are_simulated_by_the_scheduler(client: TestClient, fake: Toy
     assert specs["reference"]["settings"]["method"] == "reference"
     assert [len(d) for d in specs["tight"]["designs"]] == [5, 5] and specs["tight"]["roads"] == SWEEP["roads"]
     fake.gate.set()
-    for i in jobs.values():
-        wait_done(client, i)
-    done = client.get(url, params={"band": "true"})
-    assert done.status_code == 200 and done.json()["band_state"] == "succeeded"
-    for road, sharp in zip(job["roads"], done.json()["sharpness"], strict=True):
+    for road, sharp in zip(job["roads"], best_when_done(client, url, "band", jobs)["sharpness"], strict=True):
         ties = sharp["ties"]
         assert sharp["numerical_band"]["fitness_m"] == road["best"]["fitness_m"] == ties[0]["fitness_m"]
         assert [t["band_m"] for t in ties] == [0.0] * 5 and [t["tie"] for t in ties] == [True] + [False] * 4
@@ -177,9 +174,6 @@ def test_a_vehicle_only_the_fast_method_models_is_banded_without_the_reference_r
     url = f"/v1/jobs/{job['id']}/best"
     jobs = client.get(url, params={"band": "true"}).json()["band_jobs"]
     assert set(jobs) == {"tight"}
-    wait_done(client, jobs["tight"])
-    done = client.get(url, params={"band": "true"})
-    assert done.status_code == 200 and done.json()["band_state"] == "succeeded"
-    ties = done.json()["sharpness"][0]["ties"]
+    ties = best_when_done(client, url, "band", jobs)["sharpness"][0]["ties"]
     assert all(set(t["runs"]) == {"production", "tight"} and t["band_m"] == 0.0 for t in ties)
     assert all("fast method only" in t["failed"]["reference"] for t in ties)

@@ -171,15 +171,9 @@ def test_best_prints_which_variables_are_decided(monkeypatch: pytest.MonkeyPatch
     assert seen[0].url.params["tolerance_pct"] == "0.5"
 
 
-def test_best_band_polls_and_prints_the_band_and_ties(monkeypatch: pytest.MonkeyPatch,
-                                                      capsys: pytest.CaptureFixture[str]) -> None:
-    """202 (the band jobs running) is polled as Retry-After asks; then the best's band and its ties."""
-    seen: list[httpx.Request] = []
-    band = {"fitness_m": 20.5, "distance_m": 20.6, "band_m": 0.0021, "distance_band_m": 0.002, "exceeds_limit": True,
-            "runs": {}, "failed": {}}
-    ties = [{**band, "a2_deg": 0.0, "l2_m": 0.0, "rws_m": 0.09, "tie": True},
-            {**band, "fitness_m": 20.499, "a2_deg": 10.0, "l2_m": 0.0, "rws_m": 0.09, "tie": True},
-            {**band, "fitness_m": 20.4, "a2_deg": 20.0, "l2_m": 0.0, "rws_m": 0.09, "tie": False}]
+def _polled_best(seen: list[httpx.Request], ready: dict[str, Any]) -> Any:
+    """A /best that answers 202 (its jobs running, Retry-After 0) once, then 200 with ``ready`` in the road's
+    sharpness; each request into ``seen``."""
     sharp = {"road": "flat", "tolerance_pct": 0.1, "tolerance_m": 0.0205, "best_fitness_m": 20.5, "count": 2,
              "evaluated": 3, "ranges": {"a2_deg": [0.0, 10.0], "l2_m": [0.0, 0.0], "rws_m": [0.09, 0.09]},
              "explored": {}, "verdicts": {}, "sentences": []}
@@ -189,12 +183,41 @@ def test_best_band_polls_and_prints_the_band_and_ties(monkeypatch: pytest.Monkey
         if len(seen) == 1:
             return httpx.Response(202, headers={"Retry-After": "0"}, json={"job_id": 7, "roads": job()["roads"],
                                                                           "sharpness": [sharp]})
-        return httpx.Response(200, json={"job_id": 7, "roads": job()["roads"],
-                                         "sharpness": [sharp | {"numerical_band": band, "ties": ties}]})
+        return httpx.Response(200, json={"job_id": 7, "roads": job()["roads"], "sharpness": [sharp | ready]})
+    return handler
 
-    use_transport(monkeypatch, handler)
+
+def test_best_band_polls_and_prints_the_band_and_ties(monkeypatch: pytest.MonkeyPatch,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """202 (the band jobs running) is polled as Retry-After asks; then the best's band and its ties."""
+    seen: list[httpx.Request] = []
+    band = {"fitness_m": 20.5, "distance_m": 20.6, "band_m": 0.0021, "distance_band_m": 0.002, "exceeds_limit": True,
+            "runs": {}, "failed": {}}
+    ties = [{**band, "a2_deg": 0.0, "l2_m": 0.0, "rws_m": 0.09, "tie": True},
+            {**band, "fitness_m": 20.499, "a2_deg": 10.0, "l2_m": 0.0, "rws_m": 0.09, "tie": True},
+            {**band, "fitness_m": 20.4, "a2_deg": 20.0, "l2_m": 0.0, "rws_m": 0.09, "tie": False}]
+    use_transport(monkeypatch, _polled_best(seen, {"numerical_band": band, "ties": ties}))
     assert main(["best", "7", "--band"]) == 0
     out = capsys.readouterr().out
     assert len(seen) == 2 and all(r.url.params["band"] == "true" for r in seen)
     assert "numerical band of the best's fitness: +-2.10 mm, wider than 1 mm" in out
     assert "of the next 2 best designs, 1 tie with it" in out
+
+
+def test_best_model_band_polls_and_prints_each_alternatives_ranking(monkeypatch: pytest.MonkeyPatch,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    seen: list[httpx.Request] = []
+    ranking = {"fitness_m": [20.5, 20.4, 20.3], "distance_m": [20.6, 20.5, 20.4], "failed": ["", "", ""],
+               "rank_correlation": 1.0, "best": 0, "same_best": True, "largest_change_m": 0.0}
+    bands = {"designs": [{"a2_deg": 0.0, "l2_m": 0.0, "rws_m": 0.09}] * 3, "baseline": ranking,
+             "alternatives": {"drive_double": ranking | {"rank_correlation": -0.5, "best": 2, "same_best": False,
+                                                         "largest_change_m": 0.0123, "failed": ["", "x", ""],
+                                                         "what": "the drive doubled", "road": "flat"}},
+             "skipped": ["road_enveloped"], "skipped_reasons": {"road_enveloped": "a computed profile"}}
+    use_transport(monkeypatch, _polled_best(seen, {"model_bands": bands}))
+    assert main(["best", "7", "--model-band"]) == 0
+    out = capsys.readouterr().out
+    assert len(seen) == 2 and all(r.url.params["model_band"] == "true" for r in seen)
+    assert "model bands of its 3 best distinct designs" in out
+    assert "drive_double" in out and "-0.50" in out and "another best" in out and "12.3 mm" in out
+    assert "(1 failed)" in out and "left out: road_enveloped (a computed profile)" in out

@@ -14,6 +14,7 @@ from finaldrive.engine import DEFAULT_TOLERANCE_PCT, MAX_TOLERANCE_PCT
 from finaldrive.service.api.bands import band_jobs, stored_bands
 from finaldrive.service.api.deps import JobId, ServicesDep
 from finaldrive.service.api.lookups import find_road, load_job, parse_cursor
+from finaldrive.service.api.model_bands import model_band_jobs, stored_model_bands
 from finaldrive.service.api.problems import ApiProblem, documented, validation_problem
 from finaldrive.service.api.sharpness import (
     RETRY_AFTER_S,
@@ -109,7 +110,8 @@ IN_FLIGHT = InFlight()
         "are simulated by a scheduler as a small job of kind `designs`, queued once per job: 202 with "
         "Retry-After until it has finished, then 200 with each road's sensitivity. With band=true, likewise "
         "two such jobs re-simulate each road's best designs (100x tighter; the reference method): then 200 "
-        "with each road's band and ties."),
+        "with each road's band and ties. With model_band=true, one such job an applicable modelling alternative "
+        "simulates them (docs/optimisation.md#model-bands): then 200 with each road's model bands."),
 )
 def best(
     job_id: JobId, services: ServicesDep, request: Request, response: Response,
@@ -121,6 +123,10 @@ def best(
     band: Annotated[bool, Query(description="also the numerical band of each road's best and next best designs "
                                 "(up to 5 a road, re-simulated 100x tighter and with the reference method by a "
                                 "scheduler), with which tie with the best: 202 until they are stored")] = False,
+    model_band: Annotated[bool, Query(description="also each road's best designs under each documented modelling "
+                                      "alternative (tyre load range, drive, front wheel, elastic chain, road phase), "
+                                      "simulated by a scheduler, with the rank correlation of each against the "
+                                      "job's own: 202 until they are stored")] = False,
 ) -> BestOut:
     with IN_FLIGHT.slot(request.client.host if request.client else ""):
         job = load_job(services, job_id)
@@ -130,13 +136,18 @@ def best(
                 raise ApiProblem(404, f"job {job_id} does not exist", slug="not-found")
         designs = sensitivity_job(services, row) if sensitivity else None
         re_runs = band_jobs(services, row) if band else {}
+        alternatives, skipped = model_band_jobs(services, row) if model_band else ({}, {})
         with services.db.read() as session:
             ready = designs is not None and designs.state == JobState.succeeded.value
             derivatives = stored_sensitivities(session, row, designs) if ready and designs is not None else None
             banded = (stored_bands(session, row, re_runs)
                       if re_runs and all(j.state == JobState.succeeded.value for j in re_runs.values()) else None)
-            sharp = job_sharpness(session, row, tolerance_pct, derivatives, banded)
-    running = [j for j in [designs, *re_runs.values()] if j is not None and j.state not in TERMINAL]
+            ranked = (stored_model_bands(session, row, alternatives, skipped)
+                      if model_band and all(j.state == JobState.succeeded.value for j in alternatives.values())
+                      else None)
+            sharp = job_sharpness(session, row, tolerance_pct, derivatives, _merged(banded, ranked))
+    running = [j for j in [designs, *re_runs.values(), *alternatives.values()]
+               if j is not None and j.state not in TERMINAL]
     if running:
         response.status_code = 202
         response.headers["Retry-After"] = str(RETRY_AFTER_S)
@@ -145,7 +156,18 @@ def best(
                    sensitivity_job=None if designs is None else designs.id,
                    sensitivity_state=None if designs is None else designs.state,
                    band_jobs={label: j.id for label, j in re_runs.items()} or None,
-                   band_state=_least_finished([j.state for j in re_runs.values()]))
+                   band_state=_least_finished([j.state for j in re_runs.values()]),
+                   model_band_jobs={name: j.id for name, j in alternatives.items()} or None,
+                   model_band_state=_least_finished([j.state for j in alternatives.values()]))
+
+
+def _merged(*per_road: dict[int, dict[str, Any]] | None) -> dict[int, dict[str, Any]] | None:
+    """Road index -> the fields several road-wise results add to its sharpness, together."""
+    out: dict[int, dict[str, Any]] = {}
+    for results in per_road:
+        for index, fields in (results or {}).items():
+            out.setdefault(index, {}).update(fields)
+    return out or None
 
 
 #: Terminal job states, and the order in which a set of jobs' state is told (the least finished first).
