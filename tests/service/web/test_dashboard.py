@@ -118,6 +118,26 @@ def test_the_numerical_bands_are_asked_for_and_shown(tab: Page, server: Server) 
     assert tab.page.is_hidden("#bands")
 
 
+def test_the_model_bands_are_asked_for_and_shown(tab: Page, server: Server) -> None:
+    """The button queues the model-band jobs through /best?model_band=true; the page polls until they are
+    stored and shows, for each alternative, the rank correlation the API gives, and what was left out."""
+    job_id = submit_sweep(server)
+    tab.goto(f"/jobs/{job_id}")
+    tab.ready()
+    assert tab.page.is_hidden("#model-bands-card")
+    tab.page.click("#model-bands")
+    row = tab.page.wait_for_selector('#model-bands-table tr[data-road="flat"][data-alternative="drive_double"]',
+                                     timeout=120_000)
+    bands = server.client.get(f"/v1/jobs/{job_id}/best", params={"model_band": "true"}).json()["sharpness"][0]
+    shown = tab.page.locator('#model-bands-table tr[data-road="flat"]')
+    assert shown.count() == len(bands["model_bands"]["alternatives"])
+    rho = bands["model_bands"]["alternatives"]["drive_double"]["rank_correlation"]
+    shown_rho = row.query_selector("td[data-rho]").get_attribute("data-rho")
+    assert shown_rho == "null" if rho is None else float(shown_rho) == rho
+    assert "road_enveloped" in tab.page.inner_text("#model-bands-note")
+    assert tab.page.is_hidden("#model-bands")
+
+
 def _image(png: bytes) -> np.ndarray:
     from PIL import Image
 

@@ -18,6 +18,7 @@ let job = null;
 let points = null; // columns of the chosen road's evaluations
 let best = null;
 let banded = false; // the numerical bands were asked for: /best?band=true from then on
+let modelBanded = false; // the model bands were asked for: /best?model_band=true from then on
 let sort = { key: "fitness_m", desc: true };
 let page = 0;
 
@@ -63,6 +64,34 @@ function bestTable() {
   }
   $("best").tBodies[0].replaceChildren(...rows);
   $("bands").hidden = !TERMINAL.has(job.state) || banded;
+  $("model-bands").hidden = !TERMINAL.has(job.state) || modelBanded;
+  modelBandsTable();
+}
+
+/** Each road's best designs under each modelling alternative (service.api.model_bands), one row an alternative. */
+function modelBandsTable() {
+  $("model-bands-card").hidden = !modelBanded;
+  if (!modelBanded) return;
+  const rows = [];
+  const left = [];
+  for (const s of best?.sharpness ?? []) {
+    const bands = s.model_bands;
+    if (!bands) continue;
+    for (const [name, alt] of Object.entries(bands.alternatives)) {
+      const failed = alt.failed.filter(Boolean).length;
+      rows.push(el("tr", { "data-road": s.road, "data-alternative": name, title: alt.what },
+        el("td", {}, s.road), el("td", {}, name),
+        el("td", { class: "num", "data-rho": String(alt.rank_correlation) }, alt.rank_correlation == null ? "–" : num(alt.rank_correlation, 2)),
+        el("td", { class: alt.same_best ? "" : "error" }, alt.same_best ? "the same" : "another"),
+        el("td", { class: "num" }, alt.largest_change_m == null ? "–" : num(alt.largest_change_m * 1000, 1)),
+        el("td", { class: "muted" }, failed ? `${failed} of ${alt.failed.length}` : "")));
+    }
+    left.push(...bands.skipped.map((name) => `${s.road}: ${name} (${bands.skipped_reasons[name] ?? ""})`));
+  }
+  const pending = !TERMINAL.has(best?.model_band_state ?? "queued");
+  $("model-bands-table").tBodies[0].replaceChildren(...(rows.length ? rows
+    : [el("tr", {}, el("td", { colspan: 6, class: "muted" }, pending ? "simulating…" : "–"))]));
+  $("model-bands-note").textContent = left.length ? `Left out: ${left.join("; ")}.` : "";
 }
 
 /** Sentences one a line (each is a whole verdict, none ends in a full stop). */
@@ -86,23 +115,31 @@ function tieSentence(s) {
   return [`Of the next ${ties.length - 1} best designs, ${tied} tie with the best within their numerical bands.`];
 }
 
-/** Ask for the bands (the service queues their jobs), then poll until they are there. */
-async function askBands() {
+/** /best with the simulations asked for so far. */
+const bestUrl = () => {
+  const asked = [banded && "band=true", modelBanded && "model_band=true"].filter(Boolean);
+  return `/v1/jobs/${jobId}/best${asked.length ? `?${asked.join("&")}` : ""}`;
+};
+
+/** Ask for the numerical bands or the model bands (the service queues their jobs), then poll until they are there. */
+async function ask(what) {
   const wait = () => new Promise((resolve) => setTimeout(resolve, 2000));
-  banded = true;
-  $("bands").hidden = true;
+  const model = what === "model";
+  if (model) modelBanded = true; else banded = true;
+  $(model ? "model-bands" : "bands").hidden = true;
+  bestTable();
   for (;;) {
     try {
-      best = await api(`/v1/jobs/${jobId}/best?band=true`);
+      best = await api(bestUrl());
     } catch (e) {
       if (e.status === 429) { await wait(); continue; } // another /best in flight: as Retry-After asks
-      banded = false;
-      showBanner(`numerical bands: ${e.message}`, true);
+      if (model) modelBanded = false; else banded = false;
+      showBanner(`${model ? "model" : "numerical"} bands: ${e.message}`, true);
       bestTable();
       return;
     }
     bestTable();
-    if (TERMINAL.has(best.band_state)) return;
+    if (TERMINAL.has(model ? best.model_band_state : best.band_state)) return;
     await wait();
   }
 }
@@ -247,8 +284,7 @@ async function loadHistory() {
 }
 
 async function loadAll() {
-  const bestUrl = `/v1/jobs/${jobId}/best${banded ? "?band=true" : ""}`;
-  [job, best] = await Promise.all([api(`/v1/jobs/${jobId}`), api(bestUrl).catch(() => best)]); // 429: keep the last
+  [job, best] = await Promise.all([api(`/v1/jobs/${jobId}`), api(bestUrl()).catch(() => best)]); // 429: keep the last
   summary();
   bestTable();
   await Promise.all([loadPoints(), loadHistory()]);
@@ -277,7 +313,8 @@ async function init() {
   $("sx").replaceChildren(...AXES.map(([k, l]) => el("option", { value: k }, l)));
   $("sy").replaceChildren(...AXES.map(([k, l]) => el("option", { value: k, selected: k === "fitness_m" }, l)));
   $("road").addEventListener("change", () => (loadPoints(), loadHistory()));
-  $("bands").addEventListener("click", askBands);
+  $("bands").addEventListener("click", () => ask("numerical"));
+  $("model-bands").addEventListener("click", () => ask("model"));
   $("value").addEventListener("change", drawMap);
   $("sx").addEventListener("change", drawScatter);
   $("sy").addEventListener("change", drawScatter);
