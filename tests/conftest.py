@@ -16,17 +16,22 @@ from finaldrive.engine import default_vehicle, paper_tables
 def _alone_if_exclusive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
     """Under pytest-xdist, a test marked ``exclusive`` runs with no other test beside it: every test holds
     the run's machine lock shared, an exclusive one holds it alone. A turnstile taken before it keeps an
-    exclusive test from waiting forever: while one waits, no other test starts."""
+    exclusive test from waiting forever: while one waits, no other test starts. A test marked ``cluster``
+    (it starts Ray nodes of its own) runs beside no other such test."""
     if "PYTEST_XDIST_WORKER" not in os.environ:
         yield
         return
     run = tmp_path_factory.getbasetemp().parent        # the run's folder, shared by its workers
     alone = request.node.get_closest_marker("exclusive") is not None
-    with open(run / "turnstile.lock", "a") as turnstile, open(run / "machine.lock", "a") as machine:
+    cluster = request.node.get_closest_marker("cluster") is not None
+    with (open(run / "turnstile.lock", "a") as turnstile, open(run / "machine.lock", "a") as machine,
+          open(run / "cluster.lock", "a") as clusters):
         fcntl.flock(turnstile, fcntl.LOCK_EX)
         fcntl.flock(machine, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
         fcntl.flock(turnstile, fcntl.LOCK_UN)
-        yield                                           # both released when the files close
+        if cluster:   # taken after the machine lock and given back first: no cycle with an exclusive test
+            fcntl.flock(clusters, fcntl.LOCK_EX)
+        yield                                           # all released when the files close
 
 
 @pytest.fixture(scope="session")

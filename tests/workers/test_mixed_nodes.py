@@ -44,11 +44,24 @@ SWEEP = {"kind": "sweep", "roads": ["sine:0.04:3"],
 DE = {"kind": "de", "roads": ["sine:0.04:2"], "de": {"np": 8, "iters": 5}, "seed": 13, "settings": SIM}
 
 
+def distinct_free_ports(n: int, taken: set[int]) -> list[int]:
+    """``n`` ports free on 127.0.0.1 now, distinct from each other and from ``taken`` (two calls of free_port
+    may give the same port: Ray then refuses to start, "port ... used by other components")."""
+    out: list[int] = []
+    while len(out) < n:
+        port = free_port()
+        if port not in taken and port not in out:
+            out.append(port)
+    return out
+
+
 def start_node(args: list[str], env: dict[str, str], temp_dir: str, name: str) -> subprocess.Popen[bytes]:
     log = Path(temp_dir) / f"{name}.log"
-    ports = [f"--node-manager-port={free_port()}", f"--object-manager-port={free_port()}",
-             f"--metrics-export-port={free_port()}", f"--dashboard-agent-listen-port={free_port()}",
-             f"--dashboard-agent-grpc-port={free_port()}", f"--runtime-env-agent-port={free_port()}"]
+    taken = {int(arg.rsplit(":", 1)[1] if arg.startswith("--address=") else arg.split("=", 1)[1])
+             for arg in args if arg.startswith(("--port=", "--address="))}
+    flags = ("--node-manager-port", "--object-manager-port", "--metrics-export-port", "--dashboard-agent-listen-port",
+             "--dashboard-agent-grpc-port", "--runtime-env-agent-port")
+    ports = [f"{flag}={port}" for flag, port in zip(flags, distinct_free_ports(len(flags), taken), strict=True)]
     with open(log, "w") as out:
         node = subprocess.Popen([sys.executable, "-m", "ray.scripts.scripts", "start", "--block", *args, *ports,
                                  "--node-ip-address=127.0.0.1", "--num-cpus=1", "--disable-usage-stats",
@@ -128,7 +141,7 @@ def _assert_same_bits(item: dict[str, Any], batch: Any, i: int) -> None:
         assert item[name] == (value if math.isfinite(value) else None), name
 
 
-@pytest.mark.exclusive   # two Ray nodes, PostgreSQL and the service on two cores: alone, as a cluster test
+@pytest.mark.cluster   # two Ray nodes of its own: no other test's cluster beside it
 def test_a_seeded_de_and_a_sweep_on_a_mixed_cluster_equal_the_serial_run(
         mixed_cluster: tuple[str, dict[str, str]], postgres: Any, tmp_path: Path) -> None:
     address, env = mixed_cluster

@@ -129,6 +129,7 @@ def _assert_no_stall(gaps: list[float]) -> None:
     assert max(gaps) <= usual + STALL_S, f"a generation waited {max(gaps):.2f} s against the usual {usual:.2f} s"
 
 
+@pytest.mark.cluster   # Ray nodes of its own: no other test's cluster beside it
 def test_a_node_with_an_empty_cache_joining_mid_de_stalls_no_generation(
         cluster: Cluster, postgres: Any, tmp_path: Path) -> None:
     cold_cache = tmp_path / "numba-cache"
@@ -150,6 +151,7 @@ def test_a_node_with_an_empty_cache_joining_mid_de_stalls_no_generation(
     _assert_no_stall(gaps)
 
 
+@pytest.mark.cluster   # Ray nodes of its own: no other test's cluster beside it
 def test_a_node_killed_mid_de_stalls_no_generation_and_changes_nothing(
         cluster: Cluster, postgres: Any, tmp_path: Path) -> None:
     node, temp_dir = cluster.add()

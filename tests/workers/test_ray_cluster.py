@@ -106,7 +106,7 @@ def ray_head(cluster_env: dict[str, str]) -> Iterator[str]:
         shutil.rmtree(temp_dir, ignore_errors=True)
 
 
-@pytest.mark.exclusive   # a cluster of its own beside another test's cluster failed to start a client (CI, Ray 2.40)
+@pytest.mark.cluster   # a cluster of its own: beside another test's, a client failed to start (CI, Ray 2.40)
 def test_ray_executor_joins_cluster_from_ray_address(ray_head: str, cluster_env: dict[str, str]) -> None:
     client = subprocess.run(
         [sys.executable, "-c", CLIENT], cwd=REPO, env={**cluster_env, "RAY_ADDRESS": ray_head},

@@ -94,6 +94,7 @@ def _wait_log(proc: Proc, text: str, timeout: float) -> None:
         time.sleep(0.2)
 
 
+@pytest.mark.cluster   # Ray nodes of its own: no other test's cluster beside it
 def test_a_second_scheduler_waits_as_a_standby_and_takes_over(
         cluster: tuple[str, dict[str, str], list[str]], postgres: Any, tmp_path: Path) -> None:
     address, env, dirs = cluster
