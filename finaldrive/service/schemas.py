@@ -611,12 +611,13 @@ class TieOut(BandOut):
 class RankingOut(BaseModel):
     """The designs' results under a model (engine.study.model_band.ranking_change), in the designs' order."""
 
-    fitness_m: list[float | None] = Field(description="each design's fitness; null: its run failed")
-    distance_m: list[float | None]
-    failed: list[str] = Field(description="each design's failure reason; empty where it succeeded")
+    fitness_m: list[float | None] = Field(description="each design's fitness [m]; null: its run failed")
+    distance_m: list[float | None] = Field(description="each design's distance [m]")
+    failed: list[str] = Field(description="each design's failure reason, in the designs' order; empty where it "
+                              "succeeded")
     rank_correlation: float | None = Field(description="Spearman's of the fitness with the model as given, over "
                                            "the designs that succeeded in both (null below 3)")
-    best: int | None = Field(description="the index of the best design")
+    best: int | None = Field(description="the index of the best design; null: none succeeded")
     same_best: bool = Field(description="the best is the model as given's best")
     largest_change_m: float | None = Field(description=_described("largest_change_m"))
 
@@ -626,10 +627,16 @@ class ModelAlternativeOut(RankingOut):
     road: str = Field(description="the road it is simulated on")
 
 
+class ModelBandDesign(BaseModel):
+    a2_deg: float
+    l2_m: float
+    rws_m: float
+
+
 class ModelBandsOut(BaseModel):
     """A road's best distinct designs under the documented modelling alternatives (docs/optimisation.md#model-bands)."""
 
-    designs: list[dict[str, float]] = Field(description="the designs, best first (a2_deg, l2_m, rws_m)")
+    designs: list[ModelBandDesign] = Field(description="the designs, best first (the job's own ranking)")
     baseline: RankingOut = Field(description="the job's own results")
     alternatives: dict[str, ModelAlternativeOut]
     skipped: list[str] = Field(description="the alternatives left out on this road")

@@ -50,7 +50,9 @@ def _vehicle(**scale: float) -> Change:
 
 
 def _load_range(fz_max_n: float) -> Change:
-    def change(road: Road, vehicle: Vehicle, settings: SimSettings) -> tuple[Road, Vehicle]:
+    def change(road: Road, vehicle: Vehicle, settings: SimSettings) -> tuple[Road, Vehicle] | None:
+        if not vehicle["Fz0"] < fz_max_n < vehicle["Fz_max"]:   # a lower bound than the vehicle's only
+            return None
         return road, vehicle.replace(Fz_max=fz_max_n)
     return change
 
@@ -96,7 +98,8 @@ LOW_LOAD_RANGE_N = 4800.0
 
 ALTERNATIVES: tuple[Alternative, ...] = (
     Alternative("tyre_load_range_4800", f"the Magic Formula's loads held within {LOW_LOAD_RANGE_N:g} N (the vehicle "
-                "file's Fz_max: 6,400 N; docs/engine.md#magic-formula-load-range)", _load_range(LOW_LOAD_RANGE_N)),
+                "file's Fz_max: 6,400 N; docs/engine.md#magic-formula-load-range; skipped for a vehicle whose range "
+                "is narrower already or whose Fz0 is not below it)", _load_range(LOW_LOAD_RANGE_N)),
     Alternative("drive_half", "the drive torque halved (a gentler launch than the paper's constant 150 N m)",
                 _vehicle(torque=0.5)),
     Alternative("drive_double", "the drive torque doubled (300 N m: a harder launch)", _vehicle(torque=2.0)),

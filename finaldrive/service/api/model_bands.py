@@ -32,7 +32,7 @@ from finaldrive.engine import (
 from finaldrive.service.api.bands import top_designs
 from finaldrive.service.api.problems import ApiProblem
 from finaldrive.service.api.sharpness import own_designs_job
-from finaldrive.service.db.models import TERMINAL_STATES, EvalStatus, Evaluation, Job, JobRoad
+from finaldrive.service.db.models import TERMINAL_STATES, EvalStatus, Evaluation, Job, JobRoad, JobState
 from finaldrive.service.db.repository import job_by_idempotency_key
 from finaldrive.service.schemas import JobSpec, VehicleFile
 from finaldrive.service.services import Services
@@ -50,12 +50,13 @@ def model_band_key(job_id: int, name: str) -> str:
 
 @dataclass(frozen=True)
 class Planned:
-    """An alternative for a job: its vehicle file, and the job's road indices it applies to with the
-    road each is simulated on."""
+    """An alternative for a job: its vehicle file, the job's road indices it applies to with the road each is
+    simulated on (in its designs job's order), and the job's other roads with why not."""
 
     alternative: Alternative
     vehicle: VehicleFile
     roads: tuple[tuple[int, str], ...]
+    road_skips: tuple[tuple[int, str], ...]
 
 
 def planned(job: Job, roads: list[JobRoad]) -> tuple[list[Planned], dict[str, str]]:
@@ -70,23 +71,35 @@ def planned(job: Job, roads: list[JobRoad]) -> tuple[list[Planned], dict[str, st
             skipped[alt.name] = NOT_HERE[alt.name]
             continue
         applied: list[tuple[int, str]] = []
+        road_skips: list[tuple[int, str]] = []
         changed_vehicle = None
-        for road in roads:
-            try:
-                parsed = Road.parse(road.spec)
-            except (RoadError, ValueError):   # a measured profile: no road alternative applies to it
-                if alt.changes == "road":
+        try:
+            for road in roads:
+                try:
+                    parsed = Road.parse(road.spec)
+                except (RoadError, ValueError):   # a measured profile: no road alternative applies to it
+                    if alt.changes == "road":
+                        road_skips.append((road.road_index, "a measured profile"))
+                        continue
+                    parsed = Road()               # a vehicle alternative does not read the road
+                changed = alt.change(parsed, vehicle, settings)
+                if changed is None:
+                    road_skips.append((road.road_index, "does not apply to this road"))
                     continue
-                parsed = Road()           # a vehicle alternative does not read the road
-            changed = alt.change(parsed, vehicle, settings)
-            if changed is None:
-                continue
-            applied.append((road.road_index, road.spec if alt.changes == "vehicle" else changed[0].spec))
-            changed_vehicle = changed[1]
-        if not applied or changed_vehicle is None:
-            skipped[alt.name] = "does not apply to this job's roads or vehicle"
+                spec = road.spec if alt.changes == "vehicle" else changed[0].spec
+                if spec in {s for _, s in applied}:
+                    road_skips.append((road.road_index, f"the same road as another of the job's under it ({spec})"))
+                    continue
+                applied.append((road.road_index, spec))
+                changed_vehicle = changed[1]
+        except ValueError as exc:                 # the change refused by the vehicle's own rules
+            skipped[alt.name] = f"not for this vehicle: {exc}"
             continue
-        out.append(Planned(alt, VehicleFile.model_validate(changed_vehicle.to_dict()), tuple(applied)))
+        if not applied or changed_vehicle is None:
+            skipped[alt.name] = f"does not apply to this job's vehicle, settings or roads ({alt.what})"
+            continue
+        out.append(Planned(alt, VehicleFile.model_validate(changed_vehicle.to_dict()), tuple(applied),
+                           tuple(road_skips)))
     return out, skipped
 
 
@@ -115,10 +128,10 @@ def model_band_jobs(services: Services, job: Job) -> tuple[dict[str, Job], dict[
 
 def stored_model_bands(session: Session, job: Job, jobs: dict[str, Job],
                        skipped: dict[str, str]) -> dict[int, dict[str, Any]]:
-    """Each road's model bands (by the job's road index) from the finished model-band jobs' evaluations:
-    ``{"model_bands": {designs, baseline, alternatives: {name: {what, road, ranking_change's record}}, skipped,
-    skipped_reasons}}``; ``skipped``: the alternatives left out on the road (engine.model_bands' field), with
-    why in ``skipped_reasons``."""
+    """Each road's model bands (by the job's road index) from the model-band jobs' evaluations, once each has
+    finished: ``{"model_bands": {designs, baseline, alternatives: {name: {what, road, ranking_change's record}},
+    skipped, skipped_reasons}}``; ``skipped``: the alternatives left out on the road (engine.model_bands' field),
+    with why in ``skipped_reasons`` (an alternative whose job did not succeed among them, with its state)."""
     tops = {road.road_index: (road, top) for road, top in top_designs(session, job) if top}
     alternatives = {p.alternative.name: p for p in planned(job, [road for road, _ in tops.values()])[0]}
     out: dict[int, dict[str, Any]] = {}
@@ -132,6 +145,12 @@ def stored_model_bands(session: Session, job: Job, jobs: dict[str, Job],
     for name, designs_job in jobs.items():
         p = alternatives.get(name)
         if p is None:
+            continue
+        if designs_job.state != JobState.succeeded.value:
+            why = f"its job {designs_job.id} {designs_job.state}"
+            why += f": {designs_job.error}" if designs_job.error else ""
+            for entry in out.values():
+                entry["model_bands"]["skipped_reasons"][name] = why
             continue
         rows: dict[tuple[int, int], Any] = {}
         for r in session.execute(select(Evaluation.road_index, Evaluation.candidate, Evaluation.status,
@@ -157,9 +176,11 @@ def stored_model_bands(session: Session, job: Job, jobs: dict[str, Job],
             out[index]["model_bands"]["alternatives"][name] = {
                 "what": p.alternative.what, "road": road_spec,
                 **ranking_change(np.array(fitness), np.array(distance), failed, base)}
+        road_skips = dict(p.road_skips)
         for index in out:
             if index not in applies:
-                out[index]["model_bands"]["skipped_reasons"][name] = "does not apply to this road"
+                why = road_skips.get(index, "does not apply to this road")
+                out[index]["model_bands"]["skipped_reasons"][name] = why
     for entry in out.values():
         record = entry["model_bands"]
         record["skipped"] = [a.name for a in ALTERNATIVES if a.name in record["skipped_reasons"]]

@@ -87,7 +87,8 @@ def model_band_lines(bands: dict[str, Any], indent: str = "  ") -> list[str]:
             f"{alt['largest_change_m'] * 1000:.1f} mm" if alt["largest_change_m"] < 1.0
             else f"{alt['largest_change_m']:.3f} m")
         failed = sum(bool(f) for f in alt["failed"])
-        lines.append(f"{indent}  {name:<22} {rho:>6}  {'same best' if alt['same_best'] else 'another best':<12} "
+        which = "same best" if alt["same_best"] else "another best" if alt["best"] is not None else "none succeeded"
+        lines.append(f"{indent}  {name:<22} {rho:>6}  {which:<14} "
                      f"{change}" + (f"  ({failed} failed)" if failed else ""))
     if bands["skipped"]:
         lines.append(f"{indent}  left out: " + "; ".join(f"{name} ({bands['skipped_reasons'].get(name, '')})"

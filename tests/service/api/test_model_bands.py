@@ -11,8 +11,12 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 from scipy.stats import spearmanr
+from sqlalchemy import update
 
 from finaldrive.engine import ALTERNATIVES, BatchResult, Road, SimSettings, Vehicle, default_vehicle
+from finaldrive.service.config import Settings
+from finaldrive.service.db.models import Job
+from finaldrive.service.services import open_database
 from finaldrive.workers.evaluate import by_road
 from tests.service.svc_helpers import SWEEP, ToyTask, best_when_done, toy_batch, wait_done
 
@@ -83,3 +87,33 @@ def test_model_bands_are_simulated_by_the_scheduler_with_each_alternatives_model
         assert bands["alternatives"]["front_wheel_spin"]["largest_change_m"] == pytest.approx(0.0, abs=1e-12)
         assert bands["alternatives"]["drive_double"]["largest_change_m"] > 0.1
 
+
+
+def test_an_alternative_whose_job_failed_is_left_out_with_why_and_the_others_shown(
+        client: TestClient, settings: Settings) -> None:
+    """A model-band job that failed (its CPU budget, say) is not run again by asking again: the others'
+    results are answered, and the failed one is among the skipped with its job and error."""
+    job = wait_done(client, client.post("/v1/jobs", json=SWEEP | {"roads": ["flat"]}).json()["id"])
+    url = f"/v1/jobs/{job['id']}/best"
+    jobs = client.get(url, params={"model_band": "true"}).json()["model_band_jobs"]
+    for i in jobs.values():
+        wait_done(client, i)
+    db = open_database(settings)
+    with db.write() as session:   # as the scheduler would mark a job over its budget
+        session.execute(update(Job).where(Job.id == jobs["drive_half"]).values(state="failed", error="over budget"))
+    done = client.get(url, params={"model_band": "true"}).json()
+    assert done["model_band_jobs"] == jobs and done["model_band_state"] == "failed"
+    bands = done["sharpness"][0]["model_bands"]
+    assert "drive_half" not in bands["alternatives"] and "drive_double" in bands["alternatives"]
+    assert bands["skipped_reasons"]["drive_half"] == f"its job {jobs['drive_half']} failed: over budget"
+    assert "drive_half" in bands["skipped"]
+
+
+def test_the_lower_load_range_is_left_out_for_a_vehicle_whose_range_is_lower_already(client: TestClient) -> None:
+    vehicle = default_vehicle().replace(Fz_max=4000.0).to_dict()
+    job = wait_done(client, client.post("/v1/jobs", json=SWEEP | {"roads": ["flat"], "vehicle": vehicle}).json()["id"])
+    body = client.get(f"/v1/jobs/{job['id']}/best", params={"model_band": "true"}).json()
+    assert "tyre_load_range_4800" not in body["model_band_jobs"]
+    bands = best_when_done(client, f"/v1/jobs/{job['id']}/best", "model_band", body["model_band_jobs"])
+    bands = bands["sharpness"][0]["model_bands"]
+    assert "does not apply" in bands["skipped_reasons"]["tyre_load_range_4800"]

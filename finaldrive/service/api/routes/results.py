@@ -101,7 +101,8 @@ IN_FLIGHT = InFlight()
 
 @router.get(
     "/{job_id}/best", response_model=BestOut, responses={202: {"model": BestOut, "description": (
-        "sensitivity=true: its job is queued or running (sensitivity_job names it); ask again after Retry-After")},
+        "sensitivity=true, band=true or model_band=true: their jobs are queued or running (sensitivity_job, "
+        "band_jobs, model_band_jobs name them); ask again after Retry-After")},
         **documented(404, 409, 422, 429)},
     summary="Best design per road (and by aggregate score for robust-de), with how sharp each optimum is",
     description=(
@@ -143,8 +144,7 @@ def best(
             banded = (stored_bands(session, row, re_runs)
                       if re_runs and all(j.state == JobState.succeeded.value for j in re_runs.values()) else None)
             ranked = (stored_model_bands(session, row, alternatives, skipped)
-                      if model_band and all(j.state == JobState.succeeded.value for j in alternatives.values())
-                      else None)
+                      if model_band and all(j.state in TERMINAL for j in alternatives.values()) else None)
             sharp = job_sharpness(session, row, tolerance_pct, derivatives, _merged(banded, ranked))
     running = [j for j in [designs, *re_runs.values(), *alternatives.values()]
                if j is not None and j.state not in TERMINAL]

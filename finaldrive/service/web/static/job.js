@@ -82,7 +82,7 @@ function modelBandsTable() {
       rows.push(el("tr", { "data-road": s.road, "data-alternative": name, title: alt.what },
         el("td", {}, s.road), el("td", {}, name),
         el("td", { class: "num", "data-rho": String(alt.rank_correlation) }, alt.rank_correlation == null ? "–" : num(alt.rank_correlation, 2)),
-        el("td", { class: alt.same_best ? "" : "error" }, alt.same_best ? "the same" : "another"),
+        el("td", { class: alt.same_best ? "" : "error" }, alt.same_best ? "the same" : alt.best == null ? "none succeeded" : "another"),
         el("td", { class: "num" }, alt.largest_change_m == null ? "–" : num(alt.largest_change_m * 1000, 1)),
         el("td", { class: "muted" }, failed ? `${failed} of ${alt.failed.length}` : "")));
     }
