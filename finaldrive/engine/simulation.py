@@ -21,10 +21,10 @@ from finaldrive.engine.api import (
     SimResult,
     SimSettings,
 )
-from finaldrive.engine.fast import bodies, minimal
+from finaldrive.engine.fast import bodies, minimal, rosenbrock
 from finaldrive.engine.fast.equilibrium import EquilibriumError
-from finaldrive.engine.fast.rosenbrock import N_ST as FAST_N_ST, S_MODE, S_ROW, S_T, run_fast
 from finaldrive.engine.fitness import fitness, slack
+from finaldrive.engine.jit import records
 from finaldrive.engine.model import diagnostics as D, params as P
 from finaldrive.engine.model.coordinates import N_CONSTRAINTS, N_COORDS, X1, X14, X15, Y14
 from finaldrive.engine.model.elements import N_AUX
@@ -112,8 +112,7 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
     if off_road:
         return _failed(off_road, setup.squat_ratio, chain, start)
     kind, rp = road.packed()
-    ext = np.zeros(D.N_EXT)
-    led = np.zeros(D.N_LED)
+    tracked = D.TRACKED.new()
     qg = gravity_forces(p)
     if settings.method == "fast":
         # series rows every series_stride x dt, by dense output (the steps do not land on them)
@@ -122,18 +121,20 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
         own_sprocket = bool(p[P.CHAIN_RUNS] == 2.0 or p[P.CHAIN_COMPLIANCE] == 1.0)  # e and alpha' in the state
         series = np.zeros((n_rows, outcome.N_SERIES))
         states = np.zeros((n_rows, 2 * bodies.N_DOF + int(own_sprocket)))  # e too
-        st = np.zeros(FAST_N_ST)
+        run = rosenbrock.FAST_RUN.new(
+            longitudinal=settings.tyre_longitudinal, t_end=settings.duration, dt_out=settings.duration / n_out,
+            tol=settings.fast_tolerance, h_max=settings.fast_max_step, ros2_only=settings.fast_ros2,
+            max_air_time=settings.max_airborne_time, keep_series=settings.series, chunk_steps=FAST_CHUNK_STEPS)
+        state = rosenbrock.FAST_STATE.new()
         y = np.zeros(minimal.N_STATE_TWO_RUNS if own_sprocket else minimal.N_STATE)
         y[:bodies.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
 
         def chunk() -> int:
-            return int(run_fast(y, p, kind, rp, settings.tyre_longitudinal, settings.duration,
-                                settings.duration / n_out, settings.fast_tolerance, settings.fast_max_step,
-                                settings.fast_ros2, settings.max_airborne_time, settings.series, st, ext, led, series,
-                                states, FAST_CHUNK_STEPS))
+            return int(rosenbrock.run_fast(y, p, kind, rp, run, state, tracked, series, states))
 
         code, stopped = _run_chunks(chunk, settings, should_stop)
-        reached = float(st[S_T])
+        loop = records.read(state)
+        reached = loop["t"]
     else:
         # imported here: the reference's module builds its integrator steps (numba dispatchers) on import
         from finaldrive.engine.solver import reference
@@ -142,25 +143,27 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
         n_rows = (n_steps // settings.series_stride + 2) if settings.series else 0
         series = np.zeros((n_rows, outcome.N_SERIES))
         states = np.zeros((n_rows, 2 * N_COORDS))
-        st = np.zeros(reference.N_ST)
+        run = reference.REFERENCE_RUN.new(
+            longitudinal=settings.tyre_longitudinal, dt=dt, n_steps=n_steps, n_trap=settings.trapezoidal_steps,
+            nu=settings.under_relaxation, tol=settings.corrector_tol, max_iter=settings.corrector_max_iter,
+            lam_tol=settings.lambda_tol, lam_max=settings.lambda_max_iter, max_resid=settings.max_constraint_residual,
+            max_air_steps=math.ceil(settings.max_airborne_time / dt), stride=settings.series_stride,
+            keep_series=settings.series, chunk_steps=REFERENCE_CHUNK_STEPS)
+        state = reference.REFERENCE_STATE.new()
         y = np.zeros(reference.N_STATE)
         y[:N_COORDS] = setup.q0
         hist = np.zeros((4, reference.N_STATE))
         lam = np.zeros(N_CONSTRAINTS)
-        sigma = np.zeros(1)
         aux = np.zeros(N_AUX)
         M = mass_matrix(p)
-        max_air_steps = math.ceil(settings.max_airborne_time / dt)
 
         def chunk() -> int:
-            return int(reference.run_reference(
-                y, p, kind, rp, M, qg, settings.tyre_longitudinal, dt, n_steps, settings.trapezoidal_steps,
-                settings.under_relaxation, settings.corrector_tol, settings.corrector_max_iter, settings.lambda_tol,
-                settings.lambda_max_iter, settings.max_constraint_residual, max_air_steps, settings.series_stride,
-                settings.series, st, hist, lam, sigma, aux, ext, led, series, states, REFERENCE_CHUNK_STEPS))
+            return int(reference.run_reference(y, p, kind, rp, M, qg, run, state, tracked, hist, lam, aux,
+                                               series, states))
 
         code, stopped = _run_chunks(chunk, settings, should_stop)
-        reached = float(st[reference.S_STEP]) * dt
+        loop = records.read(state)
+        reached = loop["step"] * dt
     if stopped:
         at = f" at t = {reached:.4f} s" if stopped != REASON_CANCELLED else ""
         return _failed(stopped + at, setup.squat_ratio, chain, start)
@@ -168,11 +171,10 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
         return _failed(f"{_REASONS[code]} at t = {reached:.4f} s", setup.squat_ratio, chain, start)
     if settings.method == "fast":
         x1_end = float(y[bodies.ZX1])
-        kinetic = float(minimal.kinetic_energy(y, p, kind, rp, int(st[S_MODE])))
+        kinetic = float(minimal.kinetic_energy(y, p, kind, rp, loop["mode"]))
         chain_energy = float(minimal.elastic_energy(y, p))   # the elastic chain's spring (0 at the start)
         x1, y1, theta, phi, fs = (float(c) for c in y[:bodies.ZBETA])
         q_end = assemble(p, road, x1, y1, theta, phi, fs, 0.0, 0.0)  # the pose, but for alpha and beta
-        rows = int(st[S_ROW])
     else:
         x1_end = float(y[X1])
         qd = y[N_COORDS:2 * N_COORDS]
@@ -180,16 +182,17 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
         matvec(M, qd, Mqd)
         kinetic = 0.5 * dot(qd, Mqd)   # engine.model.linalg: not BLAS's CPU-chosen kernels
         q_end = y[:N_COORDS]
-        rows = int(st[reference.S_ROW])
         chain_energy = 0.0
+    rows = loop["row"]
     off_road = road.uncovered(float(setup.q0[X14]), float(q_end[X15]))
     if off_road:
         return _failed(off_road, setup.squat_ratio, chain, start)
     distance = x1_end - float(setup.q0[X1])
-    slack_m = slack(ext[D.E_TAUT_MIN], ext[D.E_TAUT_MAX])
+    ends = records.read(tracked)
+    slack_m = slack(ends["taut_min_m"], ends["taut_max_m"])
     fit = fitness(distance, setup.squat_ratio, slack_m, eps1=p[P.EPS1], eps2=p[P.EPS2],
                   sr_optimum=p[P.SR_OPTIMUM], floor=p[P.FLOOR])
-    diagnostics = _diagnostics(ext, led, kinetic,
+    diagnostics = _diagnostics(ends, kinetic,
                                potential_energy(q_end, p, qg) - potential_energy(setup.q0, p, qg) + chain_energy)
     out = None
     if settings.series:
@@ -203,28 +206,16 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
                         fitness_m=fit, chain_length_m=chain, wall_s=time.perf_counter() - start, **diagnostics)
 
 
-def _diagnostics(ext: np.ndarray, led: np.ndarray, kinetic: float, potential: float) -> dict[str, float]:
-    """The record's diagnostics (engine.record) from the loop's records and the end state's energies."""
-    slip = float(led[D.L_SLIP])
-    values = {
-        "chain_tension_max_n": ext[D.E_TENSION_MAX], "chain_tension_min_n": ext[D.E_TENSION_MIN],
-        "chain_compression_s": ext[D.E_CHAIN_COMPRESSION],
-        "fz_rear_max_n": ext[D.E_FZ_REAR_MAX], "fz_rear_min_n": ext[D.E_FZ_REAR_MIN],
-        "fz_front_max_n": ext[D.E_FZ_FRONT_MAX], "fz_front_min_n": ext[D.E_FZ_FRONT_MIN],
-        "slip_max": ext[D.E_SLIP_MAX],
-        "airborne_rear_s": ext[D.E_AIRBORNE_REAR], "airborne_front_s": ext[D.E_AIRBORNE_FRONT],
-        "tyre_compression_rear_max_m": ext[D.E_COMPRESSION_REAR],
-        "tyre_compression_front_max_m": ext[D.E_COMPRESSION_FRONT],
-        "drive_work_j": led[D.L_DRIVE], "kinetic_energy_j": kinetic, "potential_energy_j": potential,
-        "damper_dissipation_j": led[D.L_DAMPERS] + led[D.L_IMPACT], "tyre_slip_work_j": slip,
-        "tyre_carcass_energy_j": led[D.L_CARCASS], "tyre_dissipation_j": led[D.L_TYRE_DISSIPATION],
-        "tyre_lever_work_j": led[D.L_LEVER],
-        "ledger_residual_j": led[D.L_DRIVE] + led[D.L_LEVER] - (kinetic + potential + led[D.L_DAMPERS]
-                                                                + led[D.L_IMPACT] + slip),
-        "tyre_dissipation_min_w": led[D.L_DISSIPATION_MIN],
-    }
-    assert tuple(values) == DIAGNOSTICS  # every diagnostic the record declares, each once
-    return {k: float(v) for k, v in values.items()}
+def _diagnostics(tracked: dict[str, float], kinetic: float, potential: float) -> dict[str, float]:
+    """The record's diagnostics (engine.record) from what the loop tracked (D.TRACKED, read) and the end
+    state's energies."""
+    values = {name: tracked[name] for name in DIAGNOSTICS if name in tracked}
+    dampers = tracked["dampers_j"] + tracked["chain_impacts_j"]
+    values.update(kinetic_energy_j=kinetic, potential_energy_j=potential, damper_dissipation_j=dampers)
+    values["ledger_residual_j"] = tracked["drive_work_j"] + tracked["tyre_lever_work_j"] - (
+        kinetic + potential + tracked["dampers_j"] + tracked["chain_impacts_j"] + tracked["tyre_slip_work_j"])
+    assert set(values) == set(DIAGNOSTICS)  # every diagnostic the record declares
+    return {name: values[name] for name in DIAGNOSTICS}
 
 
 def _series(series: np.ndarray, qs: np.ndarray, setup: Setup, p: np.ndarray,

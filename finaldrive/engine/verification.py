@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from finaldrive.engine.api import Design, SimSettings
-from finaldrive.engine.fast import bodies, minimal
-from finaldrive.engine.fast.rosenbrock import N_ST as FAST_N_ST, run_fast
+from finaldrive.engine.fast import bodies, minimal, rosenbrock
+from finaldrive.engine.jit import records
 from finaldrive.engine.model import diagnostics as D
 from finaldrive.engine.model.coordinates import FT, N_CONSTRAINTS, N_COORDS, RT, Y1
 from finaldrive.engine.model.elements import N_AUX
@@ -68,9 +68,10 @@ def fast_drop(vehicle: Vehicle, design: Design, tolerance: float, max_step: floa
     y[:bodies.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
     y[bodies.ZY1] += drop_m
     series, states = np.zeros((n + 1, N_SERIES)), np.zeros((n + 1, 2 * bodies.N_DOF))
-    ext = np.zeros(D.N_EXT)
-    code = run_fast(y, p, kind, rp, False, duration_s, 1e-3, tolerance, max_step, ros2, 10.0, True,
-                    np.zeros(FAST_N_ST), ext, np.zeros(D.N_LED), series, states, 10**9)
+    tracked = D.TRACKED.new()
+    run = rosenbrock.FAST_RUN.new(longitudinal=False, t_end=duration_s, dt_out=1e-3, tol=tolerance, h_max=max_step,
+                             ros2_only=ros2, max_air_time=10.0, keep_series=True, chunk_steps=10**9)
+    code = rosenbrock.run_fast(y, p, kind, rp, run, rosenbrock.FAST_STATE.new(), tracked, series, states)
     if code != OK or states[0][bodies.ZY1] != setup.q0[Y1] + drop_m:
         raise RuntimeError(f"the fast drop did not run (code {code})")
 
@@ -80,7 +81,7 @@ def fast_drop(vehicle: Vehicle, design: Design, tolerance: float, max_step: floa
         return float(minimal.kinetic_energy(full, p, kind, rp) + potential_energy(pose_from_minimal(state, p, road), p))
 
     return _record(np.array([energy(s) for s in states]), float(potential_energy(setup.q0, p)),
-                   bool(ext[D.E_FZ_REAR_MAX] > 0))
+                   bool(tracked["fz_rear_max_n"][0] > 0))
 
 
 def reference_drop(vehicle: Vehicle, design: Design, dt: float = 1e-3, drop_m: float = DROP_M,
@@ -101,14 +102,18 @@ def reference_drop(vehicle: Vehicle, design: Design, dt: float = 1e-3, drop_m: f
     M, qg = mass_matrix(p), gravity_forces(p)
     n, step = settings.steps()
     series, states = np.zeros((n + 2, N_SERIES)), np.zeros((n + 2, 2 * N_COORDS))
-    ext, led = np.zeros(D.N_EXT), np.zeros(D.N_LED)
-    code = reference.run_reference(
-        y, p, kind, rp, M, qg, False, step, n, settings.trapezoidal_steps, settings.under_relaxation,
-        settings.corrector_tol, settings.corrector_max_iter, settings.lambda_tol, settings.lambda_max_iter,
-        settings.max_constraint_residual, 10**6, 1, True, np.zeros(reference.N_ST), np.zeros((4, reference.N_STATE)),
-        np.zeros(N_CONSTRAINTS), np.zeros(1), np.zeros(N_AUX), ext, led, series, states, 10**9)
-    if code != OK or led[D.L_DAMPERS] != 0.0 or led[D.L_DRIVE] != 0.0:
+    tracked = D.TRACKED.new()
+    run = reference.REFERENCE_RUN.new(
+        longitudinal=False, dt=step, n_steps=n, n_trap=settings.trapezoidal_steps, nu=settings.under_relaxation,
+        tol=settings.corrector_tol, max_iter=settings.corrector_max_iter, lam_tol=settings.lambda_tol,
+        lam_max=settings.lambda_max_iter, max_resid=settings.max_constraint_residual, max_air_steps=10**6, stride=1,
+        keep_series=True, chunk_steps=10**9)
+    code = reference.run_reference(y, p, kind, rp, M, qg, run, reference.REFERENCE_STATE.new(), tracked,
+                                   np.zeros((4, reference.N_STATE)), np.zeros(N_CONSTRAINTS), np.zeros(N_AUX),
+                                   series, states)
+    ends = records.read(tracked)
+    if code != OK or ends["dampers_j"] != 0.0 or ends["drive_work_j"] != 0.0:
         raise RuntimeError(f"the reference drop did not run conservatively (code {code})")
     energies = np.array([0.5 * s[N_COORDS:] @ M @ s[N_COORDS:] + potential_energy(s[:N_COORDS], p)
                          for s in states[:n + 1]])
-    return _record(energies, float(potential_energy(setup.q0, p)), bool(ext[D.E_FZ_REAR_MAX] > 0))
+    return _record(energies, float(potential_energy(setup.q0, p)), bool(ends["fz_rear_max_n"] > 0))

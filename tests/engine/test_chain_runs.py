@@ -23,8 +23,8 @@ from scipy.spatial import ConvexHull
 
 import finaldrive.engine.simulation as sim
 from finaldrive.engine import Design, Road, SimSettings, simulate
-from finaldrive.engine.fast import bodies, chain_runs, minimal
-from finaldrive.engine.fast.rosenbrock import N_ST, run_fast
+from finaldrive.engine.fast import bodies, chain_runs, minimal, rosenbrock
+from finaldrive.engine.jit import records
 from finaldrive.engine.model import diagnostics as D, params as P
 from finaldrive.engine.model.coordinates import ALPHA, BETA, X2, X6, X10, Y2, Y6, Y10
 from finaldrive.engine.model.elements import AUX_ALPHA_DOT, N_AUX
@@ -170,11 +170,12 @@ def _run(vehicle, spec, duration, tol=5e-5):
     y[:6] = setup.q0[list(MINIMAL_COORDS)]
     rows = round(duration / 1e-3) + 1
     series, states = np.zeros((rows, N_SERIES)), np.zeros((rows, 12))
-    st, ext, led = np.zeros(N_ST), np.zeros(D.N_EXT), np.zeros(D.N_LED)
-    code = run_fast(y, p, kind, rp, True, duration, 1e-3, tol, 8e-3, False, 0.5, True, st, ext, led, series, states,
-                    10**9)
+    tracked = D.TRACKED.new()
+    run = rosenbrock.FAST_RUN.new(longitudinal=True, t_end=duration, dt_out=1e-3, tol=tol, h_max=8e-3, ros2_only=False,
+                             max_air_time=0.5, keep_series=True, chunk_steps=10**9)
+    code = rosenbrock.run_fast(y, p, kind, rp, run, rosenbrock.FAST_STATE.new(), tracked, series, states)
     assert code == OK
-    return setup, y, st, ext, led, series
+    return setup, y, records.read(tracked), series
 
 
 def test_reversed_drive_loads_the_lower_run_after_the_free_play(two_runs):
@@ -182,20 +183,20 @@ def test_reversed_drive_loads_the_lower_run_after_the_free_play(two_runs):
     freely (I alpha'' = -T) through the free play s0 (its gap R_ES e grows to s0) and the lower run
     takes the load; from then on the chain pulls only through the lower run."""
     vehicle = two_runs.replace(torque=REVERSED)
-    setup, _, _, ext, led, series = _run(vehicle, "flat", 0.3)
+    setup, _, tracked, series = _run(vehicle, "flat", 0.3)
     p = setup.p
     tension, t = series[:, 3], series[:, 0]
     s0 = free_play_slack(taut_length(setup.q0), two_runs["chain_free_play"])
     engaged = t[1 + np.argmax(tension[1:] < 0.0)]  # row 0: the state at rest, the upper run still engaged
     free_sprocket = math.sqrt(2.0 * s0 / p[P.R_ES] / (-REVERSED / p[P.I_SPROCKET]))
     print(f"free play {s0 * 1e3:.3f} mm taken up in {engaged * 1e3:.1f} ms (free sprocket alone: "
-          f"{free_sprocket * 1e3:.1f} ms); lower run's peak {-ext[D.E_TENSION_MIN]:.0f} N, "
-          f"impact {led[D.L_IMPACT]:.3f} J")
+          f"{free_sprocket * 1e3:.1f} ms); lower run's peak {-tracked['chain_tension_min_n']:.0f} N, "
+          f"impact {tracked['chain_impacts_j']:.3f} J")
     assert engaged == pytest.approx(free_sprocket, abs=2e-3)  # the wheel barely moves meanwhile; rows every 1 ms
     assert np.all(tension[1:] <= 0.0)                          # the upper run never pulls (net pull = -T_lower)
     assert np.all(tension[t > engaged + 0.002] < -100.0)       # the lower run carries the reversed drive
-    assert ext[D.E_TENSION_MAX] <= 0.0 < led[D.L_IMPACT]
-    assert ext[D.E_CHAIN_COMPRESSION] == pytest.approx(0.3, abs=1e-9)  # overrun all along
+    assert tracked["chain_tension_max_n"] <= 0.0 < tracked["chain_impacts_j"]
+    assert tracked["chain_compression_s"] == pytest.approx(0.3, abs=1e-9)  # overrun all along
 
 
 def test_recorded_pose_turns_the_engine_sprocket_as_its_speed_says(two_runs):
@@ -220,8 +221,7 @@ def test_ledger_closes_with_the_impacts_booked(two_runs, spec):
     vehicle = two_runs.replace(torque=REVERSED) if flat else two_runs
     duration, tol = (0.3, 5e-7) if flat else (3.5, SimSettings().fast_tolerance)
     r = simulate(TABLE11, Road.parse(spec), SimSettings(duration=duration, fast_tolerance=tol), vehicle)
-    _, _, _, _, led, _ = _run(vehicle, spec, duration, tol)
-    impact = led[D.L_IMPACT]
+    impact = _run(vehicle, spec, duration, tol)[2]["chain_impacts_j"]
     print(f"{spec}: drive {r.drive_work_j:.3f} J, impacts {impact:.4f} J, residual {r.ledger_residual_j:.6f} J")
     assert r.ok and r.chain_compression_s > 0.0 and impact > 0.0
     # 3x the closure measured 2026-12-05 (as tests/engine/test_energy.py's): 1.75e-6 (flat, tight), 5.5e-6 (bump)

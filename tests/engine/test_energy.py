@@ -89,7 +89,7 @@ def test_slip_power_splits_into_carcass_storage_and_non_negative_dissipation(veh
     over speeds below and above V_low (where eq. 43's damping acts) and loads past Fz_max."""
     p = pack_parameters(vehicle, TABLE11, SimSettings())
     rng = np.random.default_rng(5)
-    aux, pw = np.zeros(N_AUX), np.zeros(D.N_POWERS)
+    aux = np.zeros(N_AUX)
     for _ in range(5000):
         rt = p[P.RT0] - rng.uniform(-0.01, 0.09)
         vx = rng.choice([rng.uniform(-3, 3), rng.uniform(0, 30)])
@@ -97,10 +97,10 @@ def test_slip_power_splits_into_carcass_storage_and_non_negative_dissipation(veh
         u, sigma = rng.normal(scale=0.05), rng.uniform(p[P.SIGMA_MIN], p[P.SIGMA_K0])
         aux[:] = 0.0
         rear_tyre(rt, rng.normal(), vx, omega, u, sigma, p, True, aux)
-        D.powers(aux, p, pw)
-        split = pw[D.L_CARCASS] + pw[D.L_TYRE_DISSIPATION]
-        assert pw[D.L_SLIP] == pytest.approx(split, abs=1e-9 * (1 + abs(pw[D.L_SLIP])))
-        assert pw[D.L_TYRE_DISSIPATION] >= 0.0
+        pw = D.powers(aux, p)
+        split = pw.carcass + pw.tyre_dissipation
+        assert pw.slip == pytest.approx(split, abs=1e-9 * (1 + abs(pw.slip)))
+        assert pw.tyre_dissipation >= 0.0
 
 
 @pytest.mark.slow

@@ -56,18 +56,13 @@ from finaldrive.engine.fast.minimal import (
 )
 from finaldrive.engine.fast.wstep import ERROR_ORDER, N_STAGES, attempt, w_solve
 from finaldrive.engine.jit.kernel import jit
+from finaldrive.engine.jit.records import Record
 from finaldrive.engine.model import libm, params as P
 from finaldrive.engine.model.diagnostics import (
-    E_CHAIN_COMPRESSION,
-    E_TAUT_MAX,
-    E_TAUT_MIN,
-    L_IMPACT,
-    N_POWERS,
     integrate_powers,
     powers,
     record_series,
     retune_sigma,
-    start_records,
     track_interval,
     track_state,
 )
@@ -100,10 +95,26 @@ FIRST_STEP = 1.0e-3
 #: Shortened tries of one step that locate a chain event before the step is taken as it is.
 MAX_EVENT_TRIES = 40
 
-# Slots of the loop's saved state (st): everything a paused run needs to continue exactly; S_MODE:
-# the chain's mode (engine.fast.minimal: UPPER, LOWER, FREE, ELASTIC).
-S_T, S_H, S_SIGMA, S_PREV_TAUT, S_PREV_RATE, S_AIR_REAR, S_AIR_FRONT, S_ROW, S_STARTED, S_MODE = range(10)
-N_ST = 10
+#: A run's settings (the record ``run``): name, type (each given by the caller). ``t_end`` [s] the
+#: run's end, ``dt_out`` [s] the series' interval, ``tol`` the error tolerance and ``h_max`` [s] the
+#: largest step (SimSettings.fast_tolerance, fast_max_step), ``ros2_only`` ROS2 on every road,
+#: ``max_air_time`` [s] the longest a wheel may be off the road, ``keep_series`` whether the series
+#: and states are recorded, ``chunk_steps`` the accepted steps after which the loop pauses.
+FAST_RUN = Record(
+    ("longitudinal", np.bool_, None), ("t_end", np.float64, None), ("dt_out", np.float64, None),
+    ("tol", np.float64, None), ("h_max", np.float64, None), ("ros2_only", np.bool_, None),
+    ("max_air_time", np.float64, None), ("keep_series", np.bool_, None), ("chunk_steps", np.int64, None),
+)
+#: The loop's saved state (the record ``state``): everything a paused run needs to continue exactly.
+#: ``t`` [s] the time reached, ``h`` [s] the next step's size, ``sigma`` [m] sigma* of eq. (41),
+#: ``prev_taut`` [m] and ``prev_rate`` [m/s] the taut run's length and rate at t, ``air_rear``/``air_front``
+#: [s] how long each wheel has been off the road, ``row`` the next series row, ``mode`` the chain's
+#: (engine.fast.minimal: UPPER, LOWER, FREE, ELASTIC).
+FAST_STATE = Record(
+    ("started", np.bool_, False), ("t", np.float64, 0.0), ("h", np.float64, 0.0), ("sigma", np.float64, 0.0),
+    ("prev_taut", np.float64, 0.0), ("prev_rate", np.float64, 0.0), ("air_rear", np.float64, 0.0),
+    ("air_front", np.float64, 0.0), ("row", np.int64, 0), ("mode", np.int64, UPPER),
+)
 
 
 @jit
@@ -134,7 +145,7 @@ def _error_norm(e, scale, n):
 
 
 @jit
-def _taut_extremes(ext, l0, r0, l1, r1, h):
+def _taut_extremes(out, l0, r0, l1, r1, h):
     """Extremes of L_taut inside a step, from its values l and rates r at both ends: the stationary
     points of their cubic Hermite interpolant l(s), s in (0, 1) (l'(s) = a s^2 + b s + c)."""
     a = 6.0 * (l0 - l1) + 3.0 * h * (r0 + r1)
@@ -154,8 +165,8 @@ def _taut_extremes(ext, l0, r0, l1, r1, h):
         if 0.0 < s < 1.0:
             extreme = ((1.0 + 2.0 * s) * (1.0 - s) ** 2 * l0 + s * (1.0 - s) ** 2 * h * r0
                        + s * s * (3.0 - 2.0 * s) * l1 + s * s * (s - 1.0) * h * r1)
-            ext[E_TAUT_MIN] = min(ext[E_TAUT_MIN], extreme)
-            ext[E_TAUT_MAX] = max(ext[E_TAUT_MAX], extreme)
+            out.taut_min_m = min(out.taut_min_m, extreme)
+            out.taut_max_m = max(out.taut_max_m, extreme)
 
 
 @jit
@@ -185,33 +196,35 @@ def _event_fraction(y, ynew, mode, tension, tension_end, p, geo):
 
 
 @jit(allocates=True)
-def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only, max_air_time, keep_series,
-             st, ext, led, series, states, max_steps):
+def run_fast(y, p, kind, rp, settings, saved, tracked, series, states):
     """Integrate y = (z, z', u), or (z, z', u, e, alpha') with the two-run or the elastic chain, from rest to t_end
     with step-size control; returns a code.
 
-    Resumable: every quantity the loop carries between steps is in y and the arrays st (N_ST),
-    ext, led (engine.model.diagnostics), series and states; after max_steps accepted steps the
-    loop returns PAUSED and, called again with the same arrays, continues exactly where it stopped
-    (the result is bit-identical to an uninterrupted run). Steps never land on output times: the
+    Its records, each a one-element array (engine.jit.records): ``settings`` the run's (``run``, a
+    :data:`FAST_RUN`), ``saved`` the loop's state (``state``, :data:`FAST_STATE`), ``tracked`` what it
+    tracks (``out``, engine.model.diagnostics.TRACKED). Resumable: every quantity the loop carries
+    between steps is in y, those records, series and states; after run.chunk_steps accepted steps the
+    loop returns PAUSED and, called again with the same records and arrays, continues exactly where it
+    stopped (the result is bit-identical to an uninterrupted run). Steps never land on output times: the
     series rows, every dt_out, come from cubic Hermite interpolation inside the steps (dense
     output), so the series changes nothing of the run. The step is ROS34PW2's where
-    high_order(kind, two_runs) and not ros2_only, else ROS2's. The local error estimate (ROS34PW2:
+    high_order(kind, two_runs) and not run.ros2_only, else ROS2's. The local error estimate (ROS34PW2:
     engine.fast.wstep; ROS2: y_{n+1} - (y_n + h k1), its embedded first-order solution, and steps
-    of at most h_max / 2) is measured in a weighted RMS norm with absolute scales tol * (1 m, 1 m,
+    of at most run.h_max / 2) is measured in a weighted RMS norm with absolute scales run.tol * (1 m, 1 m,
     1 rad, 1 rad, 1 m, 1 rad; x 10 /s for rates; 1 for u; with a free engine sprocket also 1 rad
     for e, 10 /s for alpha'). Extremes and the energy ledger are
     tracked at every accepted step (the extremes of L_taut also inside steps, from its rate at both
-    ends). Codes: OK, PAUSED, NONFINITE, REAR_AIRBORNE, FRONT_AIRBORNE; st[S_T] is the time reached.
+    ends). Codes: OK, PAUSED, NONFINITE, REAR_AIRBORNE, FRONT_AIRBORNE; state.t is the time reached.
     """
+    run, state, out = settings[0], saved[0], tracked[0]   # views: what the loop writes is in the arrays
     geo = design_constants(p)
     n_state = y.shape[0]
     # the elastic chain: the state of the two runs (the caller sizes it), one mode, no events
     elastic = p[P.CHAIN_COMPLIANCE] == 1.0 and n_state == N_STATE_TWO_RUNS
     two_runs = n_state == N_STATE_TWO_RUNS and not elastic
-    order3 = high_order(kind, two_runs) and not ros2_only
-    if not order3:
-        h_max *= 0.5  # ROS2's largest step: half of ROS34PW2's
+    longitudinal, t_end, dt_out, tol, max_air_time = run.longitudinal, run.t_end, run.dt_out, run.tol, run.max_air_time
+    order3 = high_order(kind, two_runs) and not run.ros2_only
+    h_max = run.h_max if order3 else 0.5 * run.h_max  # ROS2's largest step: half of ROS34PW2's
     stages = np.zeros((N_STAGES, n_state))
     ws = np.zeros(N_WS)
     c_row = np.zeros(N_DOF)
@@ -226,8 +239,6 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only,
     y_old = np.zeros(n_state)
     f_old = np.zeros(n_state)
     err = np.zeros(n_state)
-    pw0 = np.zeros(N_POWERS)
-    pw1 = np.zeros(N_POWERS)
     # scratch for the dense output's evaluations and the two-run chain's event checks
     yi = np.zeros(n_state)
     fi = np.zeros(n_state)
@@ -238,37 +249,33 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only,
         scale[i] = 10.0 * tol
     if n_state == N_STATE_TWO_RUNS:
         scale[ZALPHA_DOT] = 10.0 * tol
-    n_rows = series.shape[0] if keep_series else 0
-    if st[S_STARTED] == 0.0:
-        st[:] = 0.0
-        st[S_MODE] = ELASTIC if elastic else UPPER
-        st[S_SIGMA] = relaxation_length(0.0, 0.0, 1.0, p)
-        st[S_H] = min(h_max, FIRST_STEP)
-        start_records(ext, led)
-        if fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, f1, aux, ws, int(st[S_MODE])) != OK:
+    n_rows = series.shape[0] if run.keep_series else 0
+    if not state.started:
+        state.mode = ELASTIC if elastic else UPPER
+        state.sigma = relaxation_length(0.0, 0.0, 1.0, p)
+        state.h = min(h_max, FIRST_STEP)
+        if fast_rhs(y, p, geo, kind, rp, state.sigma, longitudinal, f1, aux, ws, state.mode) != OK:
             return NONFINITE
-        track_state(ext, aux, p)
-        st[S_PREV_TAUT], st[S_PREV_RATE] = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
+        track_state(out, aux, p)
+        state.prev_taut, state.prev_rate = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
         if n_rows > 0:
             record_series(series, 0, 0.0, y[ZX1], y[ZTHETA], -y[N_DOF + ZBETA], -aux[AUX_ALPHA_DOT], y[ZU],
-                          st[S_SIGMA], 0.0, aux)  # no constraint residual in minimal coordinates
+                          state.sigma, 0.0, aux)  # no constraint residual in minimal coordinates
             _store(states, 0, y)
-            st[S_ROW] = 1.0
-        st[S_STARTED] = 1.0
-    elif fast_rhs(y, p, geo, kind, rp, st[S_SIGMA], longitudinal, f1, aux, ws, int(st[S_MODE])) != OK:
+            state.row = 1
+        state.started = True
+    elif fast_rhs(y, p, geo, kind, rp, state.sigma, longitudinal, f1, aux, ws, state.mode) != OK:
         return NONFINITE  # not reached: the same evaluation succeeded before the pause
-    t, h, sigma = st[S_T], st[S_H], st[S_SIGMA]
-    mode = int(st[S_MODE])
-    row = int(st[S_ROW])
-    steps = 0
+    t, h, sigma, row, mode = state.t, state.h, state.sigma, state.row, state.mode
+    chunk_steps, steps = run.chunk_steps, 0
     while t < t_end:
-        if steps >= max_steps:
-            st[S_T], st[S_H], st[S_SIGMA], st[S_ROW], st[S_MODE] = t, h, sigma, row, mode
+        if steps >= chunk_steps:
+            _save(state, t, h, sigma, row, mode)
             return PAUSED
         if two_runs and released(mode, aux[AUX_TENSION]) != mode:   # the engaged run would push: it goes slack
             mode = FREE
             if fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, f1, aux, ws, mode) != OK:
-                st[S_T] = t
+                _save(state, t, h, sigma, row, mode)
                 return NONFINITE
         # eq. (41) closed with this state's values; f1 and the tyre's outputs moved to the new sigma*
         new_sigma = relaxation_length(aux[AUX_FX], aux[AUX_KAPPA], aux[AUX_FZ_REAR], p)
@@ -285,7 +292,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only,
         fx_u = aux[AUX_SLOPE] / sigma if longitudinal else 0.0
         for i in range(N_DOF):
             v[i] *= fx_u                                  # dz''/du = M^-1 b dF_x/du
-        powers(aux, p, pw0)
+        pw0 = powers(aux, p)
         fz_rear, fz_front, tension = aux[AUX_FZ_REAR], aux[AUX_FZ_FRONT], aux[AUX_TENSION]
         n_err = N_STATE if mode in (UPPER, LOWER) else n_state   # the sprocket's own e and alpha' too
         tries = 0
@@ -294,7 +301,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only,
             if order3:
                 if attempt(y, f1, h, sigma, v, c_row, a_uu, p, geo, kind, rp, longitudinal, stages, y2, f2, aux,
                            ws, ynew, err, mode) != OK:
-                    st[S_T] = t
+                    _save(state, t, h, sigma, row, mode)
                     return NONFINITE
                 e = _error_norm(err, scale, n_err)
                 factor = 0.9 * libm.pow_positive(max(e, 1e-10), -1.0 / ERROR_ORDER)
@@ -304,7 +311,7 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only,
                 for i in range(n_state):
                     y2[i] = y[i] + h * k1[i]
                 if fast_rhs(y2, p, geo, kind, rp, sigma, longitudinal, f2, aux, ws, mode) != OK:
-                    st[S_T] = t
+                    _save(state, t, h, sigma, row, mode)
                     return NONFINITE
                 for i in range(n_state):
                     f2[i] -= 2.0 * k1[i]
@@ -335,15 +342,14 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only,
             f_old[i] = f1[i]
             y[i] = ynew[i]
         if fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, f1, aux, ws, mode) != OK:
-            st[S_T] = t
+            _save(state, t, h, sigma, row, mode)
             return NONFINITE
         # records at the new state and over the step
-        track_state(ext, aux, p)
-        track_interval(ext, fz_rear, fz_front, tension, aux[AUX_TENSION], h_done)
-        powers(aux, p, pw1)
-        integrate_powers(led, pw0, pw1, h_done)
-        _taut_extremes(ext, st[S_PREV_TAUT], st[S_PREV_RATE], aux[AUX_TAUT], aux[AUX_TAUT_RATE], h_done)
-        st[S_PREV_TAUT], st[S_PREV_RATE] = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
+        track_state(out, aux, p)
+        track_interval(out, fz_rear, fz_front, tension, aux[AUX_TENSION], h_done)
+        integrate_powers(out, pw0, powers(aux, p), h_done)
+        _taut_extremes(out, state.prev_taut, state.prev_rate, aux[AUX_TAUT], aux[AUX_TAUT_RATE], h_done)
+        state.prev_taut, state.prev_rate = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
         # dense output: the series rows inside (t_old, t]
         while row < n_rows and (row * dt_out <= t + 1e-9 * dt_out or (row == n_rows - 1 and t >= t_end)):
             t_row = min(row * dt_out, t_end)
@@ -359,31 +365,37 @@ def run_fast(y, p, kind, rp, longitudinal, t_end, dt_out, tol, h_max, ros2_only,
                 _store(states, row, yi)
             row += 1
         if two_runs:
-            mode = _chain_after_step(y, mode, h_done, p, geo, ws, aux, ext, led)
+            mode = _chain_after_step(y, mode, h_done, p, geo, ws, aux, out)
             if fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, f1, aux, ws, mode) != OK:
-                st[S_T] = t
+                _save(state, t, h, sigma, row, mode)
                 return NONFINITE
-            st[S_PREV_TAUT], st[S_PREV_RATE] = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
-        st[S_AIR_REAR] = st[S_AIR_REAR] + h_done if fz_rear <= 0.0 else 0.0
-        st[S_AIR_FRONT] = st[S_AIR_FRONT] + h_done if fz_front <= 0.0 else 0.0
-        if st[S_AIR_REAR] > max_air_time or st[S_AIR_FRONT] > max_air_time:
-            st[S_T], st[S_H], st[S_SIGMA], st[S_ROW], st[S_MODE] = t, h, sigma, row, mode
-            return REAR_AIRBORNE if st[S_AIR_REAR] > max_air_time else FRONT_AIRBORNE
-    st[S_T], st[S_H], st[S_SIGMA], st[S_ROW], st[S_MODE] = t, h, sigma, row, mode
+            state.prev_taut, state.prev_rate = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
+        state.air_rear = state.air_rear + h_done if fz_rear <= 0.0 else 0.0
+        state.air_front = state.air_front + h_done if fz_front <= 0.0 else 0.0
+        if state.air_rear > max_air_time or state.air_front > max_air_time:
+            _save(state, t, h, sigma, row, mode)
+            return REAR_AIRBORNE if state.air_rear > max_air_time else FRONT_AIRBORNE
+    _save(state, t, h, sigma, row, mode)
     return OK
 
 
+@jit
+def _save(state, t, h, sigma, row, mode):
+    """The loop's carried values into its state record (a failed run's too: its t is the time reached)."""
+    state.t, state.h, state.sigma, state.row, state.mode = t, h, sigma, row, mode
+
+
 @jit(allocates=True)
-def _chain_after_step(y, mode, h, p, geo, ws, aux, ext, led):
+def _chain_after_step(y, mode, h, p, geo, ws, aux, out):
     """Two-run chain, after a step of length h taken in mode: a free step counts as overrun and ends
-    in the impact of a run whose gap closed (its loss into led[L_IMPACT]); an engaged step's e and
+    in the impact of a run whose gap closed (its loss into out.chain_impacts_j); an engaged step's e and
     alpha' are projected onto the run. Returns the mode for the next step."""
     if mode != FREE:
         project(y, mode, aux[AUX_ALPHA_DOT], p, geo)
         return mode
-    ext[E_CHAIN_COMPRESSION] += h
+    out.chain_compression_s += h
     run, g = closing_run(y, p, geo)
     if g >= 0.0:
         return FREE
-    led[L_IMPACT] += engage(y, run, p, geo, ws)
+    out.chain_impacts_j += engage(y, run, p, geo, ws)
     return run

@@ -2,8 +2,9 @@
 row of the output series (record_series), written here once for both.
 
 Both integrator loops call these on their own steps (never on the output series), so a peak is
-the same whatever the series stride. ``ext`` holds the extremes and durations, ``led`` the
-integrated powers (trapezoidal rule on the integrator's steps); engine.simulation names them.
+the same whatever the series stride. They track into one record (:data:`TRACKED`: the extremes,
+durations and the ledger's integrated powers), which engine.simulation turns into the result's
+diagnostics.
 
 The tyre's powers (docs/engine.md#the-tyres-energy-ledger): the longitudinal force takes from
 the motorcycle the slip power P_slip = -F_x V_sx (with the lever arm R_e; another lever arm r adds
@@ -17,10 +18,12 @@ E_x < 1 over the load range). Above V_low, a = 0 and D = |V_x| F_x u / sigma*.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from finaldrive.engine.jit.kernel import jit
+from finaldrive.engine.jit.records import Record
 from finaldrive.engine.model import params as P
 from finaldrive.engine.model.elements import (
     AUX_DUDT,
@@ -44,86 +47,96 @@ from finaldrive.engine.model.elements import (
 )
 from finaldrive.engine.model.tyre import low_speed_factor, magic_formula_slope
 
-# Extremes and durations of a run (ext).
-(E_TENSION_MAX, E_TENSION_MIN, E_FZ_REAR_MAX, E_FZ_REAR_MIN, E_FZ_FRONT_MAX, E_FZ_FRONT_MIN, E_SLIP_MAX,
- E_AIRBORNE_REAR, E_AIRBORNE_FRONT, E_COMPRESSION_REAR, E_COMPRESSION_FRONT, E_CHAIN_COMPRESSION, E_TAUT_MIN,
- E_TAUT_MAX) = range(14)
-N_EXT = 14
+_INF = math.inf
 
-# Integrated powers of the ledger [J] (led), the smallest tyre dissipation rate seen [W], and the
-# kinetic energy the two-run chain's re-engagement impacts took [J] (engine.fast.chain_runs).
-L_DRIVE, L_DAMPERS, L_SLIP, L_CARCASS, L_TYRE_DISSIPATION, L_LEVER, L_DISSIPATION_MIN, L_IMPACT = range(8)
-N_LED = 8
-# Powers at one state (pw), in the ledger's order.
-N_POWERS = 6
+#: What both loops track over a run (the record ``out``): name, type, value at the start. A name that
+#: is a result value (engine.record) means what that value means; the others are the loops' own:
+#: ``taut_min_m``/``taut_max_m`` the taut upper run's shortest and longest length (the slack, eq. 68),
+#: ``dampers_j`` the energy the suspension and tyre dampers dissipated and ``chain_impacts_j`` the
+#: kinetic energy the two-run chain's re-engagement impacts took (engine.fast.chain_runs): the result's
+#: damper_dissipation_j is their sum. Extremes start empty (max -inf, min +inf); durations and the
+#: ledger's integrals (trapezoidal rule on the integrator's steps) at 0.
+TRACKED = Record(
+    ("chain_tension_max_n", np.float64, -_INF), ("chain_tension_min_n", np.float64, _INF),
+    ("fz_rear_max_n", np.float64, -_INF), ("fz_rear_min_n", np.float64, _INF),
+    ("fz_front_max_n", np.float64, -_INF), ("fz_front_min_n", np.float64, _INF),
+    ("slip_max", np.float64, -_INF),
+    ("airborne_rear_s", np.float64, 0.0), ("airborne_front_s", np.float64, 0.0),
+    ("chain_compression_s", np.float64, 0.0),
+    ("tyre_compression_rear_max_m", np.float64, -_INF), ("tyre_compression_front_max_m", np.float64, -_INF),
+    ("taut_min_m", np.float64, _INF), ("taut_max_m", np.float64, -_INF),
+    ("drive_work_j", np.float64, 0.0), ("dampers_j", np.float64, 0.0), ("tyre_slip_work_j", np.float64, 0.0),
+    ("tyre_carcass_energy_j", np.float64, 0.0), ("tyre_dissipation_j", np.float64, 0.0),
+    ("tyre_lever_work_j", np.float64, 0.0), ("tyre_dissipation_min_w", np.float64, _INF),
+    ("chain_impacts_j", np.float64, 0.0),
+)
 
 
-@jit(allocates=True)
-def start_records(ext: np.ndarray, led: np.ndarray) -> None:
-    """Empty extremes (max -inf, min +inf), zero durations and integrals."""
-    ext[:] = 0.0
-    for k in (E_TENSION_MAX, E_FZ_REAR_MAX, E_FZ_FRONT_MAX, E_SLIP_MAX, E_COMPRESSION_REAR,
-              E_COMPRESSION_FRONT, E_TAUT_MAX):
-        ext[k] = -math.inf
-    for k in (E_TENSION_MIN, E_FZ_REAR_MIN, E_FZ_FRONT_MIN, E_TAUT_MIN):
-        ext[k] = math.inf
-    led[:] = 0.0
-    led[L_DISSIPATION_MIN] = math.inf
+class Powers(NamedTuple):
+    """The ledger's powers at one state [W]."""
+
+    drive: float
+    dampers: float
+    slip: float             # P_slip = dE_c/dt + D
+    carcass: float          # the carcass's stored energy rate dE_c/dt
+    tyre_dissipation: float  # D >= 0
+    lever: float            # the work rate of a lever arm other than R_e
 
 
 @jit
-def track_state(ext: np.ndarray, aux: np.ndarray, p: np.ndarray) -> None:
+def track_state(out, aux: np.ndarray, p: np.ndarray) -> None:
     """Extremes at an accepted state (forces, slip, tyre compressions, taut run)."""
-    ext[E_TENSION_MAX] = max(ext[E_TENSION_MAX], aux[AUX_TENSION])
-    ext[E_TENSION_MIN] = min(ext[E_TENSION_MIN], aux[AUX_TENSION])
-    ext[E_FZ_REAR_MAX] = max(ext[E_FZ_REAR_MAX], aux[AUX_FZ_REAR])
-    ext[E_FZ_REAR_MIN] = min(ext[E_FZ_REAR_MIN], aux[AUX_FZ_REAR])
-    ext[E_FZ_FRONT_MAX] = max(ext[E_FZ_FRONT_MAX], aux[AUX_FZ_FRONT])
-    ext[E_FZ_FRONT_MIN] = min(ext[E_FZ_FRONT_MIN], aux[AUX_FZ_FRONT])
-    ext[E_SLIP_MAX] = max(ext[E_SLIP_MAX], abs(aux[AUX_KAPPA]))
-    ext[E_COMPRESSION_REAR] = max(ext[E_COMPRESSION_REAR], p[P.RT0] - aux[AUX_RT])
-    ext[E_COMPRESSION_FRONT] = max(ext[E_COMPRESSION_FRONT], p[P.FT0] - aux[AUX_FT])
-    ext[E_TAUT_MIN] = min(ext[E_TAUT_MIN], aux[AUX_TAUT])
-    ext[E_TAUT_MAX] = max(ext[E_TAUT_MAX], aux[AUX_TAUT])
+    out.chain_tension_max_n = max(out.chain_tension_max_n, aux[AUX_TENSION])
+    out.chain_tension_min_n = min(out.chain_tension_min_n, aux[AUX_TENSION])
+    out.fz_rear_max_n = max(out.fz_rear_max_n, aux[AUX_FZ_REAR])
+    out.fz_rear_min_n = min(out.fz_rear_min_n, aux[AUX_FZ_REAR])
+    out.fz_front_max_n = max(out.fz_front_max_n, aux[AUX_FZ_FRONT])
+    out.fz_front_min_n = min(out.fz_front_min_n, aux[AUX_FZ_FRONT])
+    out.slip_max = max(out.slip_max, abs(aux[AUX_KAPPA]))
+    out.tyre_compression_rear_max_m = max(out.tyre_compression_rear_max_m, p[P.RT0] - aux[AUX_RT])
+    out.tyre_compression_front_max_m = max(out.tyre_compression_front_max_m, p[P.FT0] - aux[AUX_FT])
+    out.taut_min_m = min(out.taut_min_m, aux[AUX_TAUT])
+    out.taut_max_m = max(out.taut_max_m, aux[AUX_TAUT])
 
 
 @jit
-def track_interval(ext: np.ndarray, fz_rear: float, fz_front: float, tension: float, tension_end: float,
-                   h: float) -> None:
+def track_interval(out, fz_rear: float, fz_front: float, tension: float, tension_end: float, h: float) -> None:
     """Durations over a step of length h: a wheel off the road (F_z <= 0), judged at the step's start;
     the upper chain run in compression (tension < 0), with the tension linear between its values at
     the start and the end (tension_end = tension: judged at the start)."""
     if fz_rear <= 0.0:
-        ext[E_AIRBORNE_REAR] += h
+        out.airborne_rear_s += h
     if fz_front <= 0.0:
-        ext[E_AIRBORNE_FRONT] += h
+        out.airborne_front_s += h
     if tension < 0.0 and tension_end < 0.0:
-        ext[E_CHAIN_COMPRESSION] += h
+        out.chain_compression_s += h
     elif tension < 0.0 or tension_end < 0.0:
         below = tension / (tension - tension_end)        # where the tension crosses zero
-        ext[E_CHAIN_COMPRESSION] += h * (below if tension < 0.0 else 1.0 - below)
+        out.chain_compression_s += h * (below if tension < 0.0 else 1.0 - below)
 
 
 @jit
-def powers(aux: np.ndarray, p: np.ndarray, pw: np.ndarray) -> None:
-    """The ledger's powers at a state [W]: drive, dampers, tyre slip, carcass storage rate,
-    tyre dissipation, and the work rate of the lever arm (zero when it is R_e)."""
+def powers(aux: np.ndarray, p: np.ndarray) -> Powers:
+    """The ledger's powers at a state: drive, dampers, tyre slip, carcass storage rate, tyre
+    dissipation, and the work rate of the lever arm (zero when it is R_e)."""
     fx = aux[AUX_FX]
     a = low_speed_factor(aux[AUX_VX], aux[AUX_FZ_REAR], p)
-    pw[L_DRIVE] = aux[AUX_P_DRIVE]
-    pw[L_DAMPERS] = aux[AUX_P_DAMP]
-    pw[L_SLIP] = -fx * aux[AUX_VSX]
-    pw[L_CARCASS] = fx * aux[AUX_DUDT] / (1.0 + a)
-    pw[L_TYRE_DISSIPATION] = abs(aux[AUX_VX]) * fx * aux[AUX_KAPPA] / (1.0 + a)
-    pw[L_LEVER] = fx * aux[AUX_OMEGA] * (aux[AUX_RE] - aux[AUX_LEVER])
+    return Powers(aux[AUX_P_DRIVE], aux[AUX_P_DAMP], -fx * aux[AUX_VSX], fx * aux[AUX_DUDT] / (1.0 + a),
+                  abs(aux[AUX_VX]) * fx * aux[AUX_KAPPA] / (1.0 + a),
+                  fx * aux[AUX_OMEGA] * (aux[AUX_RE] - aux[AUX_LEVER]))
 
 
 @jit
-def integrate_powers(led: np.ndarray, pw0: np.ndarray, pw1: np.ndarray, h: float) -> None:
+def integrate_powers(out, pw0: Powers, pw1: Powers, h: float) -> None:
     """Trapezoidal rule over one step; the smallest tyre dissipation rate at either end."""
-    for k in range(N_POWERS):
-        led[k] += 0.5 * h * (pw0[k] + pw1[k])
-    led[L_DISSIPATION_MIN] = min(led[L_DISSIPATION_MIN], pw0[L_TYRE_DISSIPATION], pw1[L_TYRE_DISSIPATION])
+    half = 0.5 * h
+    out.drive_work_j += half * (pw0.drive + pw1.drive)
+    out.dampers_j += half * (pw0.dampers + pw1.dampers)
+    out.tyre_slip_work_j += half * (pw0.slip + pw1.slip)
+    out.tyre_carcass_energy_j += half * (pw0.carcass + pw1.carcass)
+    out.tyre_dissipation_j += half * (pw0.tyre_dissipation + pw1.tyre_dissipation)
+    out.tyre_lever_work_j += half * (pw0.lever + pw1.lever)
+    out.tyre_dissipation_min_w = min(out.tyre_dissipation_min_w, pw0.tyre_dissipation, pw1.tyre_dissipation)
 
 
 @jit
