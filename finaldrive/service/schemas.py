@@ -628,9 +628,11 @@ class ModelAlternativeOut(RankingOut):
 
 
 class ModelBandDesign(BaseModel):
-    a2_deg: float
-    l2_m: float
-    rws_m: float
+    """One of the designs a model band re-simulates."""
+
+    a2_deg: float = Field(description="sprocket angle a2 [deg]")
+    l2_m: float = Field(description="pivot-to-sprocket distance L2 [m]")
+    rws_m: float = Field(description="wheel sprocket radius R_WS [m]")
 
 
 class ModelBandsOut(BaseModel):

@@ -60,7 +60,7 @@ def top_designs(session: Session, job: Job) -> list[tuple[JobRoad, Top]]:
                    e.fitness_m.is_not(None))
             .order_by(e.fitness_m.desc(), e.id).limit(_SCAN)).all()
         values = np.array([[math.radians(r[0]), r[1], r[2], r[3]] for r in rows]).reshape(-1, 4)
-        top: Top = [(rows[i][0], rows[i][1], rows[i][2], _number(rows[i][3]), _number(rows[i][4]))
+        top: Top = [(rows[i][0], rows[i][1], rows[i][2], number_or_nan(rows[i][3]), number_or_nan(rows[i][4]))
                     for i in best_distinct(values[:, :3], values[:, 3])]
         out.append((road, top))
     return out
@@ -108,10 +108,7 @@ def stored_bands(session: Session, job: Job, jobs: dict[str, Job]) -> dict[int, 
     runs: dict[str, dict[tuple[str, int], Any]] = {}
     for label, designs_job in jobs.items():
         roads = {r.road_index: r.spec for r in session.scalars(select(JobRoad).where(JobRoad.job_id == designs_job.id))}
-        for r in session.execute(select(Evaluation.road_index, Evaluation.candidate, Evaluation.status,
-                                        Evaluation.reason, Evaluation.fitness_m, Evaluation.distance_m)
-                                 .where(Evaluation.job_id == designs_job.id)):
-            runs.setdefault(label, {})[(roads[r.road_index], r.candidate)] = r
+        runs[label] = {(roads[index], candidate): r for (index, candidate), r in designs_results(session, designs_job)}
     out = {}
     refused = refused_re_runs(job)
     for road, top in top_designs(session, job):
@@ -125,7 +122,7 @@ def stored_bands(session: Session, job: Job, jobs: dict[str, Job]) -> dict[int, 
                 elif row is None:
                     failed[label] = "not simulated"
                 elif row.status == EvalStatus.ok.value and row.fitness_m is not None:
-                    values[label] = (row.fitness_m, _number(row.distance_m))
+                    values[label] = (row.fitness_m, number_or_nan(row.distance_m))
                 else:
                     failed[label] = row.reason or "failed"
             bands.append(band_of(values, failed))
@@ -136,5 +133,13 @@ def stored_bands(session: Session, job: Job, jobs: dict[str, Job]) -> dict[int, 
     return out
 
 
-def _number(value: float | None) -> float:
+def designs_results(session: Session, designs_job: Job) -> list[tuple[tuple[int, int], Any]]:
+    """A designs job's results, each ((road index, candidate), its row: status, reason, fitness_m, distance_m)."""
+    return [((r.road_index, r.candidate), r) for r in session.execute(
+        select(Evaluation.road_index, Evaluation.candidate, Evaluation.status, Evaluation.reason, Evaluation.fitness_m,
+               Evaluation.distance_m).where(Evaluation.job_id == designs_job.id))]
+
+
+def number_or_nan(value: float | None) -> float:
+    """A stored number, NaN for none."""
     return math.nan if value is None else float(value)

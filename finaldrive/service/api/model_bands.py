@@ -16,7 +16,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from finaldrive.engine import (
@@ -29,10 +28,10 @@ from finaldrive.engine import (
     load_vehicle_dict,
     ranking_change,
 )
-from finaldrive.service.api.bands import top_designs
+from finaldrive.service.api.bands import designs_results, number_or_nan, top_designs
 from finaldrive.service.api.problems import ApiProblem
 from finaldrive.service.api.sharpness import own_designs_job
-from finaldrive.service.db.models import TERMINAL_STATES, EvalStatus, Evaluation, Job, JobRoad, JobState
+from finaldrive.service.db.models import TERMINAL_STATES, EvalStatus, Job, JobRoad, JobState
 from finaldrive.service.db.repository import job_by_idempotency_key
 from finaldrive.service.schemas import JobSpec, VehicleFile
 from finaldrive.service.services import Services
@@ -152,11 +151,7 @@ def stored_model_bands(session: Session, job: Job, jobs: dict[str, Job],
             for entry in out.values():
                 entry["model_bands"]["skipped_reasons"][name] = why
             continue
-        rows: dict[tuple[int, int], Any] = {}
-        for r in session.execute(select(Evaluation.road_index, Evaluation.candidate, Evaluation.status,
-                                        Evaluation.reason, Evaluation.fitness_m, Evaluation.distance_m)
-                                 .where(Evaluation.job_id == designs_job.id)):
-            rows[(r.road_index, r.candidate)] = r
+        rows = dict(designs_results(session, designs_job))
         applies = dict(p.roads)
         for position, (index, road_spec) in enumerate(p.roads):
             top = tops[index][1]
@@ -170,7 +165,7 @@ def stored_model_bands(session: Session, job: Job, jobs: dict[str, Job],
                     continue
                 ok = row.status == EvalStatus.ok.value and row.fitness_m is not None
                 fitness.append(float(row.fitness_m) if ok else math.nan)
-                distance.append(_number(row.distance_m))
+                distance.append(number_or_nan(row.distance_m))
                 failed.append("" if ok else row.reason or "failed")
             base = np.array([f for _, _, _, f, _ in top])
             out[index]["model_bands"]["alternatives"][name] = {
@@ -185,7 +180,3 @@ def stored_model_bands(session: Session, job: Job, jobs: dict[str, Job],
         record = entry["model_bands"]
         record["skipped"] = [a.name for a in ALTERNATIVES if a.name in record["skipped_reasons"]]
     return out
-
-
-def _number(value: float | None) -> float:
-    return math.nan if value is None else float(value)
