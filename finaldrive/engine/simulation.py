@@ -25,6 +25,7 @@ from finaldrive.engine.fast import bodies, minimal, rosenbrock
 from finaldrive.engine.fast.equilibrium import EquilibriumError
 from finaldrive.engine.fitness import fitness, slack
 from finaldrive.engine.jit import records
+from finaldrive.engine.jit.records import Record
 from finaldrive.engine.model import diagnostics as D, params as P
 from finaldrive.engine.model.coordinates import N_CONSTRAINTS, N_COORDS, X1, X14, X15, Y14
 from finaldrive.engine.model.elements import N_AUX
@@ -57,6 +58,11 @@ REASON_CANCELLED = "cancelled"
 def _failed(reason: str, sr: float, chain: float, start: float) -> SimResult:
     return SimResult.of(STATUS_FAILED, reason, squat_ratio=sr, chain_length_m=chain,
                         wall_s=time.perf_counter() - start)
+
+
+def _settings_record(record: Record, settings: SimSettings, **given: float) -> np.ndarray:
+    """A solver's settings record: ``given``, and SimSettings' fields of the other names."""
+    return record.new(**{name: getattr(settings, name) for name in record.names if name not in given}, **given)
 
 
 def _run_chunks(chunk: Callable[[], int], settings: SimSettings,
@@ -121,20 +127,18 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
         own_sprocket = bool(p[P.CHAIN_RUNS] == 2.0 or p[P.CHAIN_COMPLIANCE] == 1.0)  # e and alpha' in the state
         series = np.zeros((n_rows, outcome.N_SERIES))
         states = np.zeros((n_rows, 2 * bodies.N_DOF + int(own_sprocket)))  # e too
-        run = rosenbrock.FAST_RUN.new(
-            longitudinal=settings.tyre_longitudinal, t_end=settings.duration, dt_out=settings.duration / n_out,
-            tol=settings.fast_tolerance, h_max=settings.fast_max_step, ros2_only=settings.fast_ros2,
-            max_air_time=settings.max_airborne_time, keep_series=settings.series, chunk_steps=FAST_CHUNK_STEPS)
+        loop_settings = _settings_record(rosenbrock.FAST_SETTINGS, settings, dt_out=settings.duration / n_out,
+                               keep_series=settings.series, chunk_steps=FAST_CHUNK_STEPS)
         state = rosenbrock.FAST_STATE.new()
         y = np.zeros(minimal.N_STATE_TWO_RUNS if own_sprocket else minimal.N_STATE)
         y[:bodies.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
 
         def chunk() -> int:
-            return int(rosenbrock.run_fast(y, p, kind, rp, run, state, tracked, series, states))
+            return int(rosenbrock.run_fast(y, p, kind, rp, loop_settings, state, tracked, series, states))
 
         code, stopped = _run_chunks(chunk, settings, should_stop)
-        loop = records.read(state)
-        reached = loop["t"]
+        state_at_end = records.read(state)
+        reached = state_at_end["t"]
     else:
         # imported here: the reference's module builds its integrator steps (numba dispatchers) on import
         from finaldrive.engine.solver import reference
@@ -143,12 +147,9 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
         n_rows = (n_steps // settings.series_stride + 2) if settings.series else 0
         series = np.zeros((n_rows, outcome.N_SERIES))
         states = np.zeros((n_rows, 2 * N_COORDS))
-        run = reference.REFERENCE_RUN.new(
-            longitudinal=settings.tyre_longitudinal, dt=dt, n_steps=n_steps, n_trap=settings.trapezoidal_steps,
-            nu=settings.under_relaxation, tol=settings.corrector_tol, max_iter=settings.corrector_max_iter,
-            lam_tol=settings.lambda_tol, lam_max=settings.lambda_max_iter, max_resid=settings.max_constraint_residual,
-            max_air_steps=math.ceil(settings.max_airborne_time / dt), stride=settings.series_stride,
-            keep_series=settings.series, chunk_steps=REFERENCE_CHUNK_STEPS)
+        loop_settings = _settings_record(reference.REFERENCE_SETTINGS, settings, dt=dt, n_steps=n_steps,
+                               max_airborne_steps=math.ceil(settings.max_airborne_time / dt),
+                               keep_series=settings.series, chunk_steps=REFERENCE_CHUNK_STEPS)
         state = reference.REFERENCE_STATE.new()
         y = np.zeros(reference.N_STATE)
         y[:N_COORDS] = setup.q0
@@ -158,12 +159,12 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
         M = mass_matrix(p)
 
         def chunk() -> int:
-            return int(reference.run_reference(y, p, kind, rp, M, qg, run, state, tracked, hist, lam, aux,
+            return int(reference.run_reference(y, p, kind, rp, M, qg, loop_settings, state, tracked, hist, lam, aux,
                                                series, states))
 
         code, stopped = _run_chunks(chunk, settings, should_stop)
-        loop = records.read(state)
-        reached = loop["step"] * dt
+        state_at_end = records.read(state)
+        reached = state_at_end["step"] * dt
     if stopped:
         at = f" at t = {reached:.4f} s" if stopped != REASON_CANCELLED else ""
         return _failed(stopped + at, setup.squat_ratio, chain, start)
@@ -171,7 +172,7 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
         return _failed(f"{_REASONS[code]} at t = {reached:.4f} s", setup.squat_ratio, chain, start)
     if settings.method == "fast":
         x1_end = float(y[bodies.ZX1])
-        kinetic = float(minimal.kinetic_energy(y, p, kind, rp, loop["mode"]))
+        kinetic = float(minimal.kinetic_energy(y, p, kind, rp, state_at_end["mode"]))
         chain_energy = float(minimal.elastic_energy(y, p))   # the elastic chain's spring (0 at the start)
         x1, y1, theta, phi, fs = (float(c) for c in y[:bodies.ZBETA])
         q_end = assemble(p, road, x1, y1, theta, phi, fs, 0.0, 0.0)  # the pose, but for alpha and beta
@@ -183,16 +184,16 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
         kinetic = 0.5 * dot(qd, Mqd)   # engine.model.linalg: not BLAS's CPU-chosen kernels
         q_end = y[:N_COORDS]
         chain_energy = 0.0
-    rows = loop["row"]
+    rows = state_at_end["row"]
     off_road = road.uncovered(float(setup.q0[X14]), float(q_end[X15]))
     if off_road:
         return _failed(off_road, setup.squat_ratio, chain, start)
     distance = x1_end - float(setup.q0[X1])
-    ends = records.read(tracked)
-    slack_m = slack(ends["taut_min_m"], ends["taut_max_m"])
+    tracked_at_end = records.read(tracked)
+    slack_m = slack(tracked_at_end["taut_min_m"], tracked_at_end["taut_max_m"])
     fit = fitness(distance, setup.squat_ratio, slack_m, eps1=p[P.EPS1], eps2=p[P.EPS2],
                   sr_optimum=p[P.SR_OPTIMUM], floor=p[P.FLOOR])
-    diagnostics = _diagnostics(ends, kinetic,
+    diagnostics = _diagnostics(tracked_at_end, kinetic,
                                potential_energy(q_end, p, qg) - potential_energy(setup.q0, p, qg) + chain_energy)
     out = None
     if settings.series:
@@ -210,12 +211,13 @@ def _diagnostics(tracked: dict[str, float], kinetic: float, potential: float) ->
     """The record's diagnostics (engine.record) from what the loop tracked (D.TRACKED, read) and the end
     state's energies."""
     values = {name: tracked[name] for name in DIAGNOSTICS if name in tracked}
-    dampers = tracked["dampers_j"] + tracked["chain_impacts_j"]
-    values.update(kinetic_energy_j=kinetic, potential_energy_j=potential, damper_dissipation_j=dampers)
+    values.update(kinetic_energy_j=kinetic, potential_energy_j=potential,
+                  damper_dissipation_j=tracked["dampers_j"] + tracked["chain_impacts_j"])
+    # the sum in this order, term by term (results bit for bit as before the records)
     values["ledger_residual_j"] = tracked["drive_work_j"] + tracked["tyre_lever_work_j"] - (
         kinetic + potential + tracked["dampers_j"] + tracked["chain_impacts_j"] + tracked["tyre_slip_work_j"])
-    assert set(values) == set(DIAGNOSTICS)  # every diagnostic the record declares
-    return {name: values[name] for name in DIAGNOSTICS}
+    assert values.keys() == set(DIAGNOSTICS)  # every diagnostic the record declares
+    return values
 
 
 def _series(series: np.ndarray, qs: np.ndarray, setup: Setup, p: np.ndarray,

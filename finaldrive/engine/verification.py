@@ -69,9 +69,10 @@ def fast_drop(vehicle: Vehicle, design: Design, tolerance: float, max_step: floa
     y[bodies.ZY1] += drop_m
     series, states = np.zeros((n + 1, N_SERIES)), np.zeros((n + 1, 2 * bodies.N_DOF))
     tracked = D.TRACKED.new()
-    run = rosenbrock.FAST_RUN.new(longitudinal=False, t_end=duration_s, dt_out=1e-3, tol=tolerance, h_max=max_step,
-                             ros2_only=ros2, max_air_time=10.0, keep_series=True, chunk_steps=10**9)
-    code = rosenbrock.run_fast(y, p, kind, rp, run, rosenbrock.FAST_STATE.new(), tracked, series, states)
+    settings = rosenbrock.FAST_SETTINGS.new(
+        tyre_longitudinal=False, duration=duration_s, dt_out=1e-3, fast_tolerance=tolerance, fast_max_step=max_step,
+        fast_ros2=ros2, max_airborne_time=10.0, keep_series=True, chunk_steps=10**9)
+    code = rosenbrock.run_fast(y, p, kind, rp, settings, rosenbrock.FAST_STATE.new(), tracked, series, states)
     if code != OK or states[0][bodies.ZY1] != setup.q0[Y1] + drop_m:
         raise RuntimeError(f"the fast drop did not run (code {code})")
 
@@ -81,7 +82,7 @@ def fast_drop(vehicle: Vehicle, design: Design, tolerance: float, max_step: floa
         return float(minimal.kinetic_energy(full, p, kind, rp) + potential_energy(pose_from_minimal(state, p, road), p))
 
     return _record(np.array([energy(s) for s in states]), float(potential_energy(setup.q0, p)),
-                   bool(tracked["fz_rear_max_n"][0] > 0))
+                   records.read(tracked)["fz_rear_max_n"] > 0)
 
 
 def reference_drop(vehicle: Vehicle, design: Design, dt: float = 1e-3, drop_m: float = DROP_M,
@@ -103,17 +104,18 @@ def reference_drop(vehicle: Vehicle, design: Design, dt: float = 1e-3, drop_m: f
     n, step = settings.steps()
     series, states = np.zeros((n + 2, N_SERIES)), np.zeros((n + 2, 2 * N_COORDS))
     tracked = D.TRACKED.new()
-    run = reference.REFERENCE_RUN.new(
-        longitudinal=False, dt=step, n_steps=n, n_trap=settings.trapezoidal_steps, nu=settings.under_relaxation,
-        tol=settings.corrector_tol, max_iter=settings.corrector_max_iter, lam_tol=settings.lambda_tol,
-        lam_max=settings.lambda_max_iter, max_resid=settings.max_constraint_residual, max_air_steps=10**6, stride=1,
-        keep_series=True, chunk_steps=10**9)
-    code = reference.run_reference(y, p, kind, rp, M, qg, run, reference.REFERENCE_STATE.new(), tracked,
+    loop_settings = reference.REFERENCE_SETTINGS.new(
+        tyre_longitudinal=False, dt=step, n_steps=n, trapezoidal_steps=settings.trapezoidal_steps,
+        under_relaxation=settings.under_relaxation, corrector_tol=settings.corrector_tol,
+        corrector_max_iter=settings.corrector_max_iter, lambda_tol=settings.lambda_tol,
+        lambda_max_iter=settings.lambda_max_iter, max_constraint_residual=settings.max_constraint_residual,
+        max_airborne_steps=10**6, series_stride=1, keep_series=True, chunk_steps=10**9)
+    code = reference.run_reference(y, p, kind, rp, M, qg, loop_settings, reference.REFERENCE_STATE.new(), tracked,
                                    np.zeros((4, reference.N_STATE)), np.zeros(N_CONSTRAINTS), np.zeros(N_AUX),
                                    series, states)
-    ends = records.read(tracked)
-    if code != OK or ends["dampers_j"] != 0.0 or ends["drive_work_j"] != 0.0:
+    at_end = records.read(tracked)
+    if code != OK or at_end["dampers_j"] != 0.0 or at_end["drive_work_j"] != 0.0:
         raise RuntimeError(f"the reference drop did not run conservatively (code {code})")
     energies = np.array([0.5 * s[N_COORDS:] @ M @ s[N_COORDS:] + potential_energy(s[:N_COORDS], p)
                          for s in states[:n + 1]])
-    return _record(energies, float(potential_energy(setup.q0, p)), bool(ends["fz_rear_max_n"] > 0))
+    return _record(energies, float(potential_energy(setup.q0, p)), at_end["fz_rear_max_n"] > 0)

@@ -171,9 +171,10 @@ def _run(vehicle, spec, duration, tol=5e-5):
     rows = round(duration / 1e-3) + 1
     series, states = np.zeros((rows, N_SERIES)), np.zeros((rows, 12))
     tracked = D.TRACKED.new()
-    run = rosenbrock.FAST_RUN.new(longitudinal=True, t_end=duration, dt_out=1e-3, tol=tol, h_max=8e-3, ros2_only=False,
-                             max_air_time=0.5, keep_series=True, chunk_steps=10**9)
-    code = rosenbrock.run_fast(y, p, kind, rp, run, rosenbrock.FAST_STATE.new(), tracked, series, states)
+    settings = rosenbrock.FAST_SETTINGS.new(
+        tyre_longitudinal=True, duration=duration, dt_out=1e-3, fast_tolerance=tol, fast_max_step=8e-3, fast_ros2=False,
+        max_airborne_time=0.5, keep_series=True, chunk_steps=10**9)
+    code = rosenbrock.run_fast(y, p, kind, rp, settings, rosenbrock.FAST_STATE.new(), tracked, series, states)
     assert code == OK
     return setup, y, records.read(tracked), series
 

@@ -24,15 +24,19 @@ def test_tracked_names_are_the_results_diagnostics_or_the_loops_own():
     assert set(names) >= LOOPS_OWN
 
 
-@pytest.mark.parametrize("record", [rosenbrock.FAST_RUN, reference.REFERENCE_RUN])
+@pytest.mark.parametrize("record", [rosenbrock.FAST_SETTINGS, reference.REFERENCE_SETTINGS])
 def test_a_setting_left_out_or_unknown_is_refused_by_name(record):
-    given = dict.fromkeys(record.names, 1)
+    given = {name: kind(1) for name, kind, _ in record.fields}
     assert records.read(record.new(**given)) == given
     del given["chunk_steps"]
-    with pytest.raises(KeyError, match="without a value: \\['chunk_steps'\\]"):
+    with pytest.raises(TypeError, match=r"^record fields without a value: chunk_steps$"):
         record.new(**given)
-    with pytest.raises(KeyError, match="unknown: \\['tolerance'\\]"):
+    with pytest.raises(TypeError, match=r"^record fields unknown: tolerance$"):
         record.new(tolerance=1e-5, **given, chunk_steps=1)
+    with pytest.raises(TypeError, match=r"another kind: chunk_steps$"):   # not cast to 4096
+        record.new(**given, chunk_steps=4096.7)
+    with pytest.raises(TypeError, match=r"another kind: keep_series$"):
+        record.new(**{**given, "keep_series": 0.0}, chunk_steps=1)
 
 
 def test_records_start_as_declared_and_are_aligned():
@@ -41,7 +45,7 @@ def test_records_start_as_declared_and_are_aligned():
     assert tracked["drive_work_j"] == 0.0 and tracked["tyre_dissipation_min_w"] == np.inf
     state = rosenbrock.FAST_STATE.new()
     assert records.read(state) == {name: start for name, _, start in rosenbrock.FAST_STATE.fields}
-    assert state.dtype.isalignedstruct
+    assert state.dtype.isalignedstruct and state.flags.aligned and state.flags.writeable
 
 
 def test_the_loop_writes_through_the_records_it_is_given():
@@ -52,14 +56,15 @@ def test_the_loop_writes_through_the_records_it_is_given():
     kind, rp = road.packed()
     y = np.zeros(minimal.N_STATE)
     y[:6] = setup.q0[list(MINIMAL_COORDS)]
-    run = rosenbrock.FAST_RUN.new(longitudinal=True, t_end=0.5, dt_out=0.01, tol=5e-5, h_max=8e-3, ros2_only=False,
-                             max_air_time=0.5, keep_series=False, chunk_steps=50)
+    settings = rosenbrock.FAST_SETTINGS.new(
+        tyre_longitudinal=True, duration=0.5, dt_out=0.01, fast_tolerance=5e-5, fast_max_step=8e-3, fast_ros2=False,
+        max_airborne_time=0.5, keep_series=False, chunk_steps=50)
     state, tracked = rosenbrock.FAST_STATE.new(), D.TRACKED.new()
     empty = np.zeros((0, N_SERIES)), np.zeros((0, 12))
-    assert rosenbrock.run_fast(y, setup.p, kind, rp, run, state, tracked, *empty) == PAUSED
+    assert rosenbrock.run_fast(y, setup.p, kind, rp, settings, state, tracked, *empty) == PAUSED
     paused = records.read(state)
     assert paused["started"] and 0.0 < paused["t"] < 0.5 and paused["h"] > 0.0
-    while rosenbrock.run_fast(y, setup.p, kind, rp, run, state, tracked, *empty) == PAUSED:
+    while rosenbrock.run_fast(y, setup.p, kind, rp, settings, state, tracked, *empty) == PAUSED:
         pass
     assert records.read(state)["t"] == 0.5
     ends = records.read(tracked)

@@ -95,27 +95,31 @@ FIRST_STEP = 1.0e-3
 #: Shortened tries of one step that locate a chain event before the step is taken as it is.
 MAX_EVENT_TRIES = 40
 
-#: A run's settings (the record ``run``): name, type (each given by the caller). ``t_end`` [s] the
-#: run's end, ``dt_out`` [s] the series' interval, ``tol`` the error tolerance and ``h_max`` [s] the
-#: largest step (SimSettings.fast_tolerance, fast_max_step), ``ros2_only`` ROS2 on every road,
-#: ``max_air_time`` [s] the longest a wheel may be off the road, ``keep_series`` whether the series
-#: and states are recorded, ``chunk_steps`` the accepted steps after which the loop pauses.
-FAST_RUN = Record(
-    ("longitudinal", np.bool_, None), ("t_end", np.float64, None), ("dt_out", np.float64, None),
-    ("tol", np.float64, None), ("h_max", np.float64, None), ("ros2_only", np.bool_, None),
-    ("max_air_time", np.float64, None), ("keep_series", np.bool_, None), ("chunk_steps", np.int64, None),
+#: A fast run's settings (the record ``settings``), each given by the caller; SimSettings' names.
+FAST_SETTINGS = Record(
+    ("tyre_longitudinal", np.bool_, None),   # the rear tyre's longitudinal force on
+    ("duration", np.float64, None),          # [s] the run's end
+    ("dt_out", np.float64, None),            # [s] the series' interval
+    ("fast_tolerance", np.float64, None),    # the local error's tolerance
+    ("fast_max_step", np.float64, None),     # [s] ROS34PW2's largest step (ROS2: half)
+    ("fast_ros2", np.bool_, None),           # ROS2 on every road
+    ("max_airborne_time", np.float64, None),  # [s] the longest a wheel may be off the road
+    ("keep_series", np.bool_, None),         # the series and states recorded
+    ("chunk_steps", np.int64, None),         # accepted steps after which the loop pauses
 )
-#: The loop's saved state (the record ``state``): everything a paused run needs to continue exactly.
-#: ``t`` [s] the time reached, ``h`` [s] the next step's size, ``sigma`` [m] sigma* of eq. (41),
-#: ``prev_taut`` [m] and ``prev_rate`` [m/s] the taut run's length and rate at t, ``air_rear``/``air_front``
-#: [s] how long each wheel has been off the road, ``row`` the next series row, ``mode`` the chain's
-#: (engine.fast.minimal: UPPER, LOWER, FREE, ELASTIC).
+#: A fast run's saved state (the record ``state``): everything a paused run needs to continue exactly.
 FAST_STATE = Record(
-    ("started", np.bool_, False), ("t", np.float64, 0.0), ("h", np.float64, 0.0), ("sigma", np.float64, 0.0),
-    ("prev_taut", np.float64, 0.0), ("prev_rate", np.float64, 0.0), ("air_rear", np.float64, 0.0),
-    ("air_front", np.float64, 0.0), ("row", np.int64, 0), ("mode", np.int64, UPPER),
+    ("started", np.bool_, False),   # the start done: the others below hold the run's
+    ("t", np.float64, 0.0),         # [s] the time reached
+    ("h", np.float64, 0.0),         # [s] the next step's size (set at the start)
+    ("sigma", np.float64, 0.0),     # [m] sigma* of eq. (41) (set at the start)
+    ("prev_taut", np.float64, 0.0),  # [m] the taut run's length at t
+    ("prev_rate", np.float64, 0.0),  # [m/s] and its rate
+    ("air_rear", np.float64, 0.0),  # [s] how long the rear wheel has been off the road
+    ("air_front", np.float64, 0.0),  # [s] the front wheel
+    ("row", np.int64, 0),           # the next series row
+    ("mode", np.int64, 0),          # the chain's (engine.fast.minimal: UPPER, LOWER, FREE, ELASTIC; set at the start)
 )
-
 
 @jit
 def high_order(kind: int, two_runs: bool) -> bool:
@@ -145,7 +149,7 @@ def _error_norm(e, scale, n):
 
 
 @jit
-def _taut_extremes(out, l0, r0, l1, r1, h):
+def _taut_extremes(tracked, l0, r0, l1, r1, h):
     """Extremes of L_taut inside a step, from its values l and rates r at both ends: the stationary
     points of their cubic Hermite interpolant l(s), s in (0, 1) (l'(s) = a s^2 + b s + c)."""
     a = 6.0 * (l0 - l1) + 3.0 * h * (r0 + r1)
@@ -165,8 +169,8 @@ def _taut_extremes(out, l0, r0, l1, r1, h):
         if 0.0 < s < 1.0:
             extreme = ((1.0 + 2.0 * s) * (1.0 - s) ** 2 * l0 + s * (1.0 - s) ** 2 * h * r0
                        + s * s * (3.0 - 2.0 * s) * l1 + s * s * (s - 1.0) * h * r1)
-            out.taut_min_m = min(out.taut_min_m, extreme)
-            out.taut_max_m = max(out.taut_max_m, extreme)
+            tracked.taut_min_m = min(tracked.taut_min_m, extreme)
+            tracked.taut_max_m = max(tracked.taut_max_m, extreme)
 
 
 @jit
@@ -196,35 +200,37 @@ def _event_fraction(y, ynew, mode, tension, tension_end, p, geo):
 
 
 @jit(allocates=True)
-def run_fast(y, p, kind, rp, settings, saved, tracked, series, states):
-    """Integrate y = (z, z', u), or (z, z', u, e, alpha') with the two-run or the elastic chain, from rest to t_end
-    with step-size control; returns a code.
+def run_fast(y, p, kind, rp, settings, state, tracked, series, states):
+    """Integrate y = (z, z', u), or (z, z', u, e, alpha') with the two-run or the elastic chain, from rest to
+    settings.duration with step-size control; returns a code.
 
-    Its records, each a one-element array (engine.jit.records): ``settings`` the run's (``run``, a
-    :data:`FAST_RUN`), ``saved`` the loop's state (``state``, :data:`FAST_STATE`), ``tracked`` what it
-    tracks (``out``, engine.model.diagnostics.TRACKED). Resumable: every quantity the loop carries
-    between steps is in y, those records, series and states; after run.chunk_steps accepted steps the
-    loop returns PAUSED and, called again with the same records and arrays, continues exactly where it
-    stopped (the result is bit-identical to an uninterrupted run). Steps never land on output times: the
-    series rows, every dt_out, come from cubic Hermite interpolation inside the steps (dense
+    Its records (engine.jit.records), each a one-element array: ``settings`` (:data:`FAST_SETTINGS`),
+    ``state`` (:data:`FAST_STATE`) and ``tracked`` (engine.model.diagnostics.TRACKED), the last two
+    fresh from their ``new()`` at the start. Resumable: every quantity the loop carries between steps
+    is in y, state, tracked, series and states; after settings.chunk_steps accepted steps the loop
+    returns PAUSED and, called again with the same records and arrays, continues exactly where it
+    stopped (the result is bit-identical to an uninterrupted run). Steps never land on output times:
+    the series rows, every dt_out, come from cubic Hermite interpolation inside the steps (dense
     output), so the series changes nothing of the run. The step is ROS34PW2's where
-    high_order(kind, two_runs) and not run.ros2_only, else ROS2's. The local error estimate (ROS34PW2:
-    engine.fast.wstep; ROS2: y_{n+1} - (y_n + h k1), its embedded first-order solution, and steps
-    of at most run.h_max / 2) is measured in a weighted RMS norm with absolute scales run.tol * (1 m, 1 m,
-    1 rad, 1 rad, 1 m, 1 rad; x 10 /s for rates; 1 for u; with a free engine sprocket also 1 rad
-    for e, 10 /s for alpha'). Extremes and the energy ledger are
-    tracked at every accepted step (the extremes of L_taut also inside steps, from its rate at both
-    ends). Codes: OK, PAUSED, NONFINITE, REAR_AIRBORNE, FRONT_AIRBORNE; state.t is the time reached.
+    high_order(kind, two_runs) and not settings.fast_ros2, else ROS2's. The local error estimate
+    (ROS34PW2: engine.fast.wstep; ROS2: y_{n+1} - (y_n + h k1), its embedded first-order solution,
+    and steps of at most fast_max_step / 2) is measured in a weighted RMS norm with absolute scales
+    fast_tolerance * (1 m, 1 m, 1 rad, 1 rad, 1 m, 1 rad; x 10 /s for rates; 1 for u; with a free
+    engine sprocket also 1 rad for e, 10 /s for alpha'). Extremes and the energy ledger are tracked
+    at every accepted step (the extremes of L_taut also inside steps, from its rate at both ends).
+    Codes: OK, PAUSED, NONFINITE, REAR_AIRBORNE, FRONT_AIRBORNE; state.t is the time reached.
     """
-    run, state, out = settings[0], saved[0], tracked[0]   # views: what the loop writes is in the arrays
+    settings, state, tracked = settings[0], state[0], tracked[0]   # views: what the loop writes is in the arrays
     geo = design_constants(p)
     n_state = y.shape[0]
     # the elastic chain: the state of the two runs (the caller sizes it), one mode, no events
     elastic = p[P.CHAIN_COMPLIANCE] == 1.0 and n_state == N_STATE_TWO_RUNS
     two_runs = n_state == N_STATE_TWO_RUNS and not elastic
-    longitudinal, t_end, dt_out, tol, max_air_time = run.longitudinal, run.t_end, run.dt_out, run.tol, run.max_air_time
-    order3 = high_order(kind, two_runs) and not run.ros2_only
-    h_max = run.h_max if order3 else 0.5 * run.h_max  # ROS2's largest step: half of ROS34PW2's
+    # the settings the loop reads at every step, as locals (the compiler keeps them in registers)
+    longitudinal, t_end, dt_out = settings.tyre_longitudinal, settings.duration, settings.dt_out
+    tol, max_air_time, chunk_steps = settings.fast_tolerance, settings.max_airborne_time, settings.chunk_steps
+    order3 = high_order(kind, two_runs) and not settings.fast_ros2
+    h_max = settings.fast_max_step if order3 else 0.5 * settings.fast_max_step  # ROS2's: half of ROS34PW2's
     stages = np.zeros((N_STAGES, n_state))
     ws = np.zeros(N_WS)
     c_row = np.zeros(N_DOF)
@@ -249,14 +255,14 @@ def run_fast(y, p, kind, rp, settings, saved, tracked, series, states):
         scale[i] = 10.0 * tol
     if n_state == N_STATE_TWO_RUNS:
         scale[ZALPHA_DOT] = 10.0 * tol
-    n_rows = series.shape[0] if run.keep_series else 0
+    n_rows = series.shape[0] if settings.keep_series else 0
     if not state.started:
         state.mode = ELASTIC if elastic else UPPER
         state.sigma = relaxation_length(0.0, 0.0, 1.0, p)
         state.h = min(h_max, FIRST_STEP)
         if fast_rhs(y, p, geo, kind, rp, state.sigma, longitudinal, f1, aux, ws, state.mode) != OK:
             return NONFINITE
-        track_state(out, aux, p)
+        track_state(tracked, aux, p)
         state.prev_taut, state.prev_rate = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
         if n_rows > 0:
             record_series(series, 0, 0.0, y[ZX1], y[ZTHETA], -y[N_DOF + ZBETA], -aux[AUX_ALPHA_DOT], y[ZU],
@@ -267,7 +273,7 @@ def run_fast(y, p, kind, rp, settings, saved, tracked, series, states):
     elif fast_rhs(y, p, geo, kind, rp, state.sigma, longitudinal, f1, aux, ws, state.mode) != OK:
         return NONFINITE  # not reached: the same evaluation succeeded before the pause
     t, h, sigma, row, mode = state.t, state.h, state.sigma, state.row, state.mode
-    chunk_steps, steps = run.chunk_steps, 0
+    steps = 0
     while t < t_end:
         if steps >= chunk_steps:
             _save(state, t, h, sigma, row, mode)
@@ -345,10 +351,10 @@ def run_fast(y, p, kind, rp, settings, saved, tracked, series, states):
             _save(state, t, h, sigma, row, mode)
             return NONFINITE
         # records at the new state and over the step
-        track_state(out, aux, p)
-        track_interval(out, fz_rear, fz_front, tension, aux[AUX_TENSION], h_done)
-        integrate_powers(out, pw0, powers(aux, p), h_done)
-        _taut_extremes(out, state.prev_taut, state.prev_rate, aux[AUX_TAUT], aux[AUX_TAUT_RATE], h_done)
+        track_state(tracked, aux, p)
+        track_interval(tracked, fz_rear, fz_front, tension, aux[AUX_TENSION], h_done)
+        integrate_powers(tracked, pw0, powers(aux, p), h_done)
+        _taut_extremes(tracked, state.prev_taut, state.prev_rate, aux[AUX_TAUT], aux[AUX_TAUT_RATE], h_done)
         state.prev_taut, state.prev_rate = aux[AUX_TAUT], aux[AUX_TAUT_RATE]
         # dense output: the series rows inside (t_old, t]
         while row < n_rows and (row * dt_out <= t + 1e-9 * dt_out or (row == n_rows - 1 and t >= t_end)):
@@ -365,7 +371,7 @@ def run_fast(y, p, kind, rp, settings, saved, tracked, series, states):
                 _store(states, row, yi)
             row += 1
         if two_runs:
-            mode = _chain_after_step(y, mode, h_done, p, geo, ws, aux, out)
+            mode = _chain_after_step(y, mode, h_done, p, geo, ws, aux, tracked)
             if fast_rhs(y, p, geo, kind, rp, sigma, longitudinal, f1, aux, ws, mode) != OK:
                 _save(state, t, h, sigma, row, mode)
                 return NONFINITE
@@ -386,16 +392,16 @@ def _save(state, t, h, sigma, row, mode):
 
 
 @jit(allocates=True)
-def _chain_after_step(y, mode, h, p, geo, ws, aux, out):
+def _chain_after_step(y, mode, h, p, geo, ws, aux, tracked):
     """Two-run chain, after a step of length h taken in mode: a free step counts as overrun and ends
-    in the impact of a run whose gap closed (its loss into out.chain_impacts_j); an engaged step's e and
+    in the impact of a run whose gap closed (its loss into tracked.chain_impacts_j); an engaged step's e and
     alpha' are projected onto the run. Returns the mode for the next step."""
     if mode != FREE:
         project(y, mode, aux[AUX_ALPHA_DOT], p, geo)
         return mode
-    out.chain_compression_s += h
+    tracked.chain_compression_s += h
     run, g = closing_run(y, p, geo)
     if g >= 0.0:
         return FREE
-    out.chain_impacts_j += engage(y, run, p, geo, ws)
+    tracked.chain_impacts_j += engage(y, run, p, geo, ws)
     return run

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 #: One field: name, numpy scalar type, value at the start (None: the caller gives it).
-Field = tuple[str, type, float | None]
+Field = tuple[str, type, float | int | bool | None]
 
 
 class Record:
@@ -25,24 +25,33 @@ class Record:
 
     def __init__(self, *fields: Field) -> None:
         self.fields = fields
-        self.names = tuple(name for name, _, _ in fields)
         self.dtype = np.dtype((np.record, np.dtype([(name, kind) for name, kind, _ in fields], align=True)))
         self._starts = {name: start for name, _, start in fields}
+        self.names = tuple(self._starts)
         self._required = [name for name, _, start in fields if start is None]
+        self._exact = [(name, int if kind is np.int64 else bool) for name, kind, _ in fields
+                       if kind in (np.int64, np.bool_)]
         self._at_start = b"" if self._required else np.array(
-            [tuple(start for _, _, start in fields)], dtype=self.dtype).tobytes()
+            [tuple(self._starts.values())], dtype=self.dtype).tobytes()
 
     def new(self, **values: Any) -> np.ndarray:
         """A one-element array of this record: each field at its value in ``values``, else at its
-        declared start (``KeyError`` naming a field that does not exist or one without a start left
-        out). A few microseconds: a simulation makes three."""
+        declared start. ``TypeError`` names a field that does not exist, one without a start left out,
+        or an integer or boolean field given another kind of value (numpy would cast it silently). A
+        few microseconds: a simulation makes three."""
         if values.keys() != self._starts.keys():
             unknown = sorted(values.keys() - self._starts.keys())
             missing = [name for name in self._required if name not in values]
             if unknown or missing:
-                raise KeyError(f"record fields unknown: {unknown}; without a value: {missing}")
+                problems = (("unknown", unknown), ("without a value", missing))
+                raise TypeError("record fields " + "; ".join(f"{what}: {', '.join(names)}"
+                                                             for what, names in problems if names))
             if not values:
                 return np.frombuffer(bytearray(self._at_start), dtype=self.dtype)
+        wrong = [name for name, kind in self._exact
+                 if name in values and not isinstance(values[name], (kind, np.integer if kind is int else np.bool_))]
+        if wrong:
+            raise TypeError(f"record fields given a value of another kind: {', '.join(wrong)}")
         return np.array([tuple(values.get(name, start) for name, start in self._starts.items())], dtype=self.dtype)
 
 

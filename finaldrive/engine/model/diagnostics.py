@@ -47,30 +47,34 @@ from finaldrive.engine.model.elements import (
 )
 from finaldrive.engine.model.tyre import low_speed_factor, magic_formula_slope
 
-_INF = math.inf
-
-#: What both loops track over a run (the record ``out``): name, type, value at the start. A name that
-#: is a result value (engine.record) means what that value means; the others are the loops' own:
-#: ``taut_min_m``/``taut_max_m`` the taut upper run's shortest and longest length (the slack, eq. 68),
-#: ``dampers_j`` the energy the suspension and tyre dampers dissipated and ``chain_impacts_j`` the
-#: kinetic energy the two-run chain's re-engagement impacts took (engine.fast.chain_runs): the result's
-#: damper_dissipation_j is their sum. Extremes start empty (max -inf, min +inf); durations and the
-#: ledger's integrals (trapezoidal rule on the integrator's steps) at 0.
+#: What both loops track over a run (the record ``tracked``). A name that is a result value
+#: (engine.record) means what that value means; the others are the loops' own. Extremes start empty
+#: (max -inf, min +inf), durations and the ledger's integrals (trapezoidal rule on the integrator's
+#: steps) at 0.
 TRACKED = Record(
-    ("chain_tension_max_n", np.float64, -_INF), ("chain_tension_min_n", np.float64, _INF),
-    ("fz_rear_max_n", np.float64, -_INF), ("fz_rear_min_n", np.float64, _INF),
-    ("fz_front_max_n", np.float64, -_INF), ("fz_front_min_n", np.float64, _INF),
-    ("slip_max", np.float64, -_INF),
-    ("airborne_rear_s", np.float64, 0.0), ("airborne_front_s", np.float64, 0.0),
+    ("chain_tension_max_n", np.float64, -math.inf),
+    ("chain_tension_min_n", np.float64, math.inf),
+    ("fz_rear_max_n", np.float64, -math.inf),
+    ("fz_rear_min_n", np.float64, math.inf),
+    ("fz_front_max_n", np.float64, -math.inf),
+    ("fz_front_min_n", np.float64, math.inf),
+    ("slip_max", np.float64, -math.inf),
+    ("airborne_rear_s", np.float64, 0.0),
+    ("airborne_front_s", np.float64, 0.0),
     ("chain_compression_s", np.float64, 0.0),
-    ("tyre_compression_rear_max_m", np.float64, -_INF), ("tyre_compression_front_max_m", np.float64, -_INF),
-    ("taut_min_m", np.float64, _INF), ("taut_max_m", np.float64, -_INF),
-    ("drive_work_j", np.float64, 0.0), ("dampers_j", np.float64, 0.0), ("tyre_slip_work_j", np.float64, 0.0),
-    ("tyre_carcass_energy_j", np.float64, 0.0), ("tyre_dissipation_j", np.float64, 0.0),
-    ("tyre_lever_work_j", np.float64, 0.0), ("tyre_dissipation_min_w", np.float64, _INF),
-    ("chain_impacts_j", np.float64, 0.0),
+    ("tyre_compression_rear_max_m", np.float64, -math.inf),
+    ("tyre_compression_front_max_m", np.float64, -math.inf),
+    ("taut_min_m", np.float64, math.inf),    # the taut upper run's shortest length (the slack, eq. 68)
+    ("taut_max_m", np.float64, -math.inf),   # and its longest
+    ("drive_work_j", np.float64, 0.0),
+    ("dampers_j", np.float64, 0.0),          # what the suspension and tyre dampers dissipated
+    ("tyre_slip_work_j", np.float64, 0.0),
+    ("tyre_carcass_energy_j", np.float64, 0.0),
+    ("tyre_dissipation_j", np.float64, 0.0),
+    ("tyre_lever_work_j", np.float64, 0.0),
+    ("tyre_dissipation_min_w", np.float64, math.inf),
+    ("chain_impacts_j", np.float64, 0.0),    # the kinetic energy the two-run chain's re-engagements took
 )
-
 
 class Powers(NamedTuple):
     """The ledger's powers at one state [W]."""
@@ -84,35 +88,35 @@ class Powers(NamedTuple):
 
 
 @jit
-def track_state(out, aux: np.ndarray, p: np.ndarray) -> None:
+def track_state(tracked, aux: np.ndarray, p: np.ndarray) -> None:
     """Extremes at an accepted state (forces, slip, tyre compressions, taut run)."""
-    out.chain_tension_max_n = max(out.chain_tension_max_n, aux[AUX_TENSION])
-    out.chain_tension_min_n = min(out.chain_tension_min_n, aux[AUX_TENSION])
-    out.fz_rear_max_n = max(out.fz_rear_max_n, aux[AUX_FZ_REAR])
-    out.fz_rear_min_n = min(out.fz_rear_min_n, aux[AUX_FZ_REAR])
-    out.fz_front_max_n = max(out.fz_front_max_n, aux[AUX_FZ_FRONT])
-    out.fz_front_min_n = min(out.fz_front_min_n, aux[AUX_FZ_FRONT])
-    out.slip_max = max(out.slip_max, abs(aux[AUX_KAPPA]))
-    out.tyre_compression_rear_max_m = max(out.tyre_compression_rear_max_m, p[P.RT0] - aux[AUX_RT])
-    out.tyre_compression_front_max_m = max(out.tyre_compression_front_max_m, p[P.FT0] - aux[AUX_FT])
-    out.taut_min_m = min(out.taut_min_m, aux[AUX_TAUT])
-    out.taut_max_m = max(out.taut_max_m, aux[AUX_TAUT])
+    tracked.chain_tension_max_n = max(tracked.chain_tension_max_n, aux[AUX_TENSION])
+    tracked.chain_tension_min_n = min(tracked.chain_tension_min_n, aux[AUX_TENSION])
+    tracked.fz_rear_max_n = max(tracked.fz_rear_max_n, aux[AUX_FZ_REAR])
+    tracked.fz_rear_min_n = min(tracked.fz_rear_min_n, aux[AUX_FZ_REAR])
+    tracked.fz_front_max_n = max(tracked.fz_front_max_n, aux[AUX_FZ_FRONT])
+    tracked.fz_front_min_n = min(tracked.fz_front_min_n, aux[AUX_FZ_FRONT])
+    tracked.slip_max = max(tracked.slip_max, abs(aux[AUX_KAPPA]))
+    tracked.tyre_compression_rear_max_m = max(tracked.tyre_compression_rear_max_m, p[P.RT0] - aux[AUX_RT])
+    tracked.tyre_compression_front_max_m = max(tracked.tyre_compression_front_max_m, p[P.FT0] - aux[AUX_FT])
+    tracked.taut_min_m = min(tracked.taut_min_m, aux[AUX_TAUT])
+    tracked.taut_max_m = max(tracked.taut_max_m, aux[AUX_TAUT])
 
 
 @jit
-def track_interval(out, fz_rear: float, fz_front: float, tension: float, tension_end: float, h: float) -> None:
+def track_interval(tracked, fz_rear: float, fz_front: float, tension: float, tension_end: float, h: float) -> None:
     """Durations over a step of length h: a wheel off the road (F_z <= 0), judged at the step's start;
     the upper chain run in compression (tension < 0), with the tension linear between its values at
     the start and the end (tension_end = tension: judged at the start)."""
     if fz_rear <= 0.0:
-        out.airborne_rear_s += h
+        tracked.airborne_rear_s += h
     if fz_front <= 0.0:
-        out.airborne_front_s += h
+        tracked.airborne_front_s += h
     if tension < 0.0 and tension_end < 0.0:
-        out.chain_compression_s += h
+        tracked.chain_compression_s += h
     elif tension < 0.0 or tension_end < 0.0:
         below = tension / (tension - tension_end)        # where the tension crosses zero
-        out.chain_compression_s += h * (below if tension < 0.0 else 1.0 - below)
+        tracked.chain_compression_s += h * (below if tension < 0.0 else 1.0 - below)
 
 
 @jit
@@ -127,16 +131,16 @@ def powers(aux: np.ndarray, p: np.ndarray) -> Powers:
 
 
 @jit
-def integrate_powers(out, pw0: Powers, pw1: Powers, h: float) -> None:
+def integrate_powers(tracked, pw0: Powers, pw1: Powers, h: float) -> None:
     """Trapezoidal rule over one step; the smallest tyre dissipation rate at either end."""
     half = 0.5 * h
-    out.drive_work_j += half * (pw0.drive + pw1.drive)
-    out.dampers_j += half * (pw0.dampers + pw1.dampers)
-    out.tyre_slip_work_j += half * (pw0.slip + pw1.slip)
-    out.tyre_carcass_energy_j += half * (pw0.carcass + pw1.carcass)
-    out.tyre_dissipation_j += half * (pw0.tyre_dissipation + pw1.tyre_dissipation)
-    out.tyre_lever_work_j += half * (pw0.lever + pw1.lever)
-    out.tyre_dissipation_min_w = min(out.tyre_dissipation_min_w, pw0.tyre_dissipation, pw1.tyre_dissipation)
+    tracked.drive_work_j += half * (pw0.drive + pw1.drive)
+    tracked.dampers_j += half * (pw0.dampers + pw1.dampers)
+    tracked.tyre_slip_work_j += half * (pw0.slip + pw1.slip)
+    tracked.tyre_carcass_energy_j += half * (pw0.carcass + pw1.carcass)
+    tracked.tyre_dissipation_j += half * (pw0.tyre_dissipation + pw1.tyre_dissipation)
+    tracked.tyre_lever_work_j += half * (pw0.lever + pw1.lever)
+    tracked.tyre_dissipation_min_w = min(tracked.tyre_dissipation_min_w, pw0.tyre_dissipation, pw1.tyre_dissipation)
 
 
 @jit
