@@ -128,7 +128,7 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
         series = np.zeros((n_rows, outcome.N_SERIES))
         states = np.zeros((n_rows, 2 * bodies.N_DOF + int(own_sprocket)))  # e too
         loop_settings = _settings_record(rosenbrock.FAST_SETTINGS, settings, dt_out=settings.duration / n_out,
-                               keep_series=settings.series, chunk_steps=FAST_CHUNK_STEPS)
+                                         keep_series=settings.series, chunk_steps=FAST_CHUNK_STEPS)
         state = rosenbrock.FAST_STATE.new()
         y = np.zeros(minimal.N_STATE_TWO_RUNS if own_sprocket else minimal.N_STATE)
         y[:bodies.N_DOF] = setup.q0[list(MINIMAL_COORDS)]
@@ -148,8 +148,8 @@ def simulate_prepared(setup: Setup, road: Road, settings: SimSettings,
         series = np.zeros((n_rows, outcome.N_SERIES))
         states = np.zeros((n_rows, 2 * N_COORDS))
         loop_settings = _settings_record(reference.REFERENCE_SETTINGS, settings, dt=dt, n_steps=n_steps,
-                               max_airborne_steps=math.ceil(settings.max_airborne_time / dt),
-                               keep_series=settings.series, chunk_steps=REFERENCE_CHUNK_STEPS)
+                                         max_airborne_steps=math.ceil(settings.max_airborne_time / dt),
+                                         keep_series=settings.series, chunk_steps=REFERENCE_CHUNK_STEPS)
         state = reference.REFERENCE_STATE.new()
         y = np.zeros(reference.N_STATE)
         y[:N_COORDS] = setup.q0

@@ -24,6 +24,16 @@ def test_tracked_names_are_the_results_diagnostics_or_the_loops_own():
     assert set(names) >= LOOPS_OWN
 
 
+@pytest.mark.parametrize(("record", "loops_own"), [
+    (rosenbrock.FAST_SETTINGS, {"dt_out", "keep_series", "chunk_steps"}),
+    (reference.REFERENCE_SETTINGS, {"dt", "n_steps", "max_airborne_steps", "keep_series", "chunk_steps"})])
+def test_settings_are_simsettings_names_or_the_loops_own(record, loops_own):
+    """One vocabulary: a setting the caller takes from SimSettings has its name there (dt: the step that
+    divides the duration, SimSettings.steps())."""
+    assert set(record.names) - loops_own <= set(SimSettings.__dataclass_fields__)
+    assert loops_own <= set(record.names)
+
+
 @pytest.mark.parametrize("record", [rosenbrock.FAST_SETTINGS, reference.REFERENCE_SETTINGS])
 def test_a_setting_left_out_or_unknown_is_refused_by_name(record):
     given = {name: kind(1) for name, kind, _ in record.fields}

@@ -76,6 +76,7 @@ TRACKED = Record(
     ("chain_impacts_j", np.float64, 0.0),    # the kinetic energy the two-run chain's re-engagements took
 )
 
+
 class Powers(NamedTuple):
     """The ledger's powers at one state [W]."""
 
