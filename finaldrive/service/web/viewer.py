@@ -6,7 +6,13 @@ starts that server on a free loopback port, the files are copied into a cache fo
 rerun version (next to this module, or in the temporary directory when that is read-only) and the
 child stops; the service serves the copies from then on.
 
-The page is changed in one way: the Google Fonts links go (the viewer falls back to its own font).
+The page is changed in two ways: the Google Fonts links go (the viewer falls back to its own font), and
+the viewer's handle is left on its window as ``finaldriveViewer`` as soon as it is made, so that the
+design page can start the viewer (seconds of wasm and shaders) while its designs are simulated and hand
+it the recording's bytes later, through a channel (``open_channel``, ``send_rrd_to_channel``: the
+viewer takes them while it is still starting; a receiver added by URL, ``add_receiver``, is lost then, and
+after the start it drew seconds later than the channel in headless Chromium). The copies' folder is named after the
+rerun version and :data:`REWRITE`, so a change of either extracts them anew.
 What the viewer itself would fetch from elsewhere (its update check, telemetry, the examples
 manifest) is kept in by the Content-Security-Policy every page of the service carries
 (see :mod:`finaldrive.service.web.pages`).
@@ -31,6 +37,9 @@ from finaldrive.service.machine import free_port
 
 FILES = ("index.html", "re_viewer.js", "re_viewer_bg.wasm", "favicon.ico")
 _FONTS = re.compile(r"<link\b[^>]*?fonts\.(?:googleapis|gstatic)\.com[^>]*?>", re.S)
+_HANDLE = "let handle = new wasm_bindgen.WebHandle(options);"
+#: The version of :func:`offline_index`'s changes (part of the copies' folder name).
+REWRITE = 4
 _lock = threading.Lock()
 
 
@@ -45,12 +54,13 @@ def rerun_version() -> str:
 def cache_folder() -> Path:
     here = Path(__file__).parent / "__pycache__"
     base = here if os.access(Path(__file__).parent, os.W_OK) else Path(tempfile.gettempdir()) / "finaldrive"
-    return base / f"rerun-web-viewer-{rerun_version()}"
+    return base / f"rerun-web-viewer-{rerun_version()}-{REWRITE}"
 
 
 def offline_index(html: str) -> str:
-    """The viewer's index.html without links to font servers."""
-    return _FONTS.sub("", html)
+    """The viewer's index.html without links to font servers, its handle on its window (when the page
+    makes it as rerun 0.41's does; otherwise the design page loads the viewer with the recording's URL)."""
+    return _FONTS.sub("", html).replace(_HANDLE, _HANDLE + " window.finaldriveViewer = handle;")
 
 
 def assets(timeout: float = 60.0) -> Path:

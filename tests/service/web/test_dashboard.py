@@ -237,21 +237,29 @@ def _run_pixels(png: bytes) -> list[int]:
     return [int((np.abs(left - np.array(c)).sum(axis=2) < 40).sum()) for c in RUN_COLOURS]
 
 
-#: the viewer has the whole recording within this time of the design page asking for the viewer [s] (issue 31)
+#: the .rrd downloaded in full within this time of being asked for [s] (issue 31)
 VIEWER_S = 10.0
+#: Both bikes drawn within this of the page's opening: issue 31 asks 10 s, measured 8.7-10.4 s (median 9.4 s) on
+#: a quiet 2-core machine, software rendering (docs/performance.md); the bound leaves room for a loaded CI.
+DRAWN_S = 30.0
 
 
 def test_the_design_page_plays_both_designs_in_rerun_s_viewer(tab: Page, tmp_path: Path) -> None:
     """Both bikes drawn in the viewer's 2D view (pixels of each run's colour in screenshots of the viewer), and
     together: no screenshot shows one without the other (over a file of a thousand chunks the viewer drew design B
-    seconds to a minute after A; issue 31). The .rrd is downloaded in full within :data:`VIEWER_S` of the page
-    asking for the viewer (``/viewer/``); the time to the drawing is the viewer's own start in headless Chromium
-    drawing without a GPU (docs/performance.md), measured and shown on failure but not bounded here."""
+    seconds to a minute after A; issue 31). The viewer starts with the run, beside the simulation, and is given the
+    recording through its handle (no second load of the viewer); the .rrd is downloaded in full within
+    :data:`VIEWER_S` of being asked for. The time to the drawing is mostly the viewer's own start in headless
+    Chromium drawing without a GPU (docs/performance.md): measured from the page's opening and printed; bounded
+    by :data:`DRAWN_S`."""
     seen: dict[str, float] = {}
 
     def asked(request: Any) -> None:
-        if urlsplit(request.url).path == "/viewer/":
+        path = urlsplit(request.url).path
+        if path == "/viewer/":
             seen.setdefault("viewer", time.monotonic())
+        elif path.endswith("/recording.rrd"):
+            seen.setdefault("rrd_asked", time.monotonic())
 
     def finished(request: Any) -> None:
         if urlsplit(request.url).path.endswith("/recording.rrd"):
@@ -259,6 +267,7 @@ def test_the_design_page_plays_both_designs_in_rerun_s_viewer(tab: Page, tmp_pat
 
     tab.page.on("request", asked)
     tab.page.on("requestfinished", finished)
+    opened = time.monotonic()
     tab.goto("/design?road=flat&a=0,0.08,0.093&label_a=A&b=180,0.1,0.093&label_b=B")
     tab.ready(timeout_s=180)
     assert tab.page.locator("#series svg").count() == 7
@@ -270,18 +279,23 @@ def test_the_design_page_plays_both_designs_in_rerun_s_viewer(tab: Page, tmp_pat
     assert "36.8" in tab.page.inner_text("#travel-table tbody tr:first-child")   # R_WS 93 mm: 36.8 teeth of a 520
     viewer = tab.page.locator("#viewer")
     deadline = time.monotonic() + 120
-    shots: list[tuple[float, list[int]]] = []  # (seconds after the viewer was asked for, pixels of each colour)
+    shots: list[tuple[float, list[int]]] = []  # (seconds after the page opened, pixels of each colour)
     while time.monotonic() < deadline:
         png = viewer.screenshot()
-        shots.append((round(time.monotonic() - seen["viewer"], 1), _run_pixels(png)))
+        shots.append((round(time.monotonic() - opened, 1), _run_pixels(png)))
         if min(shots[-1][1]) > 300:  # both bikes drawn
             break
         time.sleep(0.2)
     (tmp_path / "viewer.png").write_bytes(png)
+    print(f"page opened -> viewer asked {seen['viewer'] - opened:.1f} s, .rrd asked "
+          f"{seen['rrd_asked'] - opened:.1f} s, both drawn {shots[-1][0]} s")
     assert min(shots[-1][1]) > 300, f"pixels of each bike's colour: {shots} (see {tmp_path / 'viewer.png'})"
     assert all(max(pixels) <= 300 for _, pixels in shots[:-1]), f"one design drawn before the other: {shots}"
     assert any(urlsplit(u).path.endswith("/recording.rrd") and "signature=" in u for u in tab.requests)
-    assert seen.get("rrd", np.inf) - seen["viewer"] <= VIEWER_S, (seen, shots)
+    assert [u for u in tab.requests if urlsplit(u).path == "/viewer/"] and all(
+        "url=" not in u for u in tab.requests if urlsplit(u).path == "/viewer/"), "the viewer was loaded again"
+    assert seen.get("rrd", np.inf) - seen["rrd_asked"] <= VIEWER_S, (seen, shots)
+    assert shots[-1][0] <= DRAWN_S, shots
 
 
 @pytest.mark.parametrize(("path", "selector"), [("/docs", ".swagger-ui .opblock"), ("/redoc", "[role=menuitem]")])

@@ -49,6 +49,43 @@ function designs() {
 
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
+// rerun's viewer takes seconds to start (43 MB of wasm, its shaders): it starts with a run, beside the
+// simulation, and is handed the recording's bytes through a channel as soon as both are there (the handle the
+// service's copy of its page leaves on its window, service/web/viewer.py); without a handle it is loaded again
+// with the recording's URL.
+const VIEWER = "/viewer/?hide_welcome_screen&persist=0";
+let viewerRun = 0; // counts the viewers started: a later one ends the wait for an earlier
+
+function startViewer() {
+  viewerRun += 1;
+  $("viewer").src = `${VIEWER}&run=${viewerRun}`; // a fresh viewer for each run
+  $("viewer-card").hidden = false;
+}
+
+function stopViewer() {
+  viewerRun += 1;
+  $("viewer").src = "about:blank";
+  $("viewer-card").hidden = true;
+}
+
+async function openInViewer(file) {
+  const frame = $("viewer");
+  const mine = viewerRun;
+  const answer = await fetch(file);
+  if (!answer.ok) throw new Error(`the recording's file: ${answer.status}`);
+  const bytes = new Uint8Array(await answer.arrayBuffer());
+  for (let waited = 0; waited < 120_000 && mine === viewerRun; waited += 100) {
+    const handle = frame.contentWindow?.finaldriveViewer;
+    if (handle) {
+      handle.open_channel("recording", "recording");
+      handle.send_rrd_to_channel("recording", bytes);
+      return;
+    }
+    await sleep(100);
+  }
+  if (mine === viewerRun) frame.src = `${VIEWER}&url=${encodeURIComponent(file)}`;
+}
+
 async function run(event) {
   event?.preventDefault();
   clearProblem($("designs"), $("form-error"));
@@ -56,6 +93,7 @@ async function run(event) {
   try {
     const body = { road: $("road").value.trim(), designs: designs(), duration: Number($("duration").value), fps: 50 };
     let rec = await api("/v1/recordings", { method: "POST", body });
+    startViewer();
     const started = Date.now();
     while (rec.status === "queued" || rec.status === "running") {
       $("status").textContent = `simulating and recording… ${((Date.now() - started) / 1000).toFixed(0)} s`;
@@ -68,6 +106,7 @@ async function run(event) {
   } catch (e) {
     showProblem($("designs"), e.problem ?? { detail: e.message }, $("form-error"));
     $("status").textContent = "";
+    stopViewer();
   } finally {
     $("run").disabled = false;
   }
@@ -91,9 +130,8 @@ async function show(rec) {
   })), { xLabel: "t [s]", yLabel: label, title: label, height: 220 }));
   await showTravel(data.runs);
   $("download").href = localUrl(`/v1/recordings/${encodeURIComponent(rec.id)}/file`);
-  $("viewer-card").hidden = false;
-  const file = localUrl(rec.viewer_file); // ends in .rrd (how the viewer knows it) and signed when needed
-  $("viewer").src = `/viewer/?url=${encodeURIComponent(file)}&hide_welcome_screen&persist=0`;
+  // the file ends in .rrd (how the viewer knows it, loaded with its URL) and is signed when the server has a token
+  openInViewer(localUrl(rec.viewer_file)).catch((e) => showBanner(`the viewer: ${e.message}`));
 }
 
 async function showTravel(runs) {
