@@ -121,6 +121,7 @@ FAST_STATE = Record(
     ("mode", np.int64, 0),          # the chain's (engine.fast.minimal: UPPER, LOWER, FREE, ELASTIC; set at the start)
 )
 
+
 @jit
 def high_order(kind: int, two_runs: bool) -> bool:
     """Whether run_fast steps with ROS34PW2 (else ROS2, with half its largest step h_max): on a
