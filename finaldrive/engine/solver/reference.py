@@ -83,6 +83,7 @@ REFERENCE_STATE = Record(
     ("sigma_prev", np.float64, 0.0),  # [m] the last step's
 )
 
+
 @jit(allocates=True)
 def motorcycle_rhs(t, y, ctx, out) -> int:
     """y' = f(t, y) for the motorcycle; returns a failure code (0 = ok)."""
