@@ -65,8 +65,10 @@ def hover(tab: Page, selector: str, at: tuple[float, float] | None = None) -> st
     element = tab.page.locator(selector)
     tip = element.locator("xpath=../div[contains(@class, 'tooltip')]")
     for attempt in range(5):  # the page may still move (the viewer's frame loading below): hover again
+        element.wait_for(state="visible", timeout=10_000)   # a chart is drawn anew when its data change
         box = element.bounding_box()
-        assert box is not None, selector
+        if box is None:   # replaced between the two
+            continue
         x, y = at if at is not None else (box["width"] / 2, box["height"] / 2)
         element.hover(position={"x": x + attempt, "y": y})
         try:
