@@ -55,8 +55,9 @@ from finaldrive.service.machine import describe
 from finaldrive.service.schemas import JobSpec
 from finaldrive.service.services import open_database
 from finaldrive.workers import make_executor
-from finaldrive.workers.base import Done, ExecutorMixin, Shared
+from finaldrive.workers.base import Done, ExecutorMixin, Shared, task_width
 from finaldrive.workers.evaluate import by_road
+from finaldrive.workers.task import task_cpus
 
 #: The jobs of each plan, submitted together.
 PLANS: dict[str, list[dict[str, Any]]] = {
@@ -75,6 +76,12 @@ PLANS: dict[str, list[dict[str, Any]]] = {
 RAY_TASK_US = 649.0
 #: A worker's idle time between the end of one task and the start of the next, 4 in flight [ms].
 RAY_GAP_MS = 0.902
+#: The engine's Python a design, holding the GIL, in a wide task (workers/evaluate.py) [us]: an upper
+#: bound, a design's whole wall time at 2 ms of simulated time (400 random designs on sine:0.04:3,
+#: 100-103 us; the same machine, 2026-12-06). Two threads ran 1.68-1.90x one (two processes: 1.62-1.75x).
+GIL_US = 100.0
+#: CPUs of a node of the virtual cluster (a task holds at most one node's).
+NODE_CPUS = 64
 #: One ``RayExecutor.poll(0)``'s cost by the tasks in flight, nothing ready: "n:ms,..." (interpolated,
 #: extrapolated linearly).
 RAY_POLL = "4:0.002,256:0.002,2048:0.002"
@@ -135,7 +142,8 @@ def describe_times(times: np.ndarray) -> dict[str, float]:
 
 class SleepTask:
     """The stand-in evaluation: ``ms`` of sleep a design (or, with ``times``, a time drawn for each design
-    from them, seeded by the design's bytes), a smooth deterministic fitness, no CPU. Each design's
+    from them, seeded by the design's bytes; a wide task sleeps :func:`wide_task_s` of them), a smooth
+    deterministic fitness, no CPU. Each design's
     time is its ``wall_s``. Its records are the engine's shape: every value finite, as a successful
     run's are (a NULL costs the store other bytes and time than a number)."""
 
@@ -145,8 +153,8 @@ class SleepTask:
     def __call__(self, rows: np.ndarray, roads: tuple[Road, ...], settings: SimSettings,
                  vehicle: Vehicle | None) -> list[tuple[int, BatchResult]]:
         out = [(road, self.results(x)) for road, x in by_road(rows)]
-        if self.sleep:
-            time.sleep(sum(float(result.wall_s.sum()) for _, result in out))
+        if self.sleep:  # as long as its designs on the task's threads
+            time.sleep(wide_task_s(np.concatenate([result.wall_s for _, result in out]), task_cpus()))
         return out
 
     def _wall_s(self, x: np.ndarray) -> np.ndarray:
@@ -163,23 +171,43 @@ class SleepTask:
                               wall_s=self._wall_s(x), **dict(zip(DIAGNOSTICS, diagnostics.T, strict=True)))
 
 
+def wide_task_s(times: np.ndarray, threads: int, gil_s: float = GIL_US * 1e-6) -> float:
+    """How long a task of designs taking ``times`` [s] runs on ``threads`` threads of one process, each
+    taking the next design (workers/evaluate.py): the list schedule's end, but no less than the
+    designs' Python, which holds the GIL (``gil_s`` a design, or the whole of a shorter one)."""
+    if threads <= 1 or len(times) <= 1:
+        return float(np.sum(times))
+    free = [0.0] * threads
+    for t in times:
+        heapq.heapreplace(free, free[0] + float(t))
+    return max(max(free), float(np.minimum(times, gil_s).sum()))
+
+
+def virtual_nodes(cpus: int, node_cpus: int) -> list[int]:
+    """A cluster of ``cpus`` CPUs as nodes of ``node_cpus`` (the last one smaller if they do not divide)."""
+    return [node_cpus] * (cpus // node_cpus) + ([cpus % node_cpus] if cpus % node_cpus else [])
+
+
 class VirtualCluster(ExecutorMixin):
-    """``cpus`` CPUs on a clock, no processes: a task holds a CPU for its designs' times (their
-    ``wall_s``; queued first-in first-out while no CPU is free) and is reported when that time has
-    passed on the wall clock. Its result is computed at submission (the stand-in told not to sleep),
-    with the in-worker times it would have had. With ``costs`` the driver pays Ray's: ``task_s`` at
-    each submit (the stand-in's own time making the result, then a busy loop for the rest),
-    ``poll_s(in flight)`` at each poll, and a CPU is idle ``gap_s`` after each task (reported to the
-    scheduler as the task's ``idle_s``).
+    """``cpus`` CPUs on a clock, no processes: a task holds ``task_cpus`` CPUs (``base.task_width`` of
+    nodes of ``node_cpus``, unless given) for its designs' times (their ``wall_s``, spread over that
+    many threads: :func:`wide_task_s`; queued first-in first-out while no slot is free) and is
+    reported when that time has passed on the wall clock. Its result is computed at submission (the
+    stand-in told not to sleep), with the in-worker times it would have had. With ``costs`` the driver
+    pays Ray's: ``task_s`` at each submit (the stand-in's own time making the result, then a busy loop
+    for the rest), ``poll_s(in flight)`` at each poll, and a slot is idle ``gap_s`` after each task
+    (reported to the scheduler as the task's ``idle_s``).
     Without, the scheduler and the store get the whole machine, so the figure is theirs alone.
     """
 
-    def __init__(self, cpus: int, costs: RayCosts | None = None) -> None:
+    def __init__(self, cpus: int, costs: RayCosts | None = None, *, task_cpus: int | None = None,
+                 node_cpus: int = NODE_CPUS) -> None:
         super().__init__()
-        self.num_workers, self.capacity, self.costs = cpus, 2 * cpus, costs
+        self.task_cpus, slots = task_width(virtual_nodes(cpus, node_cpus), task_cpus)
+        self.num_workers, self.capacity, self.costs = slots, 2 * slots, costs
         self.held_s = 0.0                                 # the designs' time of every task submitted
         self._ids = 0
-        self._free_at = [0.0] * cpus                      # heap: when each CPU becomes free
+        self._free_at = [0.0] * slots                     # heap: when each slot becomes free
         self._pending: list[tuple[float, int, Any]] = []  # heap: (finish time, task, result)
 
     def share(self, value: Any) -> Shared:
@@ -192,8 +220,9 @@ class VirtualCluster(ExecutorMixin):
         values = [handle.ref for handle in shared]
         begun = time.perf_counter()
         timed = fn(batch, *values)
-        held = sum(float(result.wall_s.sum()) for _, result in timed.result)
-        self.held_s += held
+        times = np.concatenate([result.wall_s for _, result in timed.result])
+        self.held_s += float(times.sum())
+        held = wide_task_s(times, self.task_cpus)
         if self.costs is None:
             result = dataclasses.replace(timed, busy_s=held, compute_s=held)  # as if it had slept
             start = max(time.perf_counter(), heapq.heappop(self._free_at))
@@ -235,11 +264,11 @@ class VirtualCluster(ExecutorMixin):
         self._pending = []
 
 
-def _warm(executor: Any, cpus: int) -> None:
-    """Start every Ray worker: ``cpus`` tasks that each hold a CPU for a moment, together."""
-    for _ in range(cpus):
+def _warm(executor: Any, slots: int) -> None:
+    """Start every Ray worker: ``slots`` tasks that each hold a task's CPUs for a moment, together."""
+    for _ in range(slots):
         executor.submit(time.sleep, 0.5)
-    pending = cpus
+    pending = slots
     while pending:
         pending -= len(executor.poll(5.0))
 
@@ -304,17 +333,18 @@ def measure_ray(tasks: int = 400, in_flight: tuple[int, ...] = (4, 256, 2048), c
 
 
 def run(cpus: int, plan: str, db_url: str | None, executor_kind: str, times: np.ndarray | None, eval_ms: float,
-        costs: RayCosts | None) -> dict[str, Any]:
+        costs: RayCosts | None, task_cpus: int | None = None) -> dict[str, Any]:
     tmp = tempfile.TemporaryDirectory(prefix="finaldrive-bench-")
     url = db_url or f"sqlite:///{Path(tmp.name) / 'bench.db'}"
     settings = Settings(db_url=url, executor="ray", num_workers=cpus)
     db = open_database(settings)  # as finaldrive.service.jobs.scheduler.run_scheduler
     virtual = executor_kind != "ray"
-    cluster = VirtualCluster(cpus, costs if executor_kind == "virtual" else None) if virtual else None
-    executor: Any = cluster or make_executor("ray", num_workers=cpus)
+    cluster = VirtualCluster(cpus, costs if executor_kind == "virtual" else None, task_cpus=task_cpus) \
+        if virtual else None
+    executor: Any = cluster or make_executor("ray", num_workers=cpus, task_cpus=task_cpus)
     try:
         if not virtual:
-            _warm(executor, cpus)
+            _warm(executor, executor.num_workers)
         task = SleepTask(eval_ms, sleep=not virtual, times=times)
         tasks = _count_submissions(executor)
         scheduler = Scheduler(db, executor, task=task, warmup=None, executor_kind="virtual" if virtual else "ray",
@@ -350,7 +380,8 @@ def run(cpus: int, plan: str, db_url: str | None, executor_kind: str, times: np.
     else:  # the same draw as the stand-in's, over as many designs: its mean
         busy = stored * (float(times.mean()) if times is not None else eval_ms * 1e-3)
     ideal = busy / cpus
-    return {"plan": plan, "executor": executor_kind, "cpus": cpus, "eval_ms": eval_ms if times is None else None,
+    return {"plan": plan, "executor": executor_kind, "cpus": cpus, "task_cpus": executor.task_cpus,
+            "eval_ms": eval_ms if times is None else None,
             "eval_dist": describe_times(times) if times is not None else None,
             "ray_costs": costs.as_dict() if executor_kind == "virtual" and costs else None,
             "store": url.split(":", 1)[0], "state": state,
@@ -394,6 +425,8 @@ def main() -> int:
     parser.add_argument("--ray-poll", default=RAY_POLL, help="a poll's cost by tasks in flight, n:ms,...")
     parser.add_argument("--measure-ray", action="store_true",
                         help="measure Ray's per-task costs with the real RayExecutor (2 CPUs) and print them")
+    parser.add_argument("--task-cpus", type=int,
+                        help="CPUs a task holds (default: the executor's rule, workers.base.task_width)")
     parser.add_argument("--json", action="store_true", help="print JSON")
     args = parser.parse_args()
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
@@ -411,7 +444,7 @@ def main() -> int:
     runs: dict[str, list[dict[str, Any]]] = {kind: [] for kind in kinds}
     for _ in range(args.repeat):
         for kind in kinds:
-            runs[kind].append(run(args.cpus, args.plan, args.db, kind, times, eval_ms, costs))
+            runs[kind].append(run(args.cpus, args.plan, args.db, kind, times, eval_ms, costs, args.task_cpus))
             if not args.json:
                 print(json.dumps(runs[kind][-1]), flush=True)
     medians = {kind: sorted(out, key=lambda o: o["efficiency"] or 0.0)[len(out) // 2] for kind, out in runs.items()}

@@ -148,10 +148,10 @@ def _watch_tells(scheduler: Scheduler, refs: dict[int, float]) -> dict[Any, floa
 
 
 def run(cpus: int, spec: dict[str, Any], cache: dict[int, dict[bytes, BatchResult]], refs: dict[int, float],
-        costs: RayCosts, tmp: Path, warm: bool) -> dict[str, Any]:
+        costs: RayCosts, tmp: Path, warm: bool, task_cpus: int | None = None) -> dict[str, Any]:
     url = f"sqlite:///{tmp / f'tta-{cpus}-{time.monotonic_ns()}.db'}"
     db = open_database(Settings(db_url=url, executor="ray", num_workers=cpus))
-    cluster = VirtualCluster(cpus, costs)
+    cluster = VirtualCluster(cpus, costs, task_cpus=task_cpus)
     try:
         scheduler = Scheduler(db, cluster, task=CachedTask(cache), warmup=None, executor_kind="virtual",
                               config=SchedulerConfig(recordings=False))
@@ -177,7 +177,8 @@ def run(cpus: int, spec: dict[str, Any], cache: dict[int, dict[bytes, BatchResul
     times = {road: (first[road] - start).total_seconds() for road in first}
     missed = sorted(set(refs) - set(first))
     told_s = [told[road] - told["open"] for road in first if road in told]
-    return {"cpus": cpus, "warm": warm, "state": state, "evaluations": len(rows), "tasks": tasks[0],
+    return {"cpus": cpus, "task_cpus": cluster.task_cpus, "warm": warm, "state": state, "evaluations": len(rows),
+            "tasks": tasks[0],
             "time_to_1mm_s": round(max(times.values()), 3) if times else None,
             "told_1mm_s": round(max(told_s), 3) if told_s else None,
             "time_to_1mm_median_s": round(float(np.median(list(times.values()))), 3) if times else None,
@@ -198,6 +199,8 @@ def main() -> int:
     parser.add_argument("--workers", type=int, default=2, help="processes simulating the runs ahead")
     parser.add_argument("--cold", action="store_true",
                         help="the job is the scheduler's first (by default a small sweep runs before it)")
+    parser.add_argument("--task-cpus", type=int,
+                        help="CPUs a task holds (default: the executor's rule, workers.base.task_width)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     spec = spec_of(args.settings, args.roads, args.np)
@@ -212,7 +215,8 @@ def main() -> int:
                            "machine": describe(), "by_cpus": {}}
     with tempfile.TemporaryDirectory(prefix="finaldrive-tta-") as tmp:
         for cpus in (int(c) for c in args.cpus.split(",")):
-            runs = [run(cpus, spec, cache, refs, costs, Path(tmp), not args.cold) for _ in range(args.repeat)]
+            runs = [run(cpus, spec, cache, refs, costs, Path(tmp), not args.cold, args.task_cpus)
+                    for _ in range(args.repeat)]
             runs.sort(key=lambda r: r["time_to_1mm_s"] if r["time_to_1mm_s"] is not None else float("inf"))
             out["by_cpus"][cpus] = {"median": runs[len(runs) // 2], "runs": runs}
             if not args.json:

@@ -34,6 +34,8 @@ class Settings(BaseSettings):
     )
     num_workers: int | None = Field(None, ge=1, description="worker processes (process/ray)")
     ray_address: str | None = Field(None, description="Ray cluster address (ray executor)")
+    task_cpus: int | None = Field(None, ge=1, description="CPUs each Ray task holds, its designs on as many threads "
+                                  "(default: 1 up to 16 CPUs in all; wider beyond, at most 16 and a node's CPUs)")
     batch_size: int | None = Field(None, ge=1, description="designs per worker task")
     api_token: SecretStr | None = Field(None, description="bearer token for every route (reads included); "
                                         "browsers sign in with it (POST /v1/session: an HttpOnly cookie)")

@@ -42,6 +42,7 @@ def make_executor(
     address: str | None = None,
     niceness: int = 0,
     standby: threading.Event | None = None,
+    task_cpus: int | None = None,
 ) -> Executor:
     """Build an executor.
 
@@ -53,6 +54,8 @@ def make_executor(
     (``os.nice``, once per process), so the calling process keeps its core; ignored by serial.
     ``standby`` (ray, joining a cluster): be the cluster's one finaldrive driver, waiting as a
     standby while another holds it, until it is free or ``standby`` is set (``ClusterTaken``).
+    ``task_cpus`` (ray): CPUs each task holds, its designs on as many threads (default: 1 up to
+    ``base.TASK_SLOTS`` CPUs, wider beyond: ``base.task_width``).
 
     For a process or Ray pool, the engine's compiled code is built once on this machine if it is
     not yet (``engine.compile_engine``, while the pool starts), so the workers only load it. While
@@ -80,7 +83,8 @@ def make_executor(
                 f"(import failed: {error})"
             ) from error
         ray_executor = RayExecutor(num_workers=num_workers, max_retries=max_retries, address=address,
-                                   niceness=niceness, exclusive=standby is not None, standby=standby)
+                                   niceness=niceness, exclusive=standby is not None, standby=standby,
+                                   task_cpus=task_cpus)
         executor, warm_up = ray_executor, warm_up and ray_executor.local
     try:
         deadline = time.monotonic() + WARM_UP_WAIT_S

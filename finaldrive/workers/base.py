@@ -24,6 +24,7 @@ Failures, named precisely (docs/workers.md, "Retries"):
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -33,6 +34,29 @@ from typing import Any, Protocol, Self, runtime_checkable
 #: Tasks worth keeping in flight per worker: one running and one queued, so a worker never
 #: waits for the driver between tasks, while a generator of batches stays lazy.
 IN_FLIGHT_PER_WORKER = 2
+
+#: On a cluster of more CPUs than this, a task holds several CPUs (:func:`task_width`), so that about this
+#: many run at once: a round of waited-on work (a DE generation of every road) then costs the one driver
+#: thread about this many tasks (~1 ms each), not one a CPU (docs/workers.md, "Wide tasks").
+TASK_SLOTS = 16
+#: The most CPUs one task holds: its designs run on as many threads of one process, and the engine's
+#: Python around its compiled loops (<= 0.1 ms a design, holding the GIL) would bound wider ones.
+MAX_TASK_CPUS = 16
+
+
+def task_width(node_cpus: Iterable[int], fixed: int | None = None) -> tuple[int, int]:
+    """(CPUs a task holds, tasks that run at once) on nodes of ``node_cpus`` CPUs: ``fixed`` if given;
+    else 1 CPU a task up to :data:`TASK_SLOTS` CPUs in all, and beyond, ``ceil(CPUs / TASK_SLOTS)``,
+    at most :data:`MAX_TASK_CPUS` and at most the smallest node's CPUs (a task runs on one node, and
+    every node then takes tasks). A node's CPUs beyond a multiple of the width stay idle. ValueError
+    if no node has ``fixed`` CPUs."""
+    nodes = [int(n) for n in node_cpus if n >= 1] or [1]
+    width = fixed or max(1, min(MAX_TASK_CPUS, min(nodes), math.ceil(sum(nodes) / TASK_SLOTS)))
+    slots = sum(n // width for n in nodes)
+    if not slots:
+        raise ValueError(f"task_cpus {width} is more than any node's CPUs (at most {max(nodes)})")
+    return width, slots
+
 
 #: How long :func:`cancel_unseen` waits for its cancelled tasks to be reported [s], in polls of at most 1 s.
 CANCEL_DRAIN_S = 5.0

@@ -11,8 +11,10 @@ remote function ``_run_task``, with ``max_retries`` for worker loss and ``retry_
 O(1) a finished task, where ``ray.wait`` cost O(tasks in flight) a call); ``cancel`` is
 ``ray.cancel(force=True)``, which drops a queued task and kills the worker process of a running
 one (Ray starts another when needed); a ``TaskCancelledError`` means cancelled, and Ray's
-worker-loss errors after the retries mean ``lost``. ``capacity`` is 2 x the cluster's CPUs, read
-again every ``CAPACITY_REFRESH_S`` by ``poll``. Ray runs its workers in process groups of their
+worker-loss errors after the retries mean ``lost``. On a cluster of more than ``base.TASK_SLOTS``
+CPUs a task holds several (``task_cpus``, ``base.task_width``; its designs run on as many threads),
+so that ``num_workers`` tasks run at once; ``capacity`` is 2 x that, both read again every
+``CAPACITY_REFRESH_S`` by ``poll``. Ray runs its workers in process groups of their
 own with SIGINT blocked (a terminal's Ctrl-C reaches only the driver), at its own worker
 niceness (``RAY_worker_niceness``, 15 by default); ``niceness`` is added to that, once per worker
 process (the OS caps it at 19).
@@ -67,10 +69,11 @@ from ray.exceptions import (
 )
 from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
-from finaldrive.workers.base import IN_FLIGHT_PER_WORKER, Done, ExecutorMixin, Shared
+from finaldrive.workers.base import IN_FLIGHT_PER_WORKER, Done, ExecutorMixin, Shared, task_width
 from finaldrive.workers.cluster import ClusterTaken, check_on_cluster
+from finaldrive.workers.task import hold_cpus
 
-#: How often ``poll`` reads the cluster's CPUs again (``capacity``) [s].
+#: How often ``poll`` reads the cluster's CPUs again (``num_workers``, ``capacity``) [s].
 CAPACITY_REFRESH_S = 5.0
 #: The longest single wait in ``poll`` [s] (a cancel from another thread also wakes it).
 POLL_SLICE_S = 0.2
@@ -256,13 +259,14 @@ def _take_cluster(standby: threading.Event | None) -> Any:
             raise ClusterTaken(message)
 
 
-def _run_task(niceness: int, fn: Callable[..., Any], batch: Any, *shared: Any) -> tuple[str, Any]:
-    """The one remote function: lower this worker's priority to ``niceness`` (once), run ``fn``;
-    returns (this node's id, ``fn``'s result)."""
+def _run_task(niceness: int, cpus: int, fn: Callable[..., Any], batch: Any, *shared: Any) -> tuple[str, Any]:
+    """The one remote function: lower this worker's priority to ``niceness`` (once), run ``fn`` holding
+    ``cpus`` CPUs (``workers.task.task_cpus``); returns (this node's id, ``fn``'s result)."""
     global _nice_added
     if niceness > _nice_added:
         os.nice(niceness - _nice_added)
         _nice_added = niceness
+    hold_cpus(cpus)
     return ray.get_runtime_context().get_node_id(), fn(batch, *shared)
 
 
@@ -277,17 +281,19 @@ class RayExecutor(ExecutorMixin):
     """One Ray task per ``submit``, with ``max_retries`` for worker loss; shared values ``ray.put`` once.
 
     ``cancel`` uses ``ray.cancel(force=True)``: a queued task is dropped, a running one's worker
-    process is killed (Ray starts another when needed). ``capacity`` is 2 x the cluster's CPUs,
-    read again every ``CAPACITY_REFRESH_S`` by ``poll``, so nodes that join get work.
+    process is killed (Ray starts another when needed). A task holds ``task_cpus`` CPUs;
+    ``num_workers`` (tasks at once) and ``capacity`` (2 x that) are read again every
+    ``CAPACITY_REFRESH_S`` by ``poll``, so nodes that join get work.
     """
 
     def __init__(
         self, num_workers: int | None = None, max_retries: int = 3, address: str | None = None, niceness: int = 0,
-        exclusive: bool = False, standby: threading.Event | None = None,
+        exclusive: bool = False, standby: threading.Event | None = None, task_cpus: int | None = None,
     ) -> None:
-        """``exclusive``: when joining a cluster, be its one finaldrive driver (:func:`_take_cluster`):
-        raise ``ClusterTaken`` if another holds it, or with ``standby``, wait until it is free or
-        ``standby`` is set."""
+        """``num_workers``: the CPUs of a local Ray, or of a cluster's to use. ``exclusive``: when
+        joining a cluster, be its one finaldrive driver (:func:`_take_cluster`): raise
+        ``ClusterTaken`` if another holds it, or with ``standby``, wait until it is free or
+        ``standby`` is set. ``task_cpus``: CPUs each task holds (default: ``base.task_width``'s rule)."""
         super().__init__()
         if max_retries < 0:
             raise ValueError("max_retries must be >= 0")
@@ -295,6 +301,8 @@ class RayExecutor(ExecutorMixin):
             raise ValueError("niceness must be >= 0 (it lowers the workers' priority)")
         if num_workers is not None and num_workers < 1:
             raise ValueError("num_workers must be >= 1")
+        if task_cpus is not None and task_cpus < 1:
+            raise ValueError("task_cpus must be >= 1")
         self.max_retries = max_retries
         self.niceness = niceness
         self._started = not ray.is_initialized()
@@ -332,11 +340,13 @@ class RayExecutor(ExecutorMixin):
                     self._started = False
                     raise
         self._fixed_workers = num_workers
-        cpus = self._cluster_cpus()
-        self.num_workers = num_workers or cpus
-        self.capacity = IN_FLIGHT_PER_WORKER * cpus
+        self._fixed_width = task_cpus
+        #: CPUs each task holds (its designs run on as many threads); ``num_workers`` tasks run at once.
+        self.task_cpus = 1
+        self.num_workers = self.capacity = 0
+        self._task: Any = None
+        self._size()
         self._capacity_at = time.monotonic()
-        self._task = _RUN.options(max_retries=max_retries, retry_exceptions=False)
         self._answered: dict[str, float] = {}   # node id -> when a task of it last returned a result
         self._suspect_until = 0.0                # placing every task on answering nodes until then (_place)
         self._nodes: set[str] = set()            # the cluster's nodes with CPUs, read while suspecting
@@ -350,6 +360,19 @@ class RayExecutor(ExecutorMixin):
         self._ready: deque[tuple[int, concurrent.futures.Future[Any]]] = deque()  # finished, not yet polled
         self._shared: dict[int, ray.ObjectRef[Any]] = {}   # live handles (the executor holds the only ref)
         self._closed = False
+
+    def _size(self) -> None:
+        """Task width and tasks at once from the cluster's nodes (``num_workers`` CPUs of them, if set:
+        a local Ray is one node); ``capacity`` is 2 tasks a slot."""
+        if self.local or self._fixed_workers:
+            nodes = [self._fixed_workers or self._cluster_cpus()]
+        else:
+            nodes = [int(node["Resources"].get("CPU", 0)) for node in ray.nodes()  # type: ignore[no-untyped-call]
+                     if node["Alive"]] or [self._cluster_cpus()]
+        width, slots = task_width(nodes, self._fixed_width)
+        if width != self.task_cpus or self._task is None:
+            self._task = _RUN.options(max_retries=self.max_retries, retry_exceptions=False, num_cpus=width)
+        self.task_cpus, self.num_workers, self.capacity = width, slots, IN_FLIGHT_PER_WORKER * slots
 
     @staticmethod
     def _cluster_cpus() -> int:
@@ -376,7 +399,7 @@ class RayExecutor(ExecutorMixin):
             except KeyError:
                 raise ValueError("unknown or released shared handle") from None
             task = self._place(again)
-            ref = task.remote(self.niceness, fn, batch, *refs)
+            ref = task.remote(self.niceness, self.task_cpus, fn, batch, *refs)
             self._ids += 1
             self._refs[ref] = self._ids
             self._by_task[self._ids] = ref
@@ -397,13 +420,13 @@ class RayExecutor(ExecutorMixin):
         nodes = sorted(self._answered, key=self._answered.__getitem__, reverse=True)
         nodes = [node for node in nodes if self._answered[node] >= now - ANSWERED_S] or nodes
         nodes += sorted(self._nodes.difference(self._answered))   # joined, and not yet answered
+        options = {"max_retries": self.max_retries, "retry_exceptions": False, "num_cpus": self.task_cpus}
         if not nodes:
-            return _RUN_AGAIN.options(max_retries=self.max_retries, retry_exceptions=False) if again else self._task
+            return _RUN_AGAIN.options(**options) if again else self._task
         self._turn += 1
         node = nodes[(again - 1) % len(nodes)] if again else nodes[self._turn % len(nodes)]
         return (_RUN_AGAIN if again else _RUN).options(
-            max_retries=self.max_retries, retry_exceptions=False,
-            scheduling_strategy=NodeAffinitySchedulingStrategy(node_id=node, soft=True))
+            **options, scheduling_strategy=NodeAffinitySchedulingStrategy(node_id=node, soft=True))
 
     def _arrive(self, task: int, future: concurrent.futures.Future[Any]) -> None:
         """Ray's completion callback (its own thread, or ``submit``'s if already done): queue the task."""
@@ -447,10 +470,8 @@ class RayExecutor(ExecutorMixin):
         if self._closed or time.monotonic() - self._capacity_at < CAPACITY_REFRESH_S:
             return
         self._capacity_at = time.monotonic()
-        cpus = self._cluster_cpus()
-        self.capacity = IN_FLIGHT_PER_WORKER * cpus
         if self._fixed_workers is None:
-            self.num_workers = cpus
+            self._size()
         if self._suspect_until > self._capacity_at:   # which nodes joined, for _place
             with contextlib.suppress(Exception):
                 self._nodes = {node["NodeID"] for node in ray.nodes()  # type: ignore[no-untyped-call]

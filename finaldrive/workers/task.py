@@ -1,4 +1,5 @@
-"""Worker-side wrapper: optional one-off warm-up per process, then ``fn`` timed.
+"""Worker-side wrapper: optional one-off warm-up per process, then ``fn`` timed; and how many CPUs
+the running task holds (a wide task's body spreads its designs over that many threads).
 
 Imported in every worker process; it must stay free of engine and Ray imports.
 """
@@ -12,6 +13,18 @@ from typing import Any
 
 _warmed_up: set[str] = set()  # warm-ups already run in this process
 _last_end: list[float] = []    # when this process's previous task ended (perf_counter)
+_cpus = [1]                    # CPUs the running task holds (set by its executor)
+
+
+def task_cpus() -> int:
+    """CPUs the task running in this process holds: 1, unless its executor gave it more (a wide task,
+    ``RayExecutor(task_cpus=...)``)."""
+    return _cpus[0]
+
+
+def hold_cpus(cpus: int) -> None:
+    """Called by an executor in the worker before a task: the task holds ``cpus`` CPUs."""
+    _cpus[0] = max(1, int(cpus))
 
 
 @dataclass(frozen=True)

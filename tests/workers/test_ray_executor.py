@@ -100,3 +100,23 @@ def test_real_engine_identical_across_executors(ray_executor: workers.Executor) 
     with make_executor("process", num_workers=2) as pool:
         assert_same(serial, run(pool))
     assert_same(serial, run(ray_executor))
+
+
+def test_a_wide_task_holds_its_cpus_and_returns_the_engine_s_results(ray_executor: workers.Executor) -> None:
+    """``task_cpus=2`` on the 2-CPU Ray: one task at a time, holding both CPUs (Ray would run two 1-CPU
+    tasks at once), told to its body, whose designs then run on two threads with the serial results."""
+    from finaldrive.workers.ray_executor import RayExecutor
+
+    designs = np.array([[np.pi / 4, 0.10, 0.08], [np.pi, 0.05, 0.10], [1.5 * np.pi, 0.15, 0.12], [0.3, 0.0, 0.09]])
+    road, settings = Road.parse("sine:0.04:3"), SimSettings(duration=0.2)
+    rows = [np.column_stack([np.zeros(len(designs)), designs])]
+    with RayExecutor(task_cpus=2) as wide:   # on the module's Ray
+        assert (wide.task_cpus, wide.num_workers, wide.capacity) == (2, 1, 2)
+        assert list(results(wide, toyfns.cpus_held, [None]).values()) == [2]
+        [(road_index, batch)] = results(wide, run_engine_on_roads, rows, ((road,), settings, None))[0]
+    assert list(results(ray_executor, toyfns.cpus_held, [None]).values()) == [1]
+    serial = run_engine_on_roads(rows[0], (road,), settings, None)[0][1]
+    assert road_index == 0 and len(serial) == 4
+    assert_same(serial, batch)
+    with pytest.raises(ValueError, match="task_cpus 3 is more than any node's CPUs"):
+        RayExecutor(task_cpus=3)

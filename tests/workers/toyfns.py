@@ -190,3 +190,10 @@ def runtime_started(batch: object) -> tuple[int, bool]:
     """(this worker's pid, whether numba's runtime was started in it before this task)."""
     jit = sys.modules.get("finaldrive.engine.jit.kernel")
     return os.getpid(), jit is not None and jit.start_runtime.cache_info().currsize == 1
+
+
+def cpus_held(batch: object) -> int:
+    """The CPUs the running task holds, as its executor said (workers.task.task_cpus)."""
+    from finaldrive.workers.task import task_cpus
+
+    return task_cpus()

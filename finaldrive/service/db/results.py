@@ -13,6 +13,7 @@ import math
 from collections.abc import Iterable, Sequence
 from typing import Any
 
+import numpy as np
 from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
@@ -136,8 +137,8 @@ def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequen
     is written otherwise (:class:`LeaseLost`). Rows go to the driver's ``executemany`` as they are
     (no ORM, no per-row statement building); a slot stored already is skipped, never stored twice.
     """
-    ok = sum(row[STATUS] == EvalStatus.ok.value for row in rows)
-    cached = sum(bool(row[CACHED]) for row in rows)
+    values = _Columns(rows)
+    ok, cached = int(values.ok.sum()), int(values.cached.sum())
     fenced = session.execute(
         update(Job).where(Job.id == job_id, Job.owner == scheduler_id, Job.state == JobState.running.value)
         .values(n_done=Job.n_done + ok, n_failed=Job.n_failed + len(rows) - ok, n_cached=Job.n_cached + cached))
@@ -150,9 +151,10 @@ def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequen
         _recount(session, job_id)
         recount_explored(session, job_id)
     else:
-        add_explored(session, job_id, ((row[ROAD], row[A2], row[L2], row[RWS], row[FITNESS]) for row in rows
-                                       if row[STATUS] == _OK and _finite(row[FITNESS])))
-    _update_best(session, job_id, rows)
+        good = values.ok & np.isfinite(values.fitness)
+        add_explored(session, job_id, *(column[good] for column in (values.road, values.a2_deg, values.l2_m,
+                                                                    values.rws_m, values.fitness)))
+    _update_best(session, job_id, rows, values)
     if generations:
         now = _bound_now(session, Generation)
         columns = ("job_id", "run", "generation", "population", "fitness_m", "state", "best_fitness_m",
@@ -248,14 +250,32 @@ def _recount(session: Session, job_id: int) -> None:
         n_failed=count(Evaluation.status != EvalStatus.ok.value), n_cached=count(Evaluation.cached.is_(True))))
 
 
-def _update_best(session: Session, job_id: int, rows: Sequence[Row]) -> None:
-    """Each road's best evaluation, if one of ``rows`` beats it (plain SQL through the driver: the
-    writer runs this with every batch of rows it stores)."""
+class _Columns:
+    """The columns of ``rows`` that the counters, the explored ranges and the best need, as arrays
+    (fitness NaN where NULL)."""
+
+    def __init__(self, rows: Sequence[Row]) -> None:
+        n = len(rows)
+
+        def column(at: int, dtype: Any) -> np.ndarray:
+            return np.fromiter((row[at] for row in rows), dtype=dtype, count=n)
+
+        self.ok = np.fromiter((row[STATUS] == _OK for row in rows), dtype=bool, count=n)
+        self.cached = np.fromiter((bool(row[CACHED]) for row in rows), dtype=bool, count=n)
+        self.road = column(ROAD, np.int64)
+        self.a2_deg, self.l2_m, self.rws_m = column(A2, float), column(L2, float), column(RWS, float)
+        self.fitness = np.fromiter((math.nan if row[FITNESS] is None else row[FITNESS] for row in rows),
+                                   dtype=float, count=n)
+
+
+def _update_best(session: Session, job_id: int, rows: Sequence[Row], columns: _Columns) -> None:
+    """Each road's best evaluation, if one of ``rows`` beats it (the first of equals; plain SQL through
+    the driver: the writer runs this with every batch of rows it stores)."""
     best: dict[int, Row] = {}
-    for row in rows:
-        current = best.get(row[ROAD])
-        if row[STATUS] == EvalStatus.ok.value and (current is None or _better(row[FITNESS], current[FITNESS])):
-            best[row[ROAD]] = row
+    good = columns.ok & np.isfinite(columns.fitness)
+    for road in np.unique(columns.road[good]).tolist():
+        candidates = np.flatnonzero(good & (columns.road == road))
+        best[road] = rows[int(candidates[np.argmax(columns.fitness[candidates])])]
     if not best:
         return
     marker = "?" if session.get_bind().dialect.paramstyle == "qmark" else "%s"
@@ -274,7 +294,3 @@ def _update_best(session: Session, job_id: int, rows: Sequence[Row]) -> None:
 def _better(a: float | None, b: float | None) -> bool:
     return a is not None and math.isfinite(a) and (b is None or a > b)
 
-
-def _finite(value: float | None) -> bool:
-    """A number a row or the store holds: None (NULL read back) and NaN (not produced) are not."""
-    return value is not None and math.isfinite(value)

@@ -21,9 +21,10 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
 from sqlalchemy import Connection, text
 from sqlalchemy.orm import Session
 
@@ -74,38 +75,35 @@ def road_sharpness(session: Session, job_id: int, road_index: int, tolerance_pct
 
 #: road_explored's ranges, (low, high) pairs in the order of _COLUMNS' after the count
 _RANGES = ("a2_lo_deg", "a2_hi_deg", "l2_lo_m", "l2_hi_m", "rws_lo_m", "rws_hi_m", "fitness_lo_m", "fitness_hi_m")
-#: A point of road_explored: (road index, a2 [deg], L2 [m], R_WS [m], fitness [m]) of a successful evaluation.
-Point = tuple[int, float, float, float, float]
-
-
-def add_explored(session: Session, job_id: int, points: Iterable[Point]) -> None:
-    """Merge successful evaluations into the job's ``road_explored`` groups (the writer, with each store)."""
-    cells: dict[tuple[int, int], list[float]] = {}
-    for road, a2, l2, rws, fitness in points:
-        x = a2 - 360.0 * math.floor(a2 / 360.0) + 0.0  # as _X (whose floor keeps -0.0: SQL gives +0.0 there)
-        key = (road, math.floor(x / _WIDTH_DEG) if l2 > CONCENTRIC_L2_M else -1)
-        cell = cells.get(key)
-        if cell is None:
-            cells[key] = [1, x, x, l2, l2, rws, rws, fitness, fitness]
-            continue
-        cell[0] += 1
-        for i, v in ((1, x), (3, l2), (5, rws), (7, fitness)):
-            if v < cell[i]:
-                cell[i] = v
-            if v > cell[i + 1]:
-                cell[i + 1] = v
-    if not cells:
+def add_explored(session: Session, job_id: int, road: np.ndarray, a2_deg: np.ndarray, l2_m: np.ndarray,
+                 rws_m: np.ndarray, fitness_m: np.ndarray) -> None:
+    """Merge successful evaluations (columns, one element each) into the job's ``road_explored`` groups
+    (the writer, with each store): grouped and reduced with numpy, one upsert a group."""
+    if not len(road):
         return
+    x = a2_deg - 360.0 * np.floor(a2_deg / 360.0) + 0.0   # as _X (+0.0: SQL gives +0.0 where floor keeps -0.0)
+    bucket = np.where(l2_m > CONCENTRIC_L2_M, np.floor(x / _WIDTH_DEG), -1.0).astype(np.int64)
+    key = np.asarray(road, dtype=np.int64) * (BUCKETS + 1) + bucket + 1
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    counts = np.diff(np.r_[starts, len(key)])
+    ranges = []
+    for values in (x, l2_m, rws_m, fitness_m):
+        grouped = np.asarray(values, dtype=float)[order]
+        ranges += [np.minimum.reduceat(grouped, starts), np.maximum.reduceat(grouped, starts)]
     connection = session.connection()
     m = _marker(connection)
     low, high = ("LEAST", "GREATEST") if connection.dialect.name == "postgresql" else ("MIN", "MAX")
     merged = ", ".join(f"{name} = {low if i % 2 == 0 else high}(road_explored.{name}, excluded.{name})"
                        for i, name in enumerate(_RANGES))
+    roads, buckets = np.divmod(key[starts], BUCKETS + 1)
     connection.exec_driver_sql(
         f"INSERT INTO road_explored (job_id, road_index, bucket, n, {', '.join(_RANGES)}) "
         f"VALUES ({', '.join([m] * (4 + len(_RANGES)))}) ON CONFLICT (job_id, road_index, bucket) DO UPDATE SET "
         f"n = road_explored.n + excluded.n, {merged}",
-        [(job_id, road, bucket, *cell) for (road, bucket), cell in cells.items()])
+        [(job_id, *group) for group in zip(roads.tolist(), (buckets - 1).tolist(), counts.tolist(),
+                                           *(r.tolist() for r in ranges), strict=True)])
 
 
 def recount_explored(session: Session, job_id: int) -> None:

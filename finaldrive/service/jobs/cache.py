@@ -46,9 +46,13 @@ def context_prefix(road: Road, settings: SimSettings, vehicle: Vehicle | None, e
 
 
 def design_keys(prefix: str, designs: np.ndarray) -> list[str]:
-    """sha256 per design row of (rounded design, context prefix)."""
+    """sha256 per design row of ``"{prefix}|{a2!r},{l2!r},{rws!r}"`` (the design rounded; the context
+    prefix hashed once, its state copied for each design)."""
     rounded = np.round(np.asarray(designs, dtype=float), DESIGN_DECIMALS) + 0.0  # -0.0 -> 0.0
-    return [
-        hashlib.sha256(f"{prefix}|{row[0]!r},{row[1]!r},{row[2]!r}".encode()).hexdigest()
-        for row in rounded.tolist()
-    ]
+    context = hashlib.sha256(f"{prefix}|".encode())
+    keys = []
+    for a2, l2, rws in rounded.tolist():
+        key = context.copy()
+        key.update(f"{a2!r},{l2!r},{rws!r}".encode())
+        keys.append(key.hexdigest())
+    return keys

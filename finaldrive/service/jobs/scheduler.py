@@ -188,8 +188,8 @@ class Scheduler:
     # ------------------------------------------------------------------ the loop
     def run(self, stop: threading.Event) -> None:
         """Serve until ``stop`` is set; then give the jobs back and release the workers."""
-        log.info("scheduler %s starting (executor %s, capacity %d)", self.id, self.executor_kind,
-                 self.executor.capacity)
+        log.info("scheduler %s starting (executor %s, capacity %d tasks, %d CPUs a task)", self.id,
+                 self.executor_kind, self.executor.capacity, getattr(self.executor, "task_cpus", 1))
         if self.recordings is not None:
             self.recordings.start()
         done = threading.Event()
@@ -559,7 +559,7 @@ def run_scheduler(settings: Settings, stop: threading.Event, *, scheduler_id: st
         start_fork_server()   # the writer's, while Ray starts and the engine compiles
     # on a Ray cluster, one scheduler drives it; another waits as its standby until ``stop``
     executor = make_executor(settings.executor, num_workers=settings.num_workers, address=settings.ray_address,
-                             niceness=settings.niceness, standby=stop)
+                             niceness=settings.niceness, standby=stop, task_cpus=settings.task_cpus)
     config = SchedulerConfig(lease_s=settings.lease_seconds, heartbeat_s=settings.heartbeat_seconds,
                              max_jobs=settings.max_jobs, batch_size=settings.batch_size,
                              max_simulation_s=settings.max_simulation_seconds,

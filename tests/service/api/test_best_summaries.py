@@ -93,8 +93,8 @@ def test_explored_ranges_kept_store_by_store_equal_their_recount(store_url: str)
     with Session(db.engine) as session, session.begin():
         session.execute(text("DELETE FROM road_explored"))
         for part in np.array_split(np.arange(n), 7):
-            add_explored(session, 1, [(road, float(a2[i]), float(l2[i]), float(rws[i]), float(g[i]))
-                                      for road, g in enumerate([f, f[::-1]]) for i in part])
+            for road, g in enumerate([f, f[::-1]]):
+                add_explored(session, 1, np.full(len(part), road), a2[part], l2[part], rws[part], g[part])
     with Session(db.engine) as session:
         merged = session.execute(text("SELECT * FROM road_explored ORDER BY road_index, bucket")).all()
     assert len(recounted) > 300 and merged == recounted
