@@ -5,6 +5,7 @@ in a PostgreSQL crash), in one run, as a ratio.
 
     python bench/bench_commit.py                                  # a temporary SQLite file
     python bench/bench_commit.py --db postgresql+psycopg://...    # any store; repeat --db for several
+    python bench/bench_commit.py --grow 1000000 --rows 16000      # the rate as one store grows
 
 Each measurement stores ``--transactions`` transactions of ``--rows`` evaluations (the writer's
 transaction holds what arrived in one flush); printed: evaluations stored per second, the median of
@@ -97,6 +98,36 @@ def measure(url: str, rows: int, transactions: int, repeat: int,
             "durable_over_async": round(durable / fast, 3), "runs": repeat}
 
 
+def grow(url: str, rows: int, total: int, steps: int, drop: list[str], cache_kib: int | None) -> dict[str, object]:
+    """Durable evaluations stored a second as the store grows to ``total``, in transactions of ``rows``: the
+    rate over each of ``steps`` equal parts (rows made before each part's clock starts), after dropping the
+    ``drop`` indexes of ``evaluations`` (what each costs)."""
+    open_database(Settings(db_url=url)).dispose()  # the schema
+    db = Database(url, cache_kib=cache_kib)
+    try:
+        with db.engine.begin() as connection:
+            for name in drop:
+                connection.exec_driver_sql(f"DROP INDEX {name}")
+        job, _ = submit_job(db, JobSpec.model_validate(SPEC), idempotency_key=None, max_evaluations=10**9,
+                            max_cpu_hours=1e6)
+        with db.write() as session:
+            register_scheduler(session, "bench", host="h", pid=0, executor="serial", capacity=1)
+            claim_jobs(session, "bench", lease_s=3600, limit=100)
+        per_step, rates, stored = max(1, total // steps // rows), [], 0
+        for _ in range(steps):
+            batches = [_rows(rows, stored + i * rows) for i in range(per_step)]
+            start = time.perf_counter()
+            for batch in batches:
+                with db.write() as session:
+                    store_results(session, "bench", job.id, batch, [])
+            seconds = time.perf_counter() - start
+            stored += per_step * rows
+            rates.append({"stored": stored, "evaluations_per_s": round(per_step * rows / seconds)})
+    finally:
+        db.dispose()
+    return {"store": url.split(":", 1)[0], "rows_per_transaction": rows, "dropped": drop, "rates": rates}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--db", action="append", help="SQLAlchemy URL (repeatable; default a temporary SQLite file)")
@@ -105,10 +136,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--cache-kib", type=int, default=WRITER_CACHE_KIB,
                         help="SQLite page cache of the storing connection [KiB] (the writer's; 0: SQLite's default)")
+    parser.add_argument("--grow", type=int, metavar="N",
+                        help="instead: durable rates as one store grows to N evaluations (--rows a transaction), "
+                             "over 10 parts")
+    parser.add_argument("--drop-index", action="append", default=[], metavar="NAME",
+                        help="with --grow: drop this index of evaluations first (repeatable)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         urls = args.db or [f"sqlite:///{Path(tmp) / 'commit.db'}"]
+        if args.grow:
+            grown = [grow(url, args.rows[0], args.grow, 10, args.drop_index, args.cache_kib or None) for url in urls]
+            print(json.dumps({"machine": describe(), "results": grown}, indent=None if args.json else 1))
+            return 0
         out = [measure(url, rows, max(1, args.evaluations // rows), args.repeat, args.cache_kib or None)
                for url in urls for rows in args.rows]
     if args.json:

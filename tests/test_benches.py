@@ -21,3 +21,16 @@ def test_time_to_answer_runs_through_the_real_scheduler_on_the_virtual_cluster(t
     assert done.returncode == 0, done.stderr[-3000:]
     median = json.loads(done.stdout)["by_cpus"]["4"]["median"]
     assert median["state"] == "succeeded" and median["roads_missed"] == [] and median["time_to_1mm_s"] > 0
+
+
+@pytest.mark.slow
+def test_commit_bench_grows_a_store_with_and_without_an_index(tmp_path: Path) -> None:
+    rates = {}
+    for drop in ([], ["--drop-index", "ix_evaluations_cache_hash"]):
+        done = subprocess.run([sys.executable, str(BENCH / "bench_commit.py"), "--grow", "2000", "--rows", "100",
+                               "--json", *drop], cwd=tmp_path, capture_output=True, text=True, timeout=300, check=False)
+        assert done.returncode == 0, done.stderr[-3000:]
+        [result] = json.loads(done.stdout)["results"]
+        assert result["dropped"] == drop[1:] and [r["stored"] for r in result["rates"]] == list(range(200, 2001, 200))
+        rates[bool(drop)] = result["rates"]
+    assert all(r["evaluations_per_s"] > 0 for rs in rates.values() for r in rs)

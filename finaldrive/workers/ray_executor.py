@@ -471,7 +471,8 @@ class RayExecutor(ExecutorMixin):
             return
         self._capacity_at = time.monotonic()
         if self._fixed_workers is None:
-            self._size()
+            with contextlib.suppress(ValueError):   # no node left has task_cpus: keep the last size meanwhile
+                self._size()
         if self._suspect_until > self._capacity_at:   # which nodes joined, for _place
             with contextlib.suppress(Exception):
                 self._nodes = {node["NodeID"] for node in ray.nodes()  # type: ignore[no-untyped-call]
