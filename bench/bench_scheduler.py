@@ -54,10 +54,9 @@ from finaldrive.service.jobs.submit import submit_job
 from finaldrive.service.machine import describe
 from finaldrive.service.schemas import JobSpec
 from finaldrive.service.services import open_database
-from finaldrive.workers import make_executor
+from finaldrive.workers import make_executor, task as worker_task
 from finaldrive.workers.base import Done, ExecutorMixin, Shared, task_width
 from finaldrive.workers.evaluate import by_road
-from finaldrive.workers.task import task_cpus
 
 #: The jobs of each plan, submitted together.
 PLANS: dict[str, list[dict[str, Any]]] = {
@@ -154,7 +153,7 @@ class SleepTask:
                  vehicle: Vehicle | None) -> list[tuple[int, BatchResult]]:
         out = [(road, self.results(x)) for road, x in by_road(rows)]
         if self.sleep:  # as long as its designs on the task's threads
-            time.sleep(wide_task_s(np.concatenate([result.wall_s for _, result in out]), task_cpus()))
+            time.sleep(wide_task_s(np.concatenate([result.wall_s for _, result in out]), worker_task.task_cpus()))
         return out
 
     def _wall_s(self, x: np.ndarray) -> np.ndarray:
