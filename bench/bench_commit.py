@@ -143,6 +143,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="with --grow: drop this index of evaluations first (repeatable)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
+    if args.drop_index and not args.grow:
+        parser.error("--drop-index goes with --grow")
+    if args.grow and (len(args.rows) != 1 or args.grow < 10 * args.rows[0]):
+        parser.error("--grow N takes one --rows R, and N >= 10 R (10 parts)")
     with tempfile.TemporaryDirectory() as tmp:
         urls = args.db or [f"sqlite:///{Path(tmp) / 'commit.db'}"]
         if args.grow:

@@ -44,17 +44,24 @@ TASK_SLOTS = 16
 MAX_TASK_CPUS = 16
 
 
-def task_width(node_cpus: Iterable[int], fixed: int | None = None) -> tuple[int, int]:
-    """(CPUs a task holds, tasks that run at once) on nodes of ``node_cpus`` CPUs: ``fixed`` if given;
-    else 1 CPU a task up to :data:`TASK_SLOTS` CPUs in all, and beyond, ``ceil(CPUs / TASK_SLOTS)``,
-    at most :data:`MAX_TASK_CPUS` and at most the smallest node's CPUs (a task runs on one node, and
-    every node then takes tasks). A node's CPUs beyond a multiple of the width stay idle. ValueError
-    if no node has ``fixed`` CPUs."""
-    nodes = [int(n) for n in node_cpus if n >= 1] or [1]
-    width = fixed or max(1, min(MAX_TASK_CPUS, min(nodes), math.ceil(sum(nodes) / TASK_SLOTS)))
-    slots = sum(n // width for n in nodes)
-    if not slots:
-        raise ValueError(f"task_cpus {width} is more than any node's CPUs (at most {max(nodes)})")
+def task_width(node_cpus: Iterable[int], fixed: int | None = None, *, cpus: int | None = None) -> tuple[int, int]:
+    """(CPUs a task holds, tasks that run at once) on nodes of ``node_cpus`` CPUs, using ``cpus`` of them in all
+    (default: every one). The width is ``fixed`` if given; else 1 CPU a task up to :data:`TASK_SLOTS` CPUs,
+    and beyond, ``ceil(cpus / TASK_SLOTS)``, at most :data:`MAX_TASK_CPUS` and at most the smallest of the
+    largest nodes that hold 90 % of the CPUs (a task runs on one node: a few small nodes do not narrow every
+    task, they stay idle). A node's CPUs beyond a multiple of the width stay idle too. ValueError if no node
+    has ``fixed`` CPUs."""
+    nodes = sorted((int(n) for n in node_cpus if n >= 1), reverse=True) or [1]
+    total = min(sum(nodes), cpus or sum(nodes))
+    held, cap = 0, nodes[0]
+    for cap in nodes:   # the smallest of the largest nodes that hold 90 % of the CPUs
+        held += cap
+        if held >= 0.9 * sum(nodes):
+            break
+    width = fixed or max(1, min(MAX_TASK_CPUS, cap, math.ceil(total / TASK_SLOTS)))
+    slots = min(sum(n // width for n in nodes), max(1, total // width))
+    if not sum(n // width for n in nodes):
+        raise ValueError(f"task_cpus {width} is more than any node's CPUs (at most {nodes[0]})")
     return width, slots
 
 

@@ -345,7 +345,13 @@ class RayExecutor(ExecutorMixin):
         self.task_cpus = 1
         self.num_workers = self.capacity = 0
         self._task: Any = None
-        self._size()
+        try:
+            self._size()
+        except BaseException:   # a width no node has: leave nothing of ours behind
+            if self._started:
+                self._undo_init()
+                self._started = False
+            raise
         self._capacity_at = time.monotonic()
         self._answered: dict[str, float] = {}   # node id -> when a task of it last returned a result
         self._suspect_until = 0.0                # placing every task on answering nodes until then (_place)
@@ -362,17 +368,18 @@ class RayExecutor(ExecutorMixin):
         self._closed = False
 
     def _size(self) -> None:
-        """Task width and tasks at once from the cluster's nodes (``num_workers`` CPUs of them, if set:
-        a local Ray is one node); ``capacity`` is 2 tasks a slot."""
-        if self.local or self._fixed_workers:
+        """Task width and tasks at once from the cluster's nodes (a local Ray is one node), using
+        ``num_workers`` CPUs of them if set; ``capacity`` is 2 tasks a slot."""
+        if self.local:
             nodes = [self._fixed_workers or self._cluster_cpus()]
         else:
             nodes = [int(node["Resources"].get("CPU", 0)) for node in ray.nodes()  # type: ignore[no-untyped-call]
                      if node["Alive"]] or [self._cluster_cpus()]
-        width, slots = task_width(nodes, self._fixed_width)
-        if width != self.task_cpus or self._task is None:
-            self._task = _RUN.options(max_retries=self.max_retries, retry_exceptions=False, num_cpus=width)
-        self.task_cpus, self.num_workers, self.capacity = width, slots, IN_FLIGHT_PER_WORKER * slots
+        width, slots = task_width(nodes, self._fixed_width, cpus=self._fixed_workers)
+        task = self._task if width == self.task_cpus and self._task is not None else \
+            _RUN.options(max_retries=self.max_retries, retry_exceptions=False, num_cpus=width)
+        self._task, self.task_cpus = task, width
+        self.num_workers, self.capacity = slots, IN_FLIGHT_PER_WORKER * slots
 
     @staticmethod
     def _cluster_cpus() -> int:
@@ -470,9 +477,8 @@ class RayExecutor(ExecutorMixin):
         if self._closed or time.monotonic() - self._capacity_at < CAPACITY_REFRESH_S:
             return
         self._capacity_at = time.monotonic()
-        if self._fixed_workers is None:
-            with contextlib.suppress(ValueError):   # no node left has task_cpus: keep the last size meanwhile
-                self._size()
+        with self._lock, contextlib.suppress(ValueError):   # no node left has task_cpus: keep the last size
+            self._size()                                     # (under the lock: a submit sees one width)
         if self._suspect_until > self._capacity_at:   # which nodes joined, for _place
             with contextlib.suppress(Exception):
                 self._nodes = {node["NodeID"] for node in ray.nodes()  # type: ignore[no-untyped-call]

@@ -25,11 +25,20 @@ from finaldrive.workers.task import hold_cpus, task_cpus
     ([8] * 32, None, (8, 32)),            # no wider than a node
     ([64] * 16, None, (MAX_TASK_CPUS, 64)),  # 1,024 CPUs: the widest task, 64 at once
     ([0, 32, 32], None, (4, 16)),         # a head without CPUs takes no task
+    ([64] * 4 + [2], None, (16, 16)),     # a small node does not narrow every task: it stays idle
+    ([64] + [8] * 32, None, (8, 40)),     # ... unless the small nodes hold most of the CPUs
     ([2], 2, (2, 1)),
     ([4, 2], 3, (3, 1)),                  # only the node that has 3 takes tasks
 ])
 def test_task_width(nodes: list[int], fixed: int | None, expected: tuple[int, int]) -> None:
     assert task_width(nodes, fixed) == expected
+
+
+def test_task_width_of_some_of_a_cluster_s_cpus() -> None:
+    """``num_workers`` on a cluster: the CPUs to use in all, the width still one that its nodes hold."""
+    assert task_width([4] * 32, cpus=128) == (4, 32)
+    assert task_width([64] * 4, cpus=16) == (1, 16)
+    assert task_width([64] * 4, cpus=100) == (7, 14)
 
 
 def test_a_width_no_node_has_is_refused() -> None:

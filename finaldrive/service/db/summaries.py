@@ -83,7 +83,7 @@ def add_explored(session: Session, job_id: int, road: np.ndarray, a2_deg: np.nda
         return
     x = a2_deg - 360.0 * np.floor(a2_deg / 360.0) + 0.0   # as _X (+0.0: SQL gives +0.0 where floor keeps -0.0)
     bucket = np.where(l2_m > CONCENTRIC_L2_M, np.floor(x / _WIDTH_DEG), -1.0).astype(np.int64)
-    key = np.asarray(road, dtype=np.int64) * (BUCKETS + 1) + bucket + 1
+    key = np.asarray(road, dtype=np.int64) * (BUCKETS + 2) + bucket + 1   # bucket -1 to BUCKETS (a2 just below 0)
     order = np.argsort(key, kind="stable")
     key = key[order]
     starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
@@ -97,7 +97,7 @@ def add_explored(session: Session, job_id: int, road: np.ndarray, a2_deg: np.nda
     low, high = ("LEAST", "GREATEST") if connection.dialect.name == "postgresql" else ("MIN", "MAX")
     merged = ", ".join(f"{name} = {low if i % 2 == 0 else high}(road_explored.{name}, excluded.{name})"
                        for i, name in enumerate(_RANGES))
-    roads, buckets = np.divmod(key[starts], BUCKETS + 1)
+    roads, buckets = np.divmod(key[starts], BUCKETS + 2)
     connection.exec_driver_sql(
         f"INSERT INTO road_explored (job_id, road_index, bucket, n, {', '.join(_RANGES)}) "
         f"VALUES ({', '.join([m] * (4 + len(_RANGES)))}) ON CONFLICT (job_id, road_index, bucket) DO UPDATE SET "
