@@ -42,21 +42,24 @@ TASK_SLOTS = 16
 #: The most CPUs one task holds: its designs run on as many threads of one process, and the engine's
 #: Python around its compiled loops (<= 0.1 ms a design, holding the GIL) would bound wider ones.
 MAX_TASK_CPUS = 16
+#: A task is no wider than the smallest of the largest nodes that hold this share of the CPUs: smaller nodes
+#: beyond it stay idle rather than narrow every task.
+MAIN_NODES_SHARE = 0.9
 
 
 def task_width(node_cpus: Iterable[int], fixed: int | None = None, *, cpus: int | None = None) -> tuple[int, int]:
     """(CPUs a task holds, tasks that run at once) on nodes of ``node_cpus`` CPUs, using ``cpus`` of them in all
     (default: every one). The width is ``fixed`` if given; else 1 CPU a task up to :data:`TASK_SLOTS` CPUs,
     and beyond, ``ceil(cpus / TASK_SLOTS)``, at most :data:`MAX_TASK_CPUS` and at most the smallest of the
-    largest nodes that hold 90 % of the CPUs (a task runs on one node: a few small nodes do not narrow every
-    task, they stay idle). A node's CPUs beyond a multiple of the width stay idle too. ValueError if no node
-    has ``fixed`` CPUs."""
+    largest nodes that hold :data:`MAIN_NODES_SHARE` of the CPUs (a task runs on one node: a few small
+    nodes do not narrow every task, they stay idle). A node's CPUs beyond a multiple of the width stay idle
+    too. ValueError if no node has ``fixed`` CPUs."""
     nodes = sorted((int(n) for n in node_cpus if n >= 1), reverse=True) or [1]
     total = min(sum(nodes), cpus or sum(nodes))
     held, cap = 0, nodes[0]
-    for cap in nodes:   # the smallest of the largest nodes that hold 90 % of the CPUs
+    for cap in nodes:   # the smallest of the largest nodes that hold MAIN_NODES_SHARE of the CPUs
         held += cap
-        if held >= 0.9 * sum(nodes):
+        if held >= MAIN_NODES_SHARE * sum(nodes):
             break
     width = fixed or max(1, min(MAX_TASK_CPUS, cap, math.ceil(total / TASK_SLOTS)))
     slots = min(sum(n // width for n in nodes), max(1, total // width))

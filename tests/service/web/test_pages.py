@@ -129,6 +129,20 @@ def test_offline_index_drops_the_font_links() -> None:
     assert viewer.offline_index(page) == "<head>\n<title>x</title></head>"
 
 
+@pytest.mark.slow
+def test_rerun_s_viewer_is_served_from_the_installed_sdk(client: TestClient) -> None:
+    index = client.get("/viewer/")
+    assert index.status_code == 200 and "re_viewer.js" in index.text and "fonts.googleapis" not in index.text
+    assert "connect-src 'self'" in index.headers["content-security-policy"]
+    sources = script_src(index.headers["content-security-policy"])
+    assert "'unsafe-inline'" not in sources and len([s for s in sources if s.startswith("'sha256-")]) >= 2
+    wasm = client.get("/viewer/re_viewer_bg.wasm")
+    assert wasm.status_code == 200 and wasm.headers["content-type"] == "application/wasm"
+    assert wasm.content[:4] == b"\0asm"
+    assert client.get("/viewer/secrets.txt").status_code == 404
+    assert (viewer.cache_folder() / "index.html").exists()
+
+
 def test_offline_index_leaves_the_viewer_s_handle_on_its_window() -> None:
     """The design page hands the starting viewer its recording through it (static/design.js)."""
     page = "<script>function on_wasm_loaded() {\n  let handle = new wasm_bindgen.WebHandle(options);\n}</script>"
