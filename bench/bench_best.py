@@ -26,6 +26,7 @@ from fastapi.testclient import TestClient
 
 from finaldrive.service.config import Settings
 from finaldrive.service.db.engine import Database
+from finaldrive.service.db.levels import add_entries
 from finaldrive.service.db.migrate import upgrade
 from finaldrive.service.db.summaries import recount_explored
 from finaldrive.service.main import create_app
@@ -60,8 +61,9 @@ def build_job(path: Path, evaluations: int, roads: int) -> int:
                    "job_roads.job_id AND e.road_index = job_roads.road_index ORDER BY fitness_m DESC LIMIT 1) "
                    "WHERE job_id = ?", (job,))
     store = Database(f"sqlite:///{path}")
-    with store.write() as session:
-        recount_explored(session, int(job))  # as the writer keeps them
+    with store.write() as session:  # as the writer keeps them
+        recount_explored(session, int(job))
+        add_entries(session, int(job))
     store.dispose()
     return int(job)
 

@@ -163,6 +163,7 @@ def make_store(db: Path, n: int) -> int:
     from sqlalchemy import insert
 
     from finaldrive.service.config import Settings
+    from finaldrive.service.db.levels import add_entries
     from finaldrive.service.db.models import Evaluation
     from finaldrive.service.db.repository import create_job, utcnow
     from finaldrive.service.services import open_database
@@ -191,6 +192,7 @@ def make_store(db: Path, n: int) -> int:
                  "created_at": now} for i in range(n)]
         with db_.write() as session:
             session.execute(insert(Evaluation), rows)
+            add_entries(session, job_id)  # as the writer does
     finally:
         db_.dispose()
     return job_id

@@ -26,7 +26,7 @@ def test_time_to_answer_runs_through_the_real_scheduler_on_the_virtual_cluster(t
 @pytest.mark.slow
 def test_commit_bench_grows_a_store_with_and_without_an_index(tmp_path: Path) -> None:
     rates = {}
-    for drop in ([], ["--drop-index", "ix_evaluations_cache_hash"]):
+    for drop in ([], ["--drop-index", "ix_evaluations_job_road_id"]):
         done = subprocess.run([sys.executable, str(BENCH / "bench_commit.py"), "--grow", "2000", "--rows", "100",
                                "--json", *drop], cwd=tmp_path, capture_output=True, text=True, timeout=300, check=False)
         assert done.returncode == 0, done.stderr[-3000:]

@@ -3,7 +3,8 @@
 v0.2.0.b derives the indexed cache hash from each stored key; v0.2.0.c renames the design columns
 with their units (a2 converted from radians to degrees) and rewrites stored grid specs and
 recording requests in the new names; v0.2.0.e moves each DE generation's record out of its stored
-state. Downgrading restores the earlier rows.
+state; v0.3.0.e indexes stored evaluations in the two-level index tables. Downgrading restores
+the earlier rows.
 """
 
 from __future__ import annotations
@@ -159,3 +160,34 @@ def test_generation_records_come_out_of_the_stored_states(url: str) -> None:
     for job_id, states in runs.items():
         assert [row["state"] for row in downgraded[job_id]] == states
     assert "n_failed" not in downgraded[1][0]
+
+
+def test_stored_evaluations_are_indexed_at_level_one(url: str) -> None:
+    """v0.3.0.e: each stored evaluation gets its result-cache entry and each successful one its fitness
+    entry, at level 1; a lookup through the new tables finds them; downgrading brings the indexes back."""
+    config = alembic_config(url)
+    command.upgrade(config, "v0.3.0.d")
+    engine = sa.create_engine(url)
+    stored = [(0, 0, "ok", 19.5), (0, 1, "failed", None), (1, 0, "ok", 18.25), (1, 1, "ok", 19.5)]
+    with engine.begin() as conn:
+        _insert(conn, "jobs", id=1, kind="sweep", state="succeeded", spec={})
+        for road, candidate, status, fitness in stored:
+            _insert(conn, "evaluations", job_id=1, road_index=road, step=0, candidate=candidate, status=status,
+                    fitness_m=fitness, cache_key=f"{road}{candidate}" * 32, cache_hash=10 * road + candidate)
+    engine.dispose()
+    command.upgrade(config, "head")
+    engine = sa.create_engine(url)
+    with engine.connect() as conn:
+        cache = sorted(tuple(r.values()) for r in _rows(conn, "cache_index"))
+        fitness = sorted(tuple(r.values()) for r in _rows(conn, "fitness_index"))
+        indexes = {i["name"] for i in sa.inspect(conn).get_indexes("evaluations")}
+    assert cache == [(1, 10 * r + c, 1, r, 0, c) for r, c, _, _ in stored]
+    assert fitness == sorted((1, 1, r, f, 0, c) for r, c, s, f in stored if s == "ok")
+    assert not indexes & {"ix_evaluations_cache_hash", "ix_evaluations_job_road_fitness"}
+    command.downgrade(config, "v0.3.0.d")
+    with engine.connect() as conn:
+        tables = set(sa.inspect(conn).get_table_names())
+        indexes = {i["name"] for i in sa.inspect(conn).get_indexes("evaluations")}
+    engine.dispose()
+    assert not tables & {"cache_index", "fitness_index"}
+    assert {"ix_evaluations_cache_hash", "ix_evaluations_job_road_fitness"} <= indexes

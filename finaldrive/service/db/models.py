@@ -20,6 +20,8 @@ from sqlalchemy import (
     Index,
     Integer,
     LargeBinary,
+    PrimaryKeyConstraint,
+    SmallInteger,
     String,
     Text,
     UniqueConstraint,
@@ -149,7 +151,7 @@ class Evaluation(Base):
     wall_s: Mapped[float] = mapped_column(Float)
     cached: Mapped[bool] = mapped_column(Boolean, default=False)
     cache_key: Mapped[str] = mapped_column(String(64))
-    #: the key's first 60 bits, indexed (small and fast to insert); lookups compare the whole key
+    #: the key's first 60 bits, indexed in ``cache_index``; lookups compare the whole key
     cache_hash: Mapped[int] = mapped_column(BigInteger)
     #: the failure may not recur (a time limit, a lost worker): never reused from the result cache
     transient: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
@@ -159,13 +161,46 @@ class Evaluation(Base):
         UniqueConstraint("job_id", "road_index", "step", "candidate", name="uq_evaluations_slot"),
         Index("ix_evaluations_job_id", "job_id", "id"),
         Index("ix_evaluations_job_road_id", "job_id", "road_index", "id"),
-        Index("ix_evaluations_job_road_fitness", "job_id", "road_index", "status", "fitness_m"),  # /best
-        Index("ix_evaluations_cache_hash", "cache_hash"),
     )
 
 
 for _name in DIAGNOSTICS:  # the run's extremes and energy ledger, one column each (unit in the name)
     setattr(Evaluation, _name, mapped_column(_name, Float, nullable=True))
+
+
+class _IndexEntry:
+    """An entry of an index table of two levels (finaldrive.service.db.levels): its level, its key
+    (each table's own columns) and its evaluation's slot."""
+
+    level: Mapped[int] = mapped_column(SmallInteger)
+    job_id: Mapped[int] = mapped_column(Integer)
+    road_index: Mapped[int] = mapped_column(Integer)
+    step: Mapped[int] = mapped_column(Integer)
+    candidate: Mapped[int] = mapped_column(Integer)
+
+
+def _entries_of(*key: str) -> tuple[Any, ...]:
+    """An index table's arguments: its primary key (the level, ``key``, the rest of the slot); no rowid."""
+    slot = [c for c in ("job_id", "road_index", "step", "candidate") if c not in key]
+    return PrimaryKeyConstraint("level", *key, *slot), {"sqlite_with_rowid": False}
+
+
+class CacheIndex(_IndexEntry, Base):
+    """The result cache's index: each evaluation by its ``cache_hash``."""
+
+    __tablename__ = "cache_index"
+    __table_args__ = _entries_of("cache_hash")
+
+    cache_hash: Mapped[int] = mapped_column(BigInteger)
+
+
+class FitnessIndex(_IndexEntry, Base):
+    """Each road's successful evaluations by fitness (/best: the best, the near-optimal set, the best designs)."""
+
+    __tablename__ = "fitness_index"
+    __table_args__ = _entries_of("job_id", "road_index", "fitness_m")
+
+    fitness_m: Mapped[float] = mapped_column(Float)
 
 
 class Generation(Base):

@@ -19,6 +19,7 @@ from sqlalchemy.orm import Session
 
 from finaldrive.engine import VALUES
 from finaldrive.service.db.leases import db_now, finish_job, owns, release_jobs
+from finaldrive.service.db.levels import add_entries, merge_if_full
 from finaldrive.service.db.models import EvalStatus, Evaluation, Generation, Job, JobState
 from finaldrive.service.db.summaries import add_explored, recount_explored
 
@@ -83,17 +84,19 @@ def cached_evaluations(session: Session, keys: Iterable[str]) -> dict[str, dict[
     """The values (:data:`CACHED_COLUMNS`) of the first stored evaluation for each cache key that
     has one (transient failures excluded).
 
-    Looked up by the keys' indexed hashes, then matched on the whole key, with plain SQL through the
-    driver (the scheduler asks for every generation it hands out; building a SQLAlchemy statement
-    each time cost it ~2 ms of the GIL)."""
+    Looked up by the keys' hashes in both levels of ``cache_index`` (finaldrive.service.db.levels), then
+    matched on the whole key, with plain SQL through the driver (the scheduler asks for every
+    generation it hands out; building a SQLAlchemy statement each time cost it ~2 ms of the GIL)."""
     wanted = set(keys)
     hashes = sorted({key_hash(key) for key in wanted})
     marker = "?" if session.get_bind().dialect.paramstyle == "qmark" else "%s"
     out: dict[str, dict[str, Any]] = {}
     for start in range(0, len(hashes), _IN_CHUNK):
         chunk = hashes[start:start + _IN_CHUNK]
-        sql = (f"SELECT cache_key, {', '.join(CACHED_COLUMNS)} FROM evaluations "
-               f"WHERE cache_hash IN ({', '.join([marker] * len(chunk))}) AND transient = FALSE ORDER BY id")
+        sql = (f"SELECT e.cache_key, {', '.join('e.' + c for c in CACHED_COLUMNS)} FROM cache_index c "
+               "JOIN evaluations e ON e.job_id = c.job_id AND e.road_index = c.road_index AND e.step = c.step "
+               f"AND e.candidate = c.candidate WHERE c.level IN (0, 1) AND c.cache_hash IN "
+               f"({', '.join([marker] * len(chunk))}) AND e.transient = FALSE ORDER BY e.id")
         for key, *values in session.connection().exec_driver_sql(sql, tuple(chunk)):
             if key in wanted and key not in out:
                 out[key] = dict(zip(CACHED_COLUMNS, values, strict=True))
@@ -130,8 +133,9 @@ def generation_records(session: Session, job_id: int, run: int | None = None) ->
 
 def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequence[Row],
                   generations: Sequence[dict[str, Any]]) -> int:
-    """Insert evaluations (then told DE generations), bump the job's counters, each road's best and
-    its explored ranges (summaries.add_explored); returns how many evaluations were new.
+    """Insert evaluations (then told DE generations), their entries in the cache's and fitness's index
+    tables (levels.add_entries), bump the job's counters, each road's best and its explored ranges
+    (summaries.add_explored); returns how many evaluations were new.
 
     Fenced: the counters' update matches only while the scheduler owns the running job, so nothing
     is written otherwise (:class:`LeaseLost`). Rows go to the driver's ``executemany`` as they are
@@ -145,8 +149,11 @@ def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequen
     if fenced.rowcount != 1:  # type: ignore[attr-defined]
         raise LeaseLost(job_id)
     now = _bound_now(session, Evaluation)
+    before = session.scalar(select(func.max(Evaluation.id)).where(Evaluation.job_id == job_id)) or 0
     inserted = _insert_many(session, "evaluations", ("job_id", "created_at", *ROW_COLUMNS),
                             [(job_id, now, *row) for row in rows], ("job_id", "road_index", "step", "candidate"))
+    add_entries(session, job_id, before)
+    merge_if_full(session)
     if inserted != len(rows):  # some slots were stored already: count the job's rows and ranges afresh
         _recount(session, job_id)
         recount_explored(session, job_id)

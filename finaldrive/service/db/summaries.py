@@ -9,8 +9,9 @@ a2's shortest arc (engine :func:`~finaldrive.engine.angle_arc`) whenever its lar
 successive angles is at least a bucket wide, else (angles closer than 1 deg all around the
 circle) it is found within 1 deg.
 
-On a road, the best fitness is a seek of the index on (job, road, status, fitness) and the
-near-optimal set (``fitness_m >= best - tolerance``) a range of it; the explored ranges are read
+On a road, the best fitness is a seek in each level of ``fitness_index`` (the road's successful
+evaluations by fitness: finaldrive.service.db.levels) and the near-optimal set
+(``fitness_m >= best - tolerance``) a range of each; the explored ranges are read
 from ``road_explored``, the same groups over all the road's successful evaluations, which the writer
 keeps with each store (:func:`add_explored`; an index on a2 for them cost the store a quarter of
 its ingest).
@@ -52,12 +53,13 @@ def road_sharpness(session: Session, job_id: int, road_index: int, tolerance_pct
     m = _marker(connection)
     road = f"FROM evaluations WHERE job_id = {m} AND road_index = {m} AND status = 'ok' AND fitness_m IS NOT NULL"
     key = (job_id, road_index)
-    best = connection.exec_driver_sql(f"SELECT MAX(fitness_m) {road}", key).scalar()
+    best = connection.exec_driver_sql(f"SELECT MAX(b) FROM ({best_of_levels(m)}) AS t", key * 2).scalar()
     if best is None:
         return near_summary(tolerance_pct, math.nan, math.nan, {}, {}, 0, 0, 0)
     tol = abs(best) * tolerance_pct / 100.0
-    near = connection.exec_driver_sql(f"SELECT 1, {_GROUPS} AS b, {_COLUMNS} {road} AND fitness_m >= {m} GROUP BY b",
-                                      (*key, best - tol)).all()
+    near = connection.exec_driver_sql(
+        f"SELECT 1, {_GROUPS} AS b, {_COLUMNS} FROM (SELECT e.a2_deg, e.l2_m, e.rws_m, e.fitness_m, e.distance_m "
+        f"{by_fitness(m)} AND f.fitness_m >= {m}) AS s GROUP BY b", (*key, best - tol)).all()
     cells = connection.exec_driver_sql(
         f"SELECT bucket, n, {', '.join(_RANGES)} FROM road_explored WHERE job_id = {m} AND road_index = {m} "
         "ORDER BY bucket", key).all()
@@ -71,6 +73,21 @@ def road_sharpness(session: Session, job_id: int, road_index: int, tolerance_pct
     return near_summary(tolerance_pct, best, tol, _ranges(sorted(near, key=lambda r: r[1]), distance=True),
                         {k: [float(v) for v in r] for k, r in explored.items()}, sum(r[2] for r in near),
                         sum(c[1] for c in cells), sum(r[2] for r in near if r[1] < 0))
+
+
+def best_of_levels(marker: str) -> str:
+    """The best fitness of a road (job and road bound twice) in each level of ``fitness_index``, as
+    rows ``b``: a seek each (one over both levels would scan them)."""
+    return " UNION ALL ".join(f"SELECT MAX(fitness_m) AS b FROM fitness_index WHERE level = {level} AND "
+                              f"job_id = {marker} AND road_index = {marker}" for level in (0, 1))
+
+
+def by_fitness(marker: str, levels: str = "0, 1") -> str:
+    """``FROM`` a road's successful evaluations (``e``, job and road bound) joined to their entries in
+    ``fitness_index`` (``f``, finaldrive.service.db.levels) at ``levels``, to be narrowed by ``f.fitness_m``."""
+    return ("FROM fitness_index f JOIN evaluations e ON e.job_id = f.job_id AND e.road_index = f.road_index "
+            f"AND e.step = f.step AND e.candidate = f.candidate WHERE f.level IN ({levels}) AND f.job_id = {marker} "
+            f"AND f.road_index = {marker}")
 
 
 #: road_explored's ranges, (low, high) pairs in the order of _COLUMNS' after the count

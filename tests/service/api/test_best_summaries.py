@@ -12,6 +12,7 @@ from sqlalchemy.orm import Session
 from bench.bench_best import app_client, build_job, concurrent, peak_growth, timed_get
 from finaldrive.engine import aggregate, near_optimal
 from finaldrive.service.db.engine import Database
+from finaldrive.service.db.levels import add_entries
 from finaldrive.service.db.migrate import upgrade
 from finaldrive.service.db.summaries import add_explored, aggregate_sharpness, recount_explored, road_sharpness
 
@@ -34,6 +35,7 @@ def _store(url: str, a2: np.ndarray, l2: np.ndarray, rws: np.ndarray, fitness: l
                       for road, f in enumerate(fitness) for i in range(len(a2))])
     with Session(db.engine) as session, session.begin():
         recount_explored(session, 1)  # the writer keeps them with each store (test below)
+        add_entries(session, 1)
     return db
 
 

@@ -1,0 +1,86 @@
+"""The result cache's and /best's index tables of two levels (finaldrive.service.db.levels), on SQLite and
+PostgreSQL: through the writer's stores and level 0's moves to level 1, every evaluation has exactly one
+entry, and the lookups read both levels."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from sqlalchemy import select, text
+
+from finaldrive.engine import BatchResult, Request, best_distinct, near_optimal
+from finaldrive.service.api.bands import top_designs
+from finaldrive.service.config import Settings
+from finaldrive.service.db import levels
+from finaldrive.service.db.models import Evaluation, Job
+from finaldrive.service.db.results import cached_evaluations, key_hash, store_results
+from finaldrive.service.db.summaries import road_sharpness
+from finaldrive.service.jobs.rows import rows_from_results
+from finaldrive.service.services import open_database
+from tests.service.api.test_best_summaries import _same
+from tests.service.jobs.test_store_results import _claimed_sweep
+
+
+def _batch(rng: np.random.Generator, road: int, first: int, n: int) -> tuple[list[tuple[object, ...]], list[str]]:
+    """``n`` evaluations of candidates ``first`` on: random designs, a few failed, a few transient,
+    fitness on a coarse grid (ties)."""
+    designs = np.column_stack([rng.uniform(-3, 3, n), rng.choice([0.0, 0.05, 0.1], n), rng.uniform(0.08, 0.1, n)])
+    fitness = np.round(20 - designs[:, 0] ** 2, 1)
+    failed = rng.random(n) < 0.2
+    fitness[failed] = math.nan
+    status = tuple("failed" if f else "ok" for f in failed)
+    batch = BatchResult.of(designs, status, tuple("x" if f else "" for f in failed), distance_m=fitness + 0.5,
+                           squat_ratio=0.9, slack_m=0.001, fitness_m=fitness,
+                           chain_length_m=1.2, wall_s=0.01)
+    keys = [f"{rng.integers(2**63):016x}" * 4 for _ in range(n)]
+    part = Request(0, 0, road, np.arange(first, first + n), designs)
+    return rows_from_results([(part, batch, batch.fitness_m, keys, bool(rng.random() < 0.3))]), keys
+
+
+def _entries(session: object, table: str) -> tuple[list[tuple[object, ...]], set[int]]:
+    """Each entry without its level, and the levels that hold some."""
+    rows = session.execute(text(f"SELECT * FROM {table}")).mappings().all()  # type: ignore[attr-defined]
+    return sorted(tuple(v for k, v in r.items() if k != "level") for r in rows), {r["level"] for r in rows}
+
+
+def test_every_evaluation_is_looked_up_through_both_levels(store_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(levels, "LEVEL0_ROWS", 9)
+    rng = np.random.default_rng(5)
+    db = open_database(Settings(db_url=store_url))
+    try:
+        job = _claimed_sweep(db)
+        keys: list[str] = []
+        for i in range(12):
+            rows, batch_keys = _batch(rng, i % 2, 10 * i, 1 + i % 5)
+            keys += batch_keys
+            with db.write() as session:
+                store_results(session, "s1", job.id, rows, [])
+            if i == 5:
+                with db.write() as session:  # slots stored already add no entry
+                    assert store_results(session, "s1", job.id, rows, []) == 0
+        with db.read() as session:
+            stored = session.execute(select(Evaluation).where(Evaluation.job_id == job.id)).scalars().all()
+            cache, cache_levels = _entries(session, "cache_index")
+            fitness, fitness_levels = _entries(session, "fitness_index")
+            hits = cached_evaluations(session, keys)
+            sharp = {(r, pct): road_sharpness(session, job.id, r, pct) for r in (0, 1) for pct in (0.5, 5.0, 50.0)}
+            top = dict(top_designs(session, session.get(Job, job.id)))  # type: ignore[arg-type]
+    finally:
+        db.dispose()
+    slot = {e.id: (e.job_id, e.road_index, e.step, e.candidate) for e in stored}
+    assert cache_levels == {0, 1} and 1 in fitness_levels  # level 0 was moved to level 1 (and filled again)
+    assert cache == sorted((key_hash(e.cache_key), *slot[e.id]) for e in stored)
+    ok = [e for e in stored if e.status == "ok" and e.fitness_m is not None]
+    assert fitness == sorted((e.job_id, e.road_index, e.fitness_m, e.step, e.candidate) for e in ok)
+    assert set(hits) == {e.cache_key for e in stored if not e.transient}
+    for road in (0, 1):
+        mine = sorted((e for e in ok if e.road_index == road), key=lambda e: (-e.fitness_m, e.id))
+        designs = np.array([[math.radians(e.a2_deg), e.l2_m, e.rws_m] for e in mine])
+        f, d = np.array([e.fitness_m for e in mine]), np.array([e.distance_m for e in mine])
+        for pct in (0.5, 5.0, 50.0):
+            _same(sharp[road, pct], near_optimal(designs, f, d, pct))
+        (got,) = [designs_ for job_road, designs_ in top.items() if job_road.road_index == road]
+        assert [g[:4] for g in got] == [(mine[i].a2_deg, mine[i].l2_m, mine[i].rws_m, mine[i].fitness_m)
+                                        for i in best_distinct(designs, f)]
