@@ -3,7 +3,7 @@
 v0.2.0.b derives the indexed cache hash from each stored key; v0.2.0.c renames the design columns
 with their units (a2 converted from radians to degrees) and rewrites stored grid specs and
 recording requests in the new names; v0.2.0.e moves each DE generation's record out of its stored
-state; v0.3.0.e indexes stored evaluations in the two-level index tables. Downgrading restores
+state; v0.3.0.e indexes stored evaluations in the index tables of levels. Downgrading restores
 the earlier rows.
 """
 
@@ -162,9 +162,9 @@ def test_generation_records_come_out_of_the_stored_states(url: str) -> None:
     assert "n_failed" not in downgraded[1][0]
 
 
-def test_stored_evaluations_are_indexed_at_level_one(url: str) -> None:
+def test_stored_evaluations_are_indexed_at_the_last_level(url: str) -> None:
     """v0.3.0.e: each stored evaluation gets its result-cache entry and each successful one its fitness
-    entry, at level 1; a lookup through the new tables finds them; downgrading brings the indexes back."""
+    entry, at the last level (3); downgrading brings the indexes back."""
     config = alembic_config(url)
     command.upgrade(config, "v0.3.0.d")
     engine = sa.create_engine(url)
@@ -181,8 +181,8 @@ def test_stored_evaluations_are_indexed_at_level_one(url: str) -> None:
         cache = sorted(tuple(r.values()) for r in _rows(conn, "cache_index"))
         fitness = sorted(tuple(r.values()) for r in _rows(conn, "fitness_index"))
         indexes = {i["name"] for i in sa.inspect(conn).get_indexes("evaluations")}
-    assert cache == [(1, 10 * r + c, 1, r, 0, c) for r, c, _, _ in stored]
-    assert fitness == sorted((1, 1, r, f, 0, c) for r, c, s, f in stored if s == "ok")
+    assert cache == [(3, 10 * r + c, 1, r, 0, c) for r, c, _, _ in stored]
+    assert fitness == sorted((3, 1, r, f, 0, c) for r, c, s, f in stored if s == "ok")
     assert not indexes & {"ix_evaluations_cache_hash", "ix_evaluations_job_road_fitness"}
     command.downgrade(config, "v0.3.0.d")
     with engine.connect() as conn:

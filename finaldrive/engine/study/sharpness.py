@@ -132,7 +132,7 @@ def _verdict(name: str, near: list[float], explored: list[float], tol: float, si
     lo, hi = (round(scale * v, digits) for v in near)
     if _span(explored) <= 0:
         return "fixed", f"{label} was not varied ({lo:g} {unit})"
-    share = _span(near) / _span(explored)
+    share = max(0.0, _span(near) / _span(explored))   # a one-design arc can come out -1e-17 wide: never "-0 %"
     if name == "a2_deg" and hi >= 360:
         where = f"{label} from {lo:g} through 0 to {hi - 360:g} {unit}"
     else:

@@ -1,10 +1,10 @@
-"""the result cache's and /best's lookups as index tables of two levels
+"""the result cache's and /best's lookups as index tables of levels
 
 ``cache_index`` (level, cache_hash, slot) and ``fitness_index`` (level, job_id, road_index,
 fitness_m, step, candidate) replace the indexes ``ix_evaluations_cache_hash`` and
 ``ix_evaluations_job_road_fitness``, whose keys arrive in random order and made each stored
 batch dirty pages all over them (finaldrive.service.db.levels). Stored evaluations are indexed at
-level 1.
+level 3, the last.
 
 Revision ID: v0.3.0.e
 Revises: v0.3.0.d
@@ -45,10 +45,10 @@ def upgrade() -> None:
         sa.PrimaryKeyConstraint('level', 'job_id', 'road_index', 'fitness_m', 'step', 'candidate'),
         sqlite_with_rowid=False)
     op.execute("INSERT INTO cache_index (level, cache_hash, job_id, road_index, step, candidate) "
-               "SELECT 1, cache_hash, job_id, road_index, step, candidate FROM evaluations "
+               "SELECT 3, cache_hash, job_id, road_index, step, candidate FROM evaluations "
                "ORDER BY cache_hash, job_id, road_index, step, candidate")
     op.execute("INSERT INTO fitness_index (level, job_id, road_index, fitness_m, step, candidate) "
-               "SELECT 1, job_id, road_index, fitness_m, step, candidate FROM evaluations "
+               "SELECT 3, job_id, road_index, fitness_m, step, candidate FROM evaluations "
                "WHERE status = 'ok' AND fitness_m IS NOT NULL ORDER BY job_id, road_index, fitness_m, step, candidate")
     with op.batch_alter_table('evaluations', schema=None) as batch_op:
         batch_op.drop_index('ix_evaluations_cache_hash')

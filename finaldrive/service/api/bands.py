@@ -29,6 +29,7 @@ from finaldrive.engine import (
 )
 from finaldrive.service.api.problems import ApiProblem
 from finaldrive.service.api.sharpness import own_designs_job
+from finaldrive.service.db.levels import LEVELS
 from finaldrive.service.db.models import TERMINAL_STATES, EvalStatus, Evaluation, Job, JobRoad
 from finaldrive.service.db.repository import job_by_idempotency_key
 from finaldrive.service.db.summaries import by_fitness
@@ -54,14 +55,14 @@ def top_designs(session: Session, job: Job) -> list[tuple[JobRoad, Top]]:
     (engine.best_distinct: 1 deg of a2 or 1 mm of L2 or R_WS), among its :data:`_SCAN` best evaluations."""
     connection = session.connection()
     m = "?" if connection.dialect.paramstyle == "qmark" else "%s"
-    levels = " UNION ALL ".join(  # each level's best, then the best of both: a range of each, not a sort of all
+    levels = " UNION ALL ".join(  # each level's best, then the best of all: a range of each, not a sort of all
         f"SELECT * FROM (SELECT e.a2_deg, e.l2_m, e.rws_m, e.fitness_m, e.distance_m, e.id {by_fitness(m, str(level))} "
-        f"ORDER BY f.fitness_m DESC, e.id LIMIT {_SCAN}) AS t{level}" for level in (0, 1))
+        f"ORDER BY f.fitness_m DESC, e.id LIMIT {_SCAN}) AS t{level}" for level in range(LEVELS))
     out = []
     for road in session.scalars(select(JobRoad).where(JobRoad.job_id == job.id).order_by(JobRoad.road_index)):
         rows = connection.exec_driver_sql(
             f"SELECT a2_deg, l2_m, rws_m, fitness_m, distance_m FROM ({levels}) AS u ORDER BY fitness_m DESC, id "
-            f"LIMIT {_SCAN}", (job.id, road.road_index) * 2).all()
+            f"LIMIT {_SCAN}", (job.id, road.road_index) * LEVELS).all()
         values = np.array([[math.radians(r[0]), r[1], r[2], r[3]] for r in rows]).reshape(-1, 4)
         top: Top = [(rows[i][0], rows[i][1], rows[i][2], number_or_nan(rows[i][3]), number_or_nan(rows[i][4]))
                     for i in best_distinct(values[:, :3], values[:, 3])]

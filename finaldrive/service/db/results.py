@@ -19,7 +19,7 @@ from sqlalchemy.orm import Session
 
 from finaldrive.engine import VALUES
 from finaldrive.service.db.leases import db_now, finish_job, owns, release_jobs
-from finaldrive.service.db.levels import add_entries, merge_if_full
+from finaldrive.service.db.levels import ALL_LEVELS, add_entries, merge_if_full
 from finaldrive.service.db.models import EvalStatus, Evaluation, Generation, Job, JobState
 from finaldrive.service.db.summaries import add_explored, recount_explored
 
@@ -84,7 +84,7 @@ def cached_evaluations(session: Session, keys: Iterable[str]) -> dict[str, dict[
     """The values (:data:`CACHED_COLUMNS`) of the first stored evaluation for each cache key that
     has one (transient failures excluded).
 
-    Looked up by the keys' hashes in both levels of ``cache_index`` (finaldrive.service.db.levels), then
+    Looked up by the keys' hashes in every level of ``cache_index`` (finaldrive.service.db.levels), then
     matched on the whole key, with plain SQL through the driver (the scheduler asks for every
     generation it hands out; building a SQLAlchemy statement each time cost it ~2 ms of the GIL)."""
     wanted = set(keys)
@@ -95,7 +95,7 @@ def cached_evaluations(session: Session, keys: Iterable[str]) -> dict[str, dict[
         chunk = hashes[start:start + _IN_CHUNK]
         sql = (f"SELECT e.cache_key, {', '.join('e.' + c for c in CACHED_COLUMNS)} FROM cache_index c "
                "JOIN evaluations e ON e.job_id = c.job_id AND e.road_index = c.road_index AND e.step = c.step "
-               f"AND e.candidate = c.candidate WHERE c.level IN (0, 1) AND c.cache_hash IN "
+               f"AND e.candidate = c.candidate WHERE c.level IN ({ALL_LEVELS}) AND c.cache_hash IN "
                f"({', '.join([marker] * len(chunk))}) AND e.transient = FALSE ORDER BY e.id")
         for key, *values in session.connection().exec_driver_sql(sql, tuple(chunk)):
             if key in wanted and key not in out:

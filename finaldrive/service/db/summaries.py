@@ -30,6 +30,7 @@ from sqlalchemy import Connection, text
 from sqlalchemy.orm import Session
 
 from finaldrive.engine import CONCENTRIC_L2_M, near_summary
+from finaldrive.service.db.levels import ALL_LEVELS, LEVELS
 
 #: Buckets of a2 over the circle (1 deg each).
 BUCKETS = 360
@@ -53,7 +54,7 @@ def road_sharpness(session: Session, job_id: int, road_index: int, tolerance_pct
     m = _marker(connection)
     road = f"FROM evaluations WHERE job_id = {m} AND road_index = {m} AND status = 'ok' AND fitness_m IS NOT NULL"
     key = (job_id, road_index)
-    best = connection.exec_driver_sql(f"SELECT MAX(b) FROM ({best_of_levels(m)}) AS t", key * 2).scalar()
+    best = connection.exec_driver_sql(f"SELECT MAX(b) FROM ({best_of_levels(m)}) AS t", key * LEVELS).scalar()
     if best is None:
         return near_summary(tolerance_pct, math.nan, math.nan, {}, {}, 0, 0, 0)
     tol = abs(best) * tolerance_pct / 100.0
@@ -76,13 +77,13 @@ def road_sharpness(session: Session, job_id: int, road_index: int, tolerance_pct
 
 
 def best_of_levels(marker: str) -> str:
-    """The best fitness of a road (job and road bound twice) in each level of ``fitness_index``, as
-    rows ``b``: a seek each (one over both levels would scan them)."""
+    """The best fitness of a road (job and road bound once a level) in each level of ``fitness_index``,
+    as rows ``b``: a seek each (one over every level would scan them)."""
     return " UNION ALL ".join(f"SELECT MAX(fitness_m) AS b FROM fitness_index WHERE level = {level} AND "
-                              f"job_id = {marker} AND road_index = {marker}" for level in (0, 1))
+                              f"job_id = {marker} AND road_index = {marker}" for level in range(LEVELS))
 
 
-def by_fitness(marker: str, levels: str = "0, 1") -> str:
+def by_fitness(marker: str, levels: str = ALL_LEVELS) -> str:
     """``FROM`` a road's successful evaluations (``e``, job and road bound) joined to their entries in
     ``fitness_index`` (``f``, finaldrive.service.db.levels) at ``levels``, to be narrowed by ``f.fitness_m``."""
     return ("FROM fitness_index f JOIN evaluations e ON e.job_id = f.job_id AND e.road_index = f.road_index "

@@ -1,6 +1,6 @@
-"""The result cache's and /best's index tables of two levels (finaldrive.service.db.levels), on SQLite and
-PostgreSQL: through the writer's stores and level 0's moves to level 1, every evaluation has exactly one
-entry, and the lookups read both levels."""
+"""The result cache's and /best's index tables of levels (finaldrive.service.db.levels), on SQLite and
+PostgreSQL: through the writer's stores and the moves from level to level, every evaluation has exactly
+one entry, and the lookups read every level."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 from sqlalchemy import select, text
+from sqlalchemy.orm import Session
 
 from finaldrive.engine import BatchResult, Request, best_distinct, near_optimal
 from finaldrive.service.api.bands import top_designs
@@ -39,16 +40,41 @@ def _batch(rng: np.random.Generator, road: int, first: int, n: int) -> tuple[lis
     return rows_from_results([(part, batch, batch.fitness_m, keys, bool(rng.random() < 0.3))]), keys
 
 
-def _entries(session: object, table: str) -> tuple[list[tuple[object, ...]], set[int]]:
+def _entries(session: Session, table: str) -> tuple[list[tuple[object, ...]], set[int]]:
     """Each entry without its level, and the levels that hold some."""
-    rows = session.execute(text(f"SELECT * FROM {table}")).mappings().all()  # type: ignore[attr-defined]
+    rows = session.execute(text(f"SELECT * FROM {table}")).mappings().all()
     return sorted(tuple(v for k, v in r.items() if k != "level") for r in rows), {r["level"] for r in rows}
 
 
-def test_every_evaluation_is_looked_up_through_both_levels(store_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(levels, "LEVEL0_ROWS", 9)
+def _check(session: Session, job: Job, keys: list[str]) -> tuple[set[int], set[int]]:
+    """Each evaluation has one entry in each table it belongs in, and the cache, the near-optimal sets and
+    the best designs read through them are what the stored evaluations give; returns the levels in use."""
+    stored = session.execute(select(Evaluation).where(Evaluation.job_id == job.id)).scalars().all()
+    slot = {e.id: (e.job_id, e.road_index, e.step, e.candidate) for e in stored}
+    cache, cache_levels = _entries(session, "cache_index")
+    fitness, fitness_levels = _entries(session, "fitness_index")
+    assert cache == sorted((key_hash(e.cache_key), *slot[e.id]) for e in stored)
+    ok = [e for e in stored if e.status == "ok" and e.fitness_m is not None]
+    assert fitness == sorted((e.job_id, e.road_index, e.fitness_m, e.step, e.candidate) for e in ok)
+    assert set(cached_evaluations(session, keys)) == {e.cache_key for e in stored if not e.transient}
+    top = {job_road.road_index: designs for job_road, designs in top_designs(session, job)}
+    for road in (0, 1):
+        mine = sorted((e for e in ok if e.road_index == road), key=lambda e: (-e.fitness_m, e.id))
+        designs = np.array([[math.radians(e.a2_deg), e.l2_m, e.rws_m] for e in mine]).reshape(-1, 3)
+        f, d = np.array([e.fitness_m for e in mine]), np.array([e.distance_m for e in mine])
+        for pct in (0.5, 5.0, 50.0):
+            _same(road_sharpness(session, job.id, road, pct), near_optimal(designs, f, d, pct))
+        assert [g[:4] for g in top[road]] == [(mine[i].a2_deg, mine[i].l2_m, mine[i].rws_m, mine[i].fitness_m)
+                                              for i in best_distinct(designs, f)]
+    return cache_levels, fitness_levels
+
+
+def test_every_evaluation_is_looked_up_through_every_level(store_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(levels, "LEVEL0_ROWS", 3)
+    monkeypatch.setattr(levels, "GROWTH", 2)
     rng = np.random.default_rng(5)
     db = open_database(Settings(db_url=store_url))
+    seen: tuple[set[int], set[int]] = (set(), set())  # the levels that held entries of each table
     try:
         job = _claimed_sweep(db)
         keys: list[str] = []
@@ -60,27 +86,9 @@ def test_every_evaluation_is_looked_up_through_both_levels(store_url: str, monke
             if i == 5:
                 with db.write() as session:  # slots stored already add no entry
                     assert store_results(session, "s1", job.id, rows, []) == 0
-        with db.read() as session:
-            stored = session.execute(select(Evaluation).where(Evaluation.job_id == job.id)).scalars().all()
-            cache, cache_levels = _entries(session, "cache_index")
-            fitness, fitness_levels = _entries(session, "fitness_index")
-            hits = cached_evaluations(session, keys)
-            sharp = {(r, pct): road_sharpness(session, job.id, r, pct) for r in (0, 1) for pct in (0.5, 5.0, 50.0)}
-            top = dict(top_designs(session, session.get(Job, job.id)))  # type: ignore[arg-type]
+            with db.read() as session:
+                for levels_seen, now in zip(seen, _check(session, session.get(Job, job.id), keys), strict=True):
+                    levels_seen |= now
     finally:
         db.dispose()
-    slot = {e.id: (e.job_id, e.road_index, e.step, e.candidate) for e in stored}
-    assert cache_levels == {0, 1} and 1 in fitness_levels  # level 0 was moved to level 1 (and filled again)
-    assert cache == sorted((key_hash(e.cache_key), *slot[e.id]) for e in stored)
-    ok = [e for e in stored if e.status == "ok" and e.fitness_m is not None]
-    assert fitness == sorted((e.job_id, e.road_index, e.fitness_m, e.step, e.candidate) for e in ok)
-    assert set(hits) == {e.cache_key for e in stored if not e.transient}
-    for road in (0, 1):
-        mine = sorted((e for e in ok if e.road_index == road), key=lambda e: (-e.fitness_m, e.id))
-        designs = np.array([[math.radians(e.a2_deg), e.l2_m, e.rws_m] for e in mine])
-        f, d = np.array([e.fitness_m for e in mine]), np.array([e.distance_m for e in mine])
-        for pct in (0.5, 5.0, 50.0):
-            _same(sharp[road, pct], near_optimal(designs, f, d, pct))
-        (got,) = [designs_ for job_road, designs_ in top.items() if job_road.road_index == road]
-        assert [g[:4] for g in got] == [(mine[i].a2_deg, mine[i].l2_m, mine[i].rws_m, mine[i].fitness_m)
-                                        for i in best_distinct(designs, f)]
+    assert seen == ({0, 1, 2, 3}, {0, 1, 2, 3})  # entries moved up to the last level
