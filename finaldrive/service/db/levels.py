@@ -44,26 +44,43 @@ def _columns(table: str) -> str:
     return key + "".join(f", {c}" for c in _SLOT.split(", ") if c not in key.split(", "))
 
 
-def add_entries(session: Session, job_id: int, after_id: int = 0) -> None:
+def add_entries(session: Session, job_id: int, after_id: int = 0) -> int:
     """Level-0 entries for the job's evaluations with an id above ``after_id``: those stored in this
-    transaction by the one writer that owns the job (or, from 0, all of a job stored without them)."""
+    transaction by the one writer that owns the job (or, from 0, all of a job stored without them).
+    Returns how many evaluations got a cache entry."""
     connection = session.connection()
     m = _marker(connection)
+    added = {}
     for table, (_, where) in TABLES.items():
         columns = _columns(table)
-        connection.exec_driver_sql(f"INSERT INTO {table} (level, {columns}) SELECT 0, {columns} FROM evaluations "
-                                   f"WHERE job_id = {m} AND id > {m} AND {where}", (job_id, after_id))
+        added[table] = connection.exec_driver_sql(
+            f"INSERT INTO {table} (level, {columns}) SELECT 0, {columns} FROM evaluations "
+            f"WHERE job_id = {m} AND id > {m} AND {where}", (job_id, after_id)).rowcount
+    return int(added["cache_index"])
 
 
-def merge_if_full(session: Session, rows: int | None = None) -> None:
-    """Move each table's level 0 to level 1 if it holds ``rows`` (:data:`LEVEL0_ROWS`) entries or more,
-    then level 1 to 2 if that filled it (``rows`` x :data:`GROWTH`), and so on.
+#: Level 0 is counted once this process has added this share of :data:`LEVEL0_ROWS` entries since it
+#: last counted it (a count of up to 65,536 entries with every small store cost the writer more than the
+#: store); it may then hold a few times that share more than its limit.
+CHECK_SHARE = 1 / 16
+_unchecked: dict[str, int] = {}   # database -> entries this process added since it last counted level 0
+
+
+def merge_if_full(session: Session, added: int, rows: int | None = None) -> None:
+    """After ``added`` entries: move each table's level 0 to level 1 if it holds ``rows``
+    (:data:`LEVEL0_ROWS`) entries or more, then level 1 to 2 if that filled it (``rows`` x
+    :data:`GROWTH`), and so on. Counted only every :data:`CHECK_SHARE` of ``rows`` added.
 
     SQLite: the writer holds the database's write lock, so nothing is added between the copy and the
     delete. PostgreSQL: one statement moves exactly the rows it deletes (an entry another writer adds
     meanwhile stays where it is)."""
     rows = LEVEL0_ROWS if rows is None else rows
     connection = session.connection()
+    store = str(connection.engine.url)
+    _unchecked[store] = _unchecked.get(store, 0) + added
+    if _unchecked[store] < rows * CHECK_SHARE:
+        return
+    _unchecked[store] = 0
     for table in TABLES:
         columns = _columns(table)
         for level in range(LEVELS - 1):

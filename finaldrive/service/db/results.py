@@ -149,11 +149,12 @@ def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequen
     if fenced.rowcount != 1:  # type: ignore[attr-defined]
         raise LeaseLost(job_id)
     now = _bound_now(session, Evaluation)
-    before = session.scalar(select(func.max(Evaluation.id)).where(Evaluation.job_id == job_id)) or 0
+    marker = "?" if session.get_bind().dialect.paramstyle == "qmark" else "%s"
+    before = session.connection().exec_driver_sql(f"SELECT MAX(id) FROM evaluations WHERE job_id = {marker}",
+                                                  (job_id,)).scalar() or 0
     inserted = _insert_many(session, "evaluations", ("job_id", "created_at", *ROW_COLUMNS),
                             [(job_id, now, *row) for row in rows], ("job_id", "road_index", "step", "candidate"))
-    add_entries(session, job_id, before)
-    merge_if_full(session)
+    merge_if_full(session, add_entries(session, job_id, before))
     if inserted != len(rows):  # some slots were stored already: count the job's rows and ranges afresh
         _recount(session, job_id)
         recount_explored(session, job_id)
