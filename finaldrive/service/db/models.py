@@ -169,7 +169,7 @@ for _name in DIAGNOSTICS:  # the run's extremes and energy ledger, one column ea
 
 
 class _IndexEntry:
-    """An entry of an index table of two levels (finaldrive.service.db.levels): its level, its key
+    """An entry of an index table of levels (finaldrive.service.db.levels): its level, its key
     (each table's own columns) and its evaluation's slot."""
 
     level: Mapped[int] = mapped_column(SmallInteger)

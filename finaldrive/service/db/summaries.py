@@ -54,7 +54,7 @@ def road_sharpness(session: Session, job_id: int, road_index: int, tolerance_pct
     m = _marker(connection)
     road = f"FROM evaluations WHERE job_id = {m} AND road_index = {m} AND status = 'ok' AND fitness_m IS NOT NULL"
     key = (job_id, road_index)
-    best = connection.exec_driver_sql(f"SELECT MAX(b) FROM ({best_of_levels(m)}) AS t", key * LEVELS).scalar()
+    best = connection.exec_driver_sql(f"SELECT MAX(b) FROM ({_best_of_levels(m)}) AS t", key * LEVELS).scalar()
     if best is None:
         return near_summary(tolerance_pct, math.nan, math.nan, {}, {}, 0, 0, 0)
     tol = abs(best) * tolerance_pct / 100.0
@@ -76,7 +76,7 @@ def road_sharpness(session: Session, job_id: int, road_index: int, tolerance_pct
                         sum(c[1] for c in cells), sum(r[2] for r in near if r[1] < 0))
 
 
-def best_of_levels(marker: str) -> str:
+def _best_of_levels(marker: str) -> str:
     """The best fitness of a road (job and road bound once a level) in each level of ``fitness_index``,
     as rows ``b``: a seek each (one over every level would scan them)."""
     return " UNION ALL ".join(f"SELECT MAX(fitness_m) AS b FROM fitness_index WHERE level = {level} AND "

@@ -16,7 +16,7 @@ from finaldrive.service.api.bands import top_designs
 from finaldrive.service.config import Settings
 from finaldrive.service.db import levels
 from finaldrive.service.db.models import Evaluation, Job
-from finaldrive.service.db.results import cached_evaluations, key_hash, store_results
+from finaldrive.service.db.results import COPY_ROWS, cached_evaluations, key_hash, store_results
 from finaldrive.service.db.summaries import road_sharpness
 from finaldrive.service.jobs.rows import rows_from_results
 from finaldrive.service.services import open_database
@@ -78,14 +78,16 @@ def test_every_evaluation_is_looked_up_through_every_level(store_url: str, monke
     try:
         job = _claimed_sweep(db)
         keys: list[str] = []
-        for i in range(12):
-            rows, batch_keys = _batch(rng, i % 2, 10 * i, 1 + i % 5)
+        for i in range(12):  # the last batch as many rows as PostgreSQL takes by COPY
+            rows, batch_keys = _batch(rng, i % 2, 10 * i, COPY_ROWS + 5 if i == 11 else 1 + i % 5)
             keys += batch_keys
             with db.write() as session:
                 store_results(session, "s1", job.id, rows, [])
-            if i == 5:
-                with db.write() as session:  # slots stored already add no entry
-                    assert store_results(session, "s1", job.id, rows, []) == 0
+            if i == 5:  # slots stored already add no entry, beside new ones
+                more, more_keys = _batch(rng, 1, 1000, 3)
+                keys += more_keys
+                with db.write() as session:
+                    assert store_results(session, "s1", job.id, rows + more, []) == len(more)
             with db.read() as session:
                 for levels_seen, now in zip(seen, _check(session, session.get(Job, job.id), keys), strict=True):
                     levels_seen |= now
