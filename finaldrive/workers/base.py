@@ -62,10 +62,10 @@ def task_width(node_cpus: Iterable[int], fixed: int | None = None, *, cpus: int 
         if held >= MAIN_NODES_SHARE * sum(nodes):
             break
     width = fixed or max(1, min(MAX_TASK_CPUS, cap, math.ceil(total / TASK_SLOTS)))
-    slots = min(sum(n // width for n in nodes), max(1, total // width))
-    if not sum(n // width for n in nodes):
+    held_slots = sum(n // width for n in nodes)
+    if not held_slots:
         raise ValueError(f"task_cpus {width} is more than any node's CPUs (at most {nodes[0]})")
-    return width, slots
+    return width, min(held_slots, max(1, total // width))
 
 
 #: How long :func:`cancel_unseen` waits for its cancelled tasks to be reported [s], in polls of at most 1 s.

@@ -45,8 +45,8 @@ def angle_arc(degrees: np.ndarray) -> tuple[float, float]:
     gaps = np.diff(np.append(a, a[0] + 360.0))
     widest = np.flatnonzero(gaps >= gaps.max() - 1e-9)
     i = int(widest[-1] if widest[-1] == a.size - 1 else widest[0])   # after the largest gap; on ties from a[0]
-    start = float(a[(i + 1) % a.size])
-    return start, start + 360.0 - float(gaps[i])
+    start, end = float(a[(i + 1) % a.size]), float(a[i])   # the arc ends at the angle before the gap, exactly
+    return start, end if end >= start else end + 360.0
 
 
 def spread(designs: np.ndarray, values: np.ndarray | None = None) -> dict[str, list[float]]:
@@ -132,7 +132,7 @@ def _verdict(name: str, near: list[float], explored: list[float], tol: float, si
     lo, hi = (round(scale * v, digits) for v in near)
     if _span(explored) <= 0:
         return "fixed", f"{label} was not varied ({lo:g} {unit})"
-    share = max(0.0, _span(near) / _span(explored))   # a one-design arc can come out -1e-17 wide: never "-0 %"
+    share = _span(near) / _span(explored)
     if name == "a2_deg" and hi >= 360:
         where = f"{label} from {lo:g} through 0 to {hi - 360:g} {unit}"
     else:

@@ -29,6 +29,7 @@ from finaldrive.engine import (
 )
 from finaldrive.service.api.problems import ApiProblem
 from finaldrive.service.api.sharpness import own_designs_job
+from finaldrive.service.db.engine import marker
 from finaldrive.service.db.levels import LEVELS
 from finaldrive.service.db.models import TERMINAL_STATES, EvalStatus, Evaluation, Job, JobRoad
 from finaldrive.service.db.repository import job_by_idempotency_key
@@ -54,7 +55,7 @@ def top_designs(session: Session, job: Job) -> list[tuple[JobRoad, Top]]:
     """Each road's best successful designs, best first, each distinct from the better ones
     (engine.best_distinct: 1 deg of a2 or 1 mm of L2 or R_WS), among its :data:`_SCAN` best evaluations."""
     connection = session.connection()
-    m = "?" if connection.dialect.paramstyle == "qmark" else "%s"
+    m = marker(connection)
     levels = " UNION ALL ".join(  # each level's best, then the best of all: a range of each, not a sort of all
         f"SELECT * FROM (SELECT e.a2_deg, e.l2_m, e.rws_m, e.fitness_m, e.distance_m, e.id {by_fitness(m, str(level))} "
         f"ORDER BY f.fitness_m DESC, e.id LIMIT {_SCAN}) AS t{level}" for level in range(LEVELS))

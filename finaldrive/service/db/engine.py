@@ -22,7 +22,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from sqlalchemy import Engine, create_engine, event, text
+from sqlalchemy import Connection, Engine, create_engine, event, text
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session
 
@@ -97,6 +97,11 @@ def _journal_mode_wal(cur: Any) -> Any:
             if "locked" not in str(exc) or time.monotonic() >= deadline:
                 raise
             time.sleep(0.01)
+
+
+def marker(connection: Connection) -> str:
+    """The driver's placeholder for a bound value in plain SQL: ``?`` (sqlite3) or ``%s`` (psycopg)."""
+    return "?" if connection.dialect.paramstyle == "qmark" else "%s"
 
 
 def make_engine(url: str, *, cache_kib: int | None = None, **kwargs: Any) -> Engine:

@@ -21,8 +21,9 @@ not known to the driver's ``executemany``.
 
 from __future__ import annotations
 
-from sqlalchemy import Connection
 from sqlalchemy.orm import Session
+
+from finaldrive.service.db.engine import marker
 
 #: Entries level 0 holds before the writer moves it to level 1; level i holds GROWTH ** i times as many.
 LEVEL0_ROWS = 1 << 16
@@ -49,14 +50,11 @@ def add_entries(session: Session, job_id: int, after_id: int = 0) -> int:
     transaction by the one writer that owns the job (or, from 0, all of a job stored without them).
     Returns how many evaluations got a cache entry."""
     connection = session.connection()
-    m = _marker(connection)
-    added = {}
-    for table, (_, where) in TABLES.items():
-        columns = _columns(table)
-        added[table] = connection.exec_driver_sql(
-            f"INSERT INTO {table} (level, {columns}) SELECT 0, {columns} FROM evaluations "
-            f"WHERE job_id = {m} AND id > {m} AND {where}", (job_id, after_id)).rowcount
-    return int(added["cache_index"])
+    m = marker(connection)
+    added = [connection.exec_driver_sql(f"INSERT INTO {table} (level, {_columns(table)}) SELECT 0, {_columns(table)} "
+                                        f"FROM evaluations WHERE job_id = {m} AND id > {m} AND {where}",
+                                        (job_id, after_id)).rowcount for table, (_, where) in TABLES.items()]
+    return int(added[0])   # cache_index: every evaluation
 
 
 #: Level 0 is counted once this process has added this share of :data:`LEVEL0_ROWS` entries since it
@@ -98,7 +96,3 @@ def merge_if_full(session: Session, added: int, rows: int | None = None) -> None
                 connection.exec_driver_sql(f"INSERT INTO {table} (level, {columns}) SELECT {level + 1}, {columns} "
                                            f"FROM {table} WHERE level = {level} ORDER BY {columns}")
                 connection.exec_driver_sql(f"DELETE FROM {table} WHERE level = {level}")
-
-
-def _marker(connection: Connection) -> str:
-    return "?" if connection.dialect.paramstyle == "qmark" else "%s"

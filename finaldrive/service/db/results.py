@@ -18,6 +18,7 @@ from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
 from finaldrive.engine import VALUES
+from finaldrive.service.db.engine import marker
 from finaldrive.service.db.leases import db_now, finish_job, owns, release_jobs
 from finaldrive.service.db.levels import ALL_LEVELS, add_entries, merge_if_full
 from finaldrive.service.db.models import EvalStatus, Evaluation, Generation, Job, JobState
@@ -89,14 +90,14 @@ def cached_evaluations(session: Session, keys: Iterable[str]) -> dict[str, dict[
     generation it hands out; building a SQLAlchemy statement each time cost it ~2 ms of the GIL)."""
     wanted = set(keys)
     hashes = sorted({key_hash(key) for key in wanted})
-    marker = "?" if session.get_bind().dialect.paramstyle == "qmark" else "%s"
+    m = marker(session.connection())
     out: dict[str, dict[str, Any]] = {}
     for start in range(0, len(hashes), _IN_CHUNK):
         chunk = hashes[start:start + _IN_CHUNK]
         sql = (f"SELECT e.cache_key, {', '.join('e.' + c for c in CACHED_COLUMNS)} FROM cache_index c "
                "JOIN evaluations e ON e.job_id = c.job_id AND e.road_index = c.road_index AND e.step = c.step "
                f"AND e.candidate = c.candidate WHERE c.level IN ({ALL_LEVELS}) AND c.cache_hash IN "
-               f"({', '.join([marker] * len(chunk))}) AND e.transient = FALSE ORDER BY e.id")
+               f"({', '.join([m] * len(chunk))}) AND e.transient = FALSE ORDER BY e.id")
         for key, *values in session.connection().exec_driver_sql(sql, tuple(chunk)):
             if key in wanted and key not in out:
                 out[key] = dict(zip(CACHED_COLUMNS, values, strict=True))
@@ -149,8 +150,8 @@ def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequen
     if fenced.rowcount != 1:  # type: ignore[attr-defined]
         raise LeaseLost(job_id)
     now = _bound_now(session, Evaluation)
-    marker = "?" if session.get_bind().dialect.paramstyle == "qmark" else "%s"
-    before = session.connection().exec_driver_sql(f"SELECT MAX(id) FROM evaluations WHERE job_id = {marker}",
+    m = marker(session.connection())
+    before = session.connection().exec_driver_sql(f"SELECT MAX(id) FROM evaluations WHERE job_id = {m}",
                                                   (job_id,)).scalar() or 0
     inserted = _insert_many(session, "evaluations", ("job_id", "created_at", *ROW_COLUMNS),
                             [(job_id, now, *row) for row in rows], ("job_id", "road_index", "step", "candidate"))
@@ -222,8 +223,8 @@ def _insert_many(session: Session, table: str, columns: Sequence[str], values: l
         values = [tuple(None if isinstance(v, float) and v != v else v for v in row) for row in values]
         if len(values) >= COPY_ROWS:
             return _copy_many(session, table, columns, values, unique)
-    marker = "?" if session.get_bind().dialect.paramstyle == "qmark" else "%s"
-    sql = (f"INSERT INTO {table} ({', '.join(columns)}) VALUES ({', '.join([marker] * len(columns))}) "
+    m = marker(session.connection())
+    sql = (f"INSERT INTO {table} ({', '.join(columns)}) VALUES ({', '.join([m] * len(columns))}) "
            f"ON CONFLICT ({', '.join(unique)}) DO NOTHING")
     return int(session.connection().exec_driver_sql(sql, values).rowcount)
 
@@ -286,16 +287,16 @@ def _update_best(session: Session, job_id: int, rows: Sequence[Row], columns: _C
         best[road] = rows[int(candidates[np.argmax(columns.fitness[candidates])])]
     if not best:
         return
-    marker = "?" if session.get_bind().dialect.paramstyle == "qmark" else "%s"
+    m = marker(session.connection())
     connection = session.connection()
     stored: dict[int, float | None] = dict(connection.exec_driver_sql(
-        f"SELECT road_index, best_fitness_m FROM job_roads WHERE job_id = {marker}", (job_id,)).all())
+        f"SELECT road_index, best_fitness_m FROM job_roads WHERE job_id = {m}", (job_id,)).all())
     better = [row for road, row in best.items() if road in stored and _better(row[FITNESS], stored[road])]
     if better:
         connection.exec_driver_sql(
-            f"UPDATE job_roads SET best_fitness_m = {marker}, best_evaluation_id = (SELECT id FROM evaluations "
-            f"WHERE job_id = {marker} AND road_index = {marker} AND step = {marker} AND candidate = {marker}) "
-            f"WHERE job_id = {marker} AND road_index = {marker}",
+            f"UPDATE job_roads SET best_fitness_m = {m}, best_evaluation_id = (SELECT id FROM evaluations "
+            f"WHERE job_id = {m} AND road_index = {m} AND step = {m} AND candidate = {m}) "
+            f"WHERE job_id = {m} AND road_index = {m}",
             [(row[FITNESS], job_id, row[ROAD], row[STEP], row[CANDIDATE], job_id, row[ROAD]) for row in better])
 
 

@@ -30,6 +30,7 @@ from sqlalchemy import Connection, text
 from sqlalchemy.orm import Session
 
 from finaldrive.engine import CONCENTRIC_L2_M, near_summary
+from finaldrive.service.db.engine import marker
 from finaldrive.service.db.levels import ALL_LEVELS, LEVELS
 
 #: Buckets of a2 over the circle (1 deg each).
@@ -51,7 +52,7 @@ def road_sharpness(session: Session, job_id: int, road_index: int, tolerance_pct
     """The near-optimal set of one road's evaluations (engine :func:`~finaldrive.engine.near_optimal`)."""
     connection = session.connection()
     _need_floor(connection)
-    m = _marker(connection)
+    m = marker(connection)
     road = f"FROM evaluations WHERE job_id = {m} AND road_index = {m} AND status = 'ok' AND fitness_m IS NOT NULL"
     key = (job_id, road_index)
     best = connection.exec_driver_sql(f"SELECT MAX(b) FROM ({_best_of_levels(m)}) AS t", key * LEVELS).scalar()
@@ -111,7 +112,7 @@ def add_explored(session: Session, job_id: int, road: np.ndarray, a2_deg: np.nda
         grouped = np.asarray(values, dtype=float)[order]
         ranges += [np.minimum.reduceat(grouped, starts), np.maximum.reduceat(grouped, starts)]
     connection = session.connection()
-    m = _marker(connection)
+    m = marker(connection)
     low, high = ("LEAST", "GREATEST") if connection.dialect.name == "postgresql" else ("MIN", "MAX")
     merged = ", ".join(f"{name} = {low if i % 2 == 0 else high}(road_explored.{name}, excluded.{name})"
                        for i, name in enumerate(_RANGES))
@@ -128,16 +129,12 @@ def recount_explored(session: Session, job_id: int) -> None:
     """The job's ``road_explored`` groups computed afresh from its evaluations."""
     connection = session.connection()
     _need_floor(connection)
-    m = _marker(connection)
+    m = marker(connection)
     connection.exec_driver_sql(f"DELETE FROM road_explored WHERE job_id = {m}", (job_id,))
     connection.exec_driver_sql(
         f"INSERT INTO road_explored (job_id, road_index, bucket, n, {', '.join(_RANGES)}) "
         f"SELECT job_id, road_index, {_GROUPS} AS b, {_EXPLORED} FROM evaluations WHERE job_id = {m} "
         "AND status = 'ok' AND fitness_m IS NOT NULL GROUP BY job_id, road_index, b", (job_id,))
-
-
-def _marker(connection: Connection) -> str:
-    return "?" if connection.dialect.paramstyle == "qmark" else "%s"
 
 
 #: A robust-de's designs evaluated successfully on every one of its roads, with their aggregate score.
