@@ -100,7 +100,8 @@ def measure(url: str, rows: int, transactions: int, repeat: int,
 
 def grow(url: str, rows: int, total: int, steps: int, drop: list[str], cache_kib: int | None) -> dict[str, object]:
     """Durable evaluations stored a second as the store grows to ``total``, in transactions of ``rows``: the
-    rate over each of ``steps`` equal parts (rows made before each part's clock starts), after dropping the
+    rate over each of ``steps`` equal parts (rows made before each part's clock starts) and its slowest
+    transaction (the longest the writer held the write lock), after dropping the
     ``drop`` indexes of ``evaluations`` (what each costs)."""
     open_database(Settings(db_url=url)).dispose()  # the schema
     db = Database(url, cache_kib=cache_kib)
@@ -116,13 +117,16 @@ def grow(url: str, rows: int, total: int, steps: int, drop: list[str], cache_kib
         per_step, rates, stored = max(1, total // steps // rows), [], 0
         for _ in range(steps):
             batches = [_rows(rows, stored + i * rows) for i in range(per_step)]
-            start = time.perf_counter()
+            start, slowest = time.perf_counter(), 0.0
             for batch in batches:
+                began = time.perf_counter()
                 with db.write() as session:
                     store_results(session, "bench", job.id, batch, [])
+                slowest = max(slowest, time.perf_counter() - began)
             seconds = time.perf_counter() - start
             stored += per_step * rows
-            rates.append({"stored": stored, "evaluations_per_s": round(per_step * rows / seconds)})
+            rates.append({"stored": stored, "evaluations_per_s": round(per_step * rows / seconds),
+                          "slowest_transaction_s": round(slowest, 2)})
     finally:
         db.dispose()
     return {"store": url.split(":", 1)[0], "rows_per_transaction": rows, "dropped": drop, "rates": rates}

@@ -3,8 +3,8 @@
 v0.2.0.b derives the indexed cache hash from each stored key; v0.2.0.c renames the design columns
 with their units (a2 converted from radians to degrees) and rewrites stored grid specs and
 recording requests in the new names; v0.2.0.e moves each DE generation's record out of its stored
-state; v0.3.0.e indexes stored evaluations in the index tables of levels. Downgrading restores
-the earlier rows.
+state; v0.3.0.e indexes stored evaluations in the index tables of levels, and v0.3.0.f counts
+their levels. Downgrading restores the earlier rows.
 """
 
 from __future__ import annotations
@@ -164,7 +164,8 @@ def test_generation_records_come_out_of_the_stored_states(url: str) -> None:
 
 def test_stored_evaluations_are_indexed_at_the_last_level(url: str) -> None:
     """v0.3.0.e: each stored evaluation gets its result-cache entry and each successful one its fitness
-    entry, at the last level (3); downgrading brings the indexes back."""
+    entry, at its last level (3); v0.3.0.f counts each level from 1 on (level 4 now the last);
+    downgrading puts level 4's entries back on level 3, then brings the indexes back."""
     config = alembic_config(url)
     command.upgrade(config, "v0.3.0.d")
     engine = sa.create_engine(url)
@@ -181,9 +182,20 @@ def test_stored_evaluations_are_indexed_at_the_last_level(url: str) -> None:
         cache = sorted(tuple(r.values()) for r in _rows(conn, "cache_index"))
         fitness = sorted(tuple(r.values()) for r in _rows(conn, "fitness_index"))
         indexes = {i["name"] for i in sa.inspect(conn).get_indexes("evaluations")}
+        sizes = {(r["index_table"], r["level"]): r["entries"] for r in _rows(conn, "index_levels")}
     assert cache == [(3, 10 * r + c, 1, r, 0, c) for r, c, _, _ in stored]
     assert fitness == sorted((3, 1, r, f, 0, c) for r, c, s, f in stored if s == "ok")
     assert not indexes & {"ix_evaluations_cache_hash", "ix_evaluations_job_road_fitness"}
+    assert sizes == {(table, level): {"cache_index": 4, "fitness_index": 3}[table] if level == 3 else 0
+                     for table in ("cache_index", "fitness_index") for level in (1, 2, 3, 4)}
+    with engine.begin() as conn:  # entries moved on to the new last level
+        conn.execute(sa.text("UPDATE cache_index SET level = 4 WHERE cache_hash < 10"))
+        conn.execute(sa.text("UPDATE fitness_index SET level = 4 WHERE road_index = 1"))
+    command.downgrade(config, "v0.3.0.e")
+    with engine.connect() as conn:
+        assert sorted(tuple(r.values()) for r in _rows(conn, "cache_index")) == cache
+        assert sorted(tuple(r.values()) for r in _rows(conn, "fitness_index")) == fitness
+        assert "index_levels" not in sa.inspect(conn).get_table_names()
     command.downgrade(config, "v0.3.0.d")
     with engine.connect() as conn:
         tables = set(sa.inspect(conn).get_table_names())

@@ -6,21 +6,29 @@ pages all over it: on a store of 2.24 M evaluations the writer fell from ~70,000
 ~22,000 (docs/performance.md, bench/bench_commit.py --grow). Each lookup is instead a table of
 entries (its key and the evaluation's slot), in :data:`LEVELS` levels, as a log-structured merge:
 
-- **level 0** takes each stored batch's entries; it is small (at most :data:`LEVEL0_ROWS`), so a
+- **level 0** takes each stored batch's entries; it is small (about :data:`LEVEL0_ROWS`), so a
   batch dirties few pages;
-- when level ``i`` is full (:data:`LEVEL0_ROWS` x :data:`GROWTH` ** ``i`` entries), the writer moves
-  it to level ``i + 1`` in one sorted statement, so each page there is written once for many
-  entries; the last level has no limit.
+- level ``i`` holds about :data:`LEVEL0_ROWS` x :data:`GROWTH` ** ``i`` entries; the last has no limit;
+- when level 0 is full the writer moves it whole to level 1; when a later level is full it moves one
+  chunk of it (about as many entries as level 0 holds, the next keys after the last chunk's, round
+  the key range) to the level above. Each move is one sorted statement, so a page above is written
+  once for many entries, and a store's transaction holds the write lock for at most a chunk a level,
+  never for a whole level: moving whole levels held SQLite's lock for 24 s at 18 M evaluations
+  stored, growing with the store.
 
-A lookup reads every level (the level is the first column of each table's key: a seek each). An
-entry is written in the transaction that stores its evaluation, and moved in one transaction, so
-a lookup never misses or doubles one. ``fitness_index`` holds the successful evaluations with a
-fitness. Entries name their evaluation by its slot (job, road, step, candidate): a batch's ids are
-not known to the driver's ``executemany``.
+Level 0 is counted (it is small); the sizes of the others are kept in ``index_levels``, changed by
+each move in its transaction. A lookup reads every level (the level is the first column of each
+table's key: a seek each). An entry is written in the transaction that stores its evaluation and
+moved in one transaction, so a lookup never misses or doubles one. ``fitness_index`` holds the
+successful evaluations with a fitness. Entries name their evaluation by its slot (job, road, step,
+candidate): a batch's ids are not known to the driver's ``executemany``.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
+from sqlalchemy import Connection
 from sqlalchemy.orm import Session
 
 from finaldrive.service.db.engine import marker
@@ -28,8 +36,9 @@ from finaldrive.service.db.engine import marker
 #: Entries level 0 holds before the writer moves it to level 1; level i holds GROWTH ** i times as many.
 LEVEL0_ROWS = 1 << 16
 GROWTH = 8
-#: Levels of each table: the last (3.7 x 10^7 entries and more) holds what the others moved there.
-LEVELS = 4
+#: Levels of each table. The last (from 3.8 x 10^7 entries on) has no limit: a chunk from level 3 writes a
+#: slice of it that grows with it (a chunk times its size over level 3's), a few chunks up to 10^8 evaluations.
+LEVELS = 5
 #: Every level, for ``level IN (...)``.
 ALL_LEVELS = ", ".join(str(level) for level in range(LEVELS))
 _SLOT = "job_id, road_index, step, candidate"
@@ -57,42 +66,76 @@ def add_entries(session: Session, job_id: int, after_id: int = 0) -> int:
     return int(added[0])   # cache_index: every evaluation
 
 
-#: Level 0 is counted once this process has added this share of :data:`LEVEL0_ROWS` entries since it
-#: last counted it (a count of up to 65,536 entries with every small store cost the writer more than the
-#: store); it may then hold a few times that share more than its limit.
+#: A check counts level 0 once this process has added this share of :data:`LEVEL0_ROWS` entries since
+#: the last (a count of up to 65,536 entries with every small store cost the writer more than the store).
 CHECK_SHARE = 1 / 16
-_unchecked: dict[str, int] = {}   # database -> entries this process added since it last counted level 0
+_unchecked: dict[str, int] = {}   # database -> entries this process added since its last check
+#: (database, table, level) -> the key of the last entry this process moved from that level (None: start
+#: from the lowest key); lost with the process, which then starts again from the lowest.
+_cursors: dict[tuple[str, str, int], tuple[Any, ...] | None] = {}
 
 
 def merge_if_full(session: Session, added: int, rows: int | None = None) -> None:
-    """After ``added`` entries: move each table's level 0 to level 1 if it holds ``rows``
-    (:data:`LEVEL0_ROWS`) entries or more, then level 1 to 2 if that filled it (``rows`` x
-    :data:`GROWTH`), and so on. Counted only every :data:`CHECK_SHARE` of ``rows`` added.
+    """After ``added`` entries, once :data:`CHECK_SHARE` of ``rows`` (:data:`LEVEL0_ROWS`) were added
+    since the last check: move each table's level 0 to level 1 if it holds ``rows`` entries or more,
+    then one chunk of each later level that holds ``rows`` x :data:`GROWTH` ** level or more, of
+    ``rows`` entries (or as many as were added since the last check, if more: the chunks keep up
+    with the stores).
 
     SQLite: the writer holds the database's write lock, so nothing is added between the copy and the
     delete. PostgreSQL: one statement moves exactly the rows it deletes (an entry another writer adds
-    meanwhile stays where it is)."""
+    or moves meanwhile stays where it is), and ``index_levels`` counts what was moved."""
     rows = LEVEL0_ROWS if rows is None else rows
     connection = session.connection()
     store = str(connection.engine.url)
-    _unchecked[store] = _unchecked.get(store, 0) + added
-    if _unchecked[store] < rows * CHECK_SHARE:
+    since = _unchecked.get(store, 0) + added
+    if since < rows * CHECK_SHARE:
+        _unchecked[store] = since
         return
     _unchecked[store] = 0
+    m = marker(connection)
     for table in TABLES:
-        columns = _columns(table)
+        sizes = dict(connection.exec_driver_sql(
+            f"SELECT level, entries FROM index_levels WHERE index_table = {m}", (table,)).all())
+        sizes[0] = connection.exec_driver_sql(
+            f"SELECT COUNT(*) FROM (SELECT 1 FROM {table} WHERE level = 0 LIMIT {rows}) AS t").scalar() or 0
         for level in range(LEVELS - 1):
-            full = rows * GROWTH ** level
-            count = connection.exec_driver_sql(
-                f"SELECT COUNT(*) FROM (SELECT 1 FROM {table} WHERE level = {level} LIMIT {full}) AS t").scalar()
-            if (count or 0) < full:
-                break
-            if connection.dialect.name == "postgresql":
-                connection.exec_driver_sql(
-                    f"WITH moved AS (DELETE FROM {table} WHERE level = {level} RETURNING {columns}) "
-                    f"INSERT INTO {table} (level, {columns}) SELECT {level + 1}, {columns} FROM moved "
-                    f"ORDER BY {columns}")
-            else:
-                connection.exec_driver_sql(f"INSERT INTO {table} (level, {columns}) SELECT {level + 1}, {columns} "
-                                           f"FROM {table} WHERE level = {level} ORDER BY {columns}")
-                connection.exec_driver_sql(f"DELETE FROM {table} WHERE level = {level}")
+            if sizes.get(level, 0) < rows * GROWTH ** level:
+                continue
+            moved = _move(connection, table, level, *(
+                ("", ()) if level == 0 else _next_chunk(connection, table, level, max(rows, since), store)))
+            sizes[level + 1] = sizes.get(level + 1, 0) + moved
+            connection.exec_driver_sql(
+                f"UPDATE index_levels SET entries = entries + {m} WHERE index_table = {m} AND level = {m}",
+                [(sign * moved, table, at) for sign, at in ((-1, level), (1, level + 1)) if at > 0])
+
+
+def _next_chunk(connection: Connection, table: str, level: int, chunk: int,
+                store: str) -> tuple[str, tuple[Any, ...]]:
+    """The condition (after ``level = ?``) and parameters of the next ``chunk`` keys of ``level`` after
+    this process's last (the rest of the level if fewer remain: the next chunk starts from the lowest)."""
+    key, m = _columns(table), marker(connection)
+    row = f"({', '.join([m] * len(key.split(', ')))})"
+    last = _cursors.get((store, table, level))
+    if last and connection.exec_driver_sql(f"SELECT 1 FROM {table} WHERE level = {m} AND ({key}) > {row} LIMIT 1",
+                                           (level, *last)).first() is None:
+        last = None  # the last chunk ended at the level's last key
+    where, values = (f" AND ({key}) > {row}", tuple(last)) if last else ("", ())
+    bound = connection.exec_driver_sql(f"SELECT {key} FROM {table} WHERE level = {m}{where} ORDER BY {key} "
+                                       f"LIMIT 1 OFFSET {chunk - 1}", (level, *values)).first()
+    _cursors[(store, table, level)] = None if bound is None else tuple(bound)
+    return (where, values) if bound is None else (f"{where} AND ({key}) <= {row}", (*values, *bound))
+
+
+def _move(connection: Connection, table: str, level: int, where: str, values: tuple[Any, ...]) -> int:
+    """Move the entries of ``level`` that meet ``where`` to the level above, in key order; returns how many."""
+    columns, m = _columns(table), marker(connection)
+    if connection.dialect.name == "postgresql":
+        return int(connection.exec_driver_sql(
+            f"WITH moved AS (DELETE FROM {table} WHERE level = {m}{where} RETURNING {columns}) "
+            f"INSERT INTO {table} (level, {columns}) SELECT {level + 1}, {columns} FROM moved "
+            f"ORDER BY {columns}", (level, *values)).rowcount)
+    connection.exec_driver_sql(f"INSERT INTO {table} (level, {columns}) SELECT {level + 1}, {columns} "
+                               f"FROM {table} WHERE level = {m}{where} ORDER BY {columns}", (level, *values))
+    return int(connection.exec_driver_sql(f"DELETE FROM {table} WHERE level = {m}{where}",
+                                          (level, *values)).rowcount)

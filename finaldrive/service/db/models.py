@@ -203,6 +203,17 @@ class FitnessIndex(_IndexEntry, Base):
     fitness_m: Mapped[float] = mapped_column(Float)
 
 
+class IndexLevel(Base):
+    """How many entries a level (1 on) of an index table holds: changed by each move between levels
+    (finaldrive.service.db.levels), so that a full level is found without counting it."""
+
+    __tablename__ = "index_levels"
+
+    index_table: Mapped[str] = mapped_column(String(32), primary_key=True)
+    level: Mapped[int] = mapped_column(SmallInteger, primary_key=True)
+    entries: Mapped[int] = mapped_column(BigInteger)
+
+
 class Generation(Base):
     """One told DE generation of a run (run = road index for ``de``, 0 for ``robust-de``).
 

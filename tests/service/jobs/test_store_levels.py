@@ -1,6 +1,7 @@
 """The result cache's and /best's index tables of levels (finaldrive.service.db.levels), on SQLite and
 PostgreSQL: through the writer's stores and the moves from level to level, every evaluation has exactly
-one entry, and the lookups read every level."""
+one entry, the lookups read every level, each level's kept size is its size, and a full level moves a
+chunk at a time, round its keys."""
 
 from __future__ import annotations
 
@@ -41,8 +42,11 @@ def _batch(rng: np.random.Generator, road: int, first: int, n: int) -> tuple[lis
 
 
 def _entries(session: Session, table: str) -> tuple[list[tuple[object, ...]], set[int]]:
-    """Each entry without its level, and the levels that hold some."""
+    """Each entry without its level, and the levels that hold some; checks ``index_levels`` against them."""
     rows = session.execute(text(f"SELECT * FROM {table}")).mappings().all()
+    kept = dict(session.execute(text("SELECT level, entries FROM index_levels WHERE index_table = :t"),
+                                {"t": table}).all())
+    assert kept == {level: sum(r["level"] == level for r in rows) for level in range(1, levels.LEVELS)}
     return sorted(tuple(v for k, v in r.items() if k != "level") for r in rows), {r["level"] for r in rows}
 
 
@@ -93,4 +97,68 @@ def test_every_evaluation_is_looked_up_through_every_level(store_url: str, monke
                     levels_seen |= now
     finally:
         db.dispose()
-    assert seen == ({0, 1, 2, 3}, {0, 1, 2, 3})  # entries moved up to the last level
+    assert seen == (set(range(levels.LEVELS)),) * 2  # entries moved up to the last level
+
+
+def test_a_full_level_moves_a_chunk_at_a_time_round_its_keys(store_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A level over its size gives the level above one chunk a check (as many entries as level 0 holds,
+    or as were added since the last check if more), the next keys after the last chunk's, the rest of
+    the level when fewer remain, then from the lowest again: a store's transaction never moves a whole
+    large level."""
+    monkeypatch.setattr(levels, "LEVEL0_ROWS", 4)
+    monkeypatch.setattr(levels, "GROWTH", 2)
+    monkeypatch.setattr(levels, "_cursors", {})
+    db = open_database(Settings(db_url=store_url))
+    try:
+        job = _claimed_sweep(db)
+        rows, _ = _batch(np.random.default_rng(8), 0, 0, 80)
+        with db.write() as session:
+            store_results(session, "s1", job.id, rows, [])
+            for table in levels.TABLES:  # all on level 2 (size 16), level 3 empty
+                n = session.execute(text(f"UPDATE {table} SET level = 2")).rowcount  # type: ignore[attr-defined]
+                session.execute(text("UPDATE index_levels SET entries = CASE WHEN level = 2 THEN :n ELSE 0 END "
+                                     "WHERE index_table = :t"), {"n": n, "t": table})
+        with db.read() as session:
+            keys = {table: _entries(session, table)[0] for table in levels.TABLES}
+        assert min(len(k) for k in keys.values()) >= 16 + 4 + 9 + 4 + 2 + 4 + 4
+
+        def merge(added: int) -> dict[str, list[tuple[object, ...]]]:
+            with db.write() as session:
+                levels.merge_if_full(session, added)
+            with db.read() as session:
+                return {table: _entries_at(session, table, 3) for table in levels.TABLES}
+
+        levels._cursors.clear()
+        for table, k in merge(4).items():
+            assert k == keys[table][:4]
+        for table, k in merge(9).items():  # more added since the last check than level 0 holds
+            assert k == keys[table][:13]
+        low = {"cache_index": [(h, job.id, 0, -1, h) for h in (0, 1)],   # keys below the first chunk's
+               "fitness_index": [(job.id, -1, f, 0, 0) for f in (0.0, 1.0)]}
+        with db.write() as session:
+            for table, entries in low.items():
+                for entry in entries:
+                    session.execute(text(f"INSERT INTO {table} (level, {levels._columns(table)}) "
+                                         f"VALUES (2, :a, :b, :c, :d, :e)"), dict(zip("abcde", entry, strict=True)))
+                session.execute(text("UPDATE index_levels SET entries = entries + 2 WHERE index_table = :t "
+                                     "AND level = 2"), {"t": table})
+        for table, k in merge(4).items():  # the keys after the last chunk's, not the lowest
+            assert k == keys[table][:17]
+        for table, k in keys.items():  # this process last moved the third key from the end
+            levels._cursors[(str(db.engine.url), table, 2)] = k[-3]
+        for table, k in merge(4).items():  # the rest of the level
+            assert k == keys[table][:17] + keys[table][-2:]
+        for table, k in merge(4).items():  # then from the lowest
+            assert k == sorted(low[table] + keys[table][:19] + keys[table][-2:])
+        for table, k in keys.items():  # the last chunk ended at the level's last key
+            levels._cursors[(str(db.engine.url), table, 2)] = k[-3]
+        for table, k in merge(4).items():  # from the lowest at once
+            assert k == sorted(low[table] + keys[table][:23] + keys[table][-2:])
+    finally:
+        db.dispose()
+
+
+def _entries_at(session: Session, table: str, level: int) -> list[tuple[object, ...]]:
+    """The entries of a level, without it, by key."""
+    rows = session.execute(text(f"SELECT * FROM {table} WHERE level = {level}")).mappings().all()
+    return sorted(tuple(v for k, v in r.items() if k != "level") for r in rows)
