@@ -6,23 +6,28 @@ chunk at a time, round its keys."""
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 import pytest
 from sqlalchemy import select, text
+from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session
 
 from finaldrive.engine import BatchResult, Request, best_distinct, near_optimal
 from finaldrive.service.api.bands import top_designs
 from finaldrive.service.config import Settings
 from finaldrive.service.db import levels
+from finaldrive.service.db.leases import claim_jobs, register_scheduler
 from finaldrive.service.db.models import Evaluation, Job
 from finaldrive.service.db.results import COPY_ROWS, cached_evaluations, key_hash, store_results
 from finaldrive.service.db.summaries import road_sharpness
 from finaldrive.service.jobs.rows import rows_from_results
+from finaldrive.service.jobs.submit import submit_job
+from finaldrive.service.schemas import JobSpec
 from finaldrive.service.services import open_database
 from tests.service.api.test_best_summaries import _same
-from tests.service.jobs.test_store_results import _claimed_sweep
+from tests.service.jobs.test_store_results import SWEEP, _claimed_sweep
 
 
 def _batch(rng: np.random.Generator, road: int, first: int, n: int) -> tuple[list[tuple[object, ...]], list[str]]:
@@ -162,3 +167,56 @@ def _entries_at(session: Session, table: str, level: int) -> list[tuple[object, 
     """The entries of a level, without it, by key."""
     rows = session.execute(text(f"SELECT * FROM {table} WHERE level = {level}")).mappings().all()
     return sorted(tuple(v for k, v in r.items() if k != "level") for r in rows)
+
+
+def test_two_writers_moving_levels_at_once_keep_one_entry_each(store_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two schedulers' writers storing at once, each moving full levels as it goes (level 0 of 3 entries,
+    so nearly every store moves some): every evaluation of both jobs keeps exactly one entry in each
+    table it belongs in, and the kept sizes are the levels'. On PostgreSQL the moves run concurrently; a
+    deadlock between two of them, which PostgreSQL breaks, is retried, as the writer retries a failed
+    store."""
+    monkeypatch.setattr(levels, "LEVEL0_ROWS", 3)
+    monkeypatch.setattr(levels, "GROWTH", 2)
+    db = open_database(Settings(db_url=store_url))
+    errors: list[BaseException] = []
+    try:
+        first = _claimed_sweep(db)
+        second, _ = submit_job(db, JobSpec.model_validate(SWEEP), idempotency_key=None, max_evaluations=1000,
+                               max_cpu_hours=1.0)
+        with db.write() as session:
+            register_scheduler(session, "s2", host="h", pid=2, executor="serial", capacity=1)
+            assert claim_jobs(session, "s2", lease_s=30.0, limit=1) == [second.id]
+
+        def write(job_id: int, scheduler: str, seed: int) -> None:
+            rng = np.random.default_rng(seed)
+            try:
+                for i in range(40):
+                    rows, _ = _batch(rng, i % 2, 10 * i, 1 + i % 7)
+                    for _attempt in range(20):
+                        try:
+                            with db.write() as session:
+                                store_results(session, scheduler, job_id, rows, [])
+                            break
+                        except OperationalError as exc:
+                            if "deadlock" not in str(exc):
+                                raise
+            except BaseException as exc:
+                errors.append(exc)
+
+        threads = [threading.Thread(target=write, args=args) for args in ((first.id, "s1", 1), (second.id, "s2", 2))]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+        assert not errors, errors
+        with db.read() as session:
+            stored = session.execute(select(Evaluation)).scalars().all()
+            cache, cache_levels = _entries(session, "cache_index")
+            fitness, fitness_levels = _entries(session, "fitness_index")
+    finally:
+        db.dispose()
+    assert len(stored) == 2 * sum(1 + i % 7 for i in range(40))
+    assert cache == sorted((key_hash(e.cache_key), e.job_id, e.road_index, e.step, e.candidate) for e in stored)
+    assert fitness == sorted((e.job_id, e.road_index, e.fitness_m, e.step, e.candidate) for e in stored
+                             if e.status == "ok" and e.fitness_m is not None)
+    assert {2, 3} <= cache_levels & fitness_levels  # entries moved on, chunks included
