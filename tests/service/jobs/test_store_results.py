@@ -142,3 +142,30 @@ def test_bulk_stores_keep_every_value_and_skip_what_is_stored(store_url: str) ->
     assert after == recounted and sum(c[3] for c in after) == counts[0]
     assert counts == (sum(r[ROW_COLUMNS.index("status")] == "ok" for r in rows),
                       sum(r[ROW_COLUMNS.index("status")] != "ok" for r in rows))
+
+
+def test_bulk_stored_generations_keep_their_json(store_url: str) -> None:
+    """Hundreds of told generations a transaction (PostgreSQL: by COPY, in text for their JSON columns, whose
+    binary format would encode the stored JSON text again): population, fitness and state read back as given."""
+    from sqlalchemy import select
+
+    from finaldrive.service.db.models import Generation
+    from finaldrive.service.db.results import COPY_ROWS
+
+    generations = [{"run": 0, "generation": g, "population": [[0.5 * g, 0.1, 0.09]], "fitness_m": [20.0 - g, None],
+                    "state": {"method": "de", "generation": g, "rng": [g, "a\tb\\N"]}, "best_fitness_m": 20.0 - g,
+                    "mean_fitness_m": None, "n_evals": 12 * g, "n_failed": g % 3} for g in range(1, COPY_ROWS + 2)]
+    db = open_database(Settings(db_url=store_url))
+    try:
+        job = _claimed_sweep(db)
+        with db.write() as session:
+            store_results(session, "s1", job.id, [], generations)
+        with db.read() as session:
+            stored = session.execute(select(Generation).where(Generation.job_id == job.id)
+                                     .order_by(Generation.generation)).scalars().all()
+            got = [{"run": r.run, "generation": r.generation, "population": r.population, "fitness_m": r.fitness_m,
+                    "state": r.state, "best_fitness_m": r.best_fitness_m, "mean_fitness_m": r.mean_fitness_m,
+                    "n_evals": r.n_evals, "n_failed": r.n_failed} for r in stored]
+    finally:
+        db.dispose()
+    assert got == generations
