@@ -149,8 +149,9 @@ class CMAES(AskTell):
         return self._best_f
 
     # ------------------------------------------------------------------ state
-    def state(self, *, history: bool = True) -> dict[str, Any]:
-        """Everything needed to continue exactly, as JSON types (NaN -> None)."""
+    def state(self, *, history: bool = True, arrays: bool = False) -> dict[str, Any]:
+        """Everything needed to continue exactly, as JSON types (NaN -> None; with ``arrays`` too: its
+        state is a few small arrays, and its rounds are few)."""
         cma = self._cma
         out: dict[str, Any] = {
             "method": self.method, "version": STATE_VERSION,

@@ -140,3 +140,21 @@ def jsonable(obj: Any) -> Any:
     if isinstance(obj, np.generic):
         return obj.item()
     return obj
+
+
+def plain_json(obj: Any) -> Any:
+    """A state taken with numpy arrays in it (``state(arrays=True)``) as plain JSON types: arrays and
+    numpy scalars as lists and Python numbers, NaN and infinities as None (a plain state unchanged)."""
+    if isinstance(obj, dict):
+        return {k: plain_json(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [plain_json(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        if obj.dtype.kind != "f":
+            return obj.tolist()
+        values = obj.astype(object)
+        values[~np.isfinite(obj)] = None
+        return values.tolist()
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    return encode(obj)

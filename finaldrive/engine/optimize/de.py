@@ -229,13 +229,19 @@ class DifferentialEvolution(AskTell):
         return float(self._fitness[0]) if self._fitness.size else math.nan
 
     # ------------------------------------------------------------------ state
-    def state(self, *, history: bool = True) -> dict[str, Any]:
+    def state(self, *, history: bool = True, arrays: bool = False) -> dict[str, Any]:
         """Everything needed to continue the run, as plain JSON types (NaN -> None).
 
         ``history=False`` leaves out the per-generation records (``history``), which continuing
         does not need: a caller that stores every generation's state and record keeps each state
         O(NP) rather than O(generations), and the stored states O(generations) in all.
+        ``arrays=True`` keeps the population, fitness (NaN where failed) and pending designs as numpy
+        arrays of their own: quick to take and to hand to another process, made plain JSON types
+        there by :func:`~finaldrive.engine.optimize.common.plain_json`.
         """
+        def values(array: np.ndarray) -> Any:
+            return array.copy() if arrays else array.tolist()
+
         out = {
             "method": self.method,
             "version": STATE_VERSION,
@@ -253,14 +259,14 @@ class DifferentialEvolution(AskTell):
                 "patience": self.patience,
                 "tol": self.tol,
             },
-            "population": self._population.tolist(),
-            "fitness": [encode(v) for v in self._fitness],
+            "population": values(self._population),
+            "fitness": self._fitness.copy() if arrays else [encode(v) for v in self._fitness],
             "generation": self.generation,
             "n_evals": self.n_evals,
             "stall": self._stall.count,
             "stall_ref": encode(self._stall.ref),
             "stop_reason": self.stop_reason,
-            "pending": None if self._pending is None else self._pending.tolist(),
+            "pending": None if self._pending is None else values(self._pending),
             "rng": jsonable(self._rng.bit_generator.state),
         }
         if history:

@@ -68,8 +68,10 @@ class Optimiser(Protocol):
     def fitness(self) -> np.ndarray:
         """Their fitness (NaN = failed)."""
 
-    def state(self, *, history: bool = True) -> dict[str, Any]:
-        """Everything needed to continue exactly, as JSON types, with ``"method"`` set."""
+    def state(self, *, history: bool = True, arrays: bool = False) -> dict[str, Any]:
+        """Everything needed to continue exactly, as JSON types, with ``"method"`` set; ``arrays=True``
+        allows numpy arrays in it (NaN where a value is missing), made JSON types by
+        :func:`~finaldrive.engine.optimize.common.plain_json` where it is stored."""
 
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> Optimiser:

@@ -17,7 +17,7 @@ import numpy as np
 from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
-from finaldrive.engine import VALUES
+from finaldrive.engine import VALUES, plain_json
 from finaldrive.service.db.engine import marker
 from finaldrive.service.db.leases import db_now, finish_job, owns, release_jobs
 from finaldrive.service.db.levels import ALL_LEVELS, add_entries, merge_if_full
@@ -168,9 +168,9 @@ def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequen
         now = _bound_now(session, Generation)
         columns = ("job_id", "run", "generation", "population", "fitness_m", "state", "best_fitness_m",
                    "mean_fitness_m", "n_evals", "n_failed", "created_at")
-        _insert_many(session, "generations", columns, [
-            (job_id, g["run"], g["generation"], json.dumps(g["population"]), json.dumps(g["fitness_m"]),
-             json.dumps(g["state"]), g["best_fitness_m"], g["mean_fitness_m"], g["n_evals"], g["n_failed"], now)
+        _insert_many(session, "generations", columns, [  # arrays made plain JSON here, in the writer
+            (job_id, g["run"], g["generation"], *(json.dumps(plain_json(g[name])) for name in columns[3:6]),
+             g["best_fitness_m"], g["mean_fitness_m"], g["n_evals"], g["n_failed"], now)
             for g in generations],
             ("job_id", "run", "generation"))
     return inserted

@@ -420,9 +420,9 @@ class Scheduler:
             de = run.optimiser
             record = de.history[-1]
             de.history.clear()  # the rows hold the history: the optimiser here stays O(NP)
-            job.writes.generations.append({  # the state without its history: each row holds its own record
-                "run": run.index, "generation": run.generation, "state": de.state(history=False),
-                "population": de.population.tolist(), "fitness_m": nullable(de.fitness),
+            job.writes.generations.append({  # the state without its history: each row holds its own record;
+                "run": run.index, "generation": run.generation,  # arrays, made JSON in the writer (off this thread)
+                "state": de.state(history=False, arrays=True), "population": de.population, "fitness_m": de.fitness,
                 "best_fitness_m": nullable([de.best_f])[0], "mean_fitness_m": nullable([record["mean_f"]])[0],
                 "n_evals": de.n_evals, "n_failed": record["n_failed"],
             })

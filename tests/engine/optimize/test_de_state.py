@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from finaldrive.engine.optimize import DifferentialEvolution
+from finaldrive.engine.optimize import DifferentialEvolution, plain_json
 
 TWO_PI = 2.0 * np.pi
 LOWER, UPPER, PERIODIC = [0.0, 0.0, 0.05], [TWO_PI, 0.2, 0.15], [True, False, False]
@@ -81,6 +81,26 @@ def test_a_state_without_its_history_resumes_the_same_run_and_stays_small() -> N
     assert np.array_equal(resumed.fitness, reference.fitness, equal_nan=True)
     assert json.dumps(resumed.state(history=False)) == json.dumps(reference.state(history=False))
     assert resumed.history == reference.history[21:]  # the records told after the resume
+
+
+def test_a_state_taken_as_arrays_stores_as_the_plain_state() -> None:
+    """The scheduler takes states with arrays (cheap to hand to the writer's process), which makes them
+    JSON: the text must be the plain state's (failed fitness null), and a run resumed from it the same."""
+    reference = finish(make())
+    de, failed = make(), 0
+    for _ in range(5):
+        de.tell(fitness(de.ask()))
+        taken = de.state(history=False, arrays=True)
+        assert isinstance(taken["population"], np.ndarray) and isinstance(taken["fitness"], np.ndarray)
+        failed += int(np.isnan(taken["fitness"]).sum())
+        assert json.dumps(plain_json(taken), allow_nan=False) == json.dumps(de.state(history=False))
+    assert failed  # the landscape's failed region: NaN stored as null
+    de.ask()
+    taken = de.state(arrays=True)   # with the pending designs and the history
+    assert isinstance(taken["pending"], np.ndarray)
+    text = json.dumps(plain_json(taken), allow_nan=False)
+    assert text == json.dumps(de.state())
+    assert_same(finish(DifferentialEvolution.from_state(json.loads(text))), reference)
 
 
 def test_resume_before_the_first_tell_and_between_ask_and_tell() -> None:
