@@ -8,6 +8,7 @@ import math
 from functools import partial
 
 import numpy as np
+from sqlalchemy import select, update
 
 from finaldrive.engine import DIAGNOSTICS, BatchResult, Request, Road
 from finaldrive.service.config import Settings
@@ -95,6 +96,29 @@ def test_a_job_succeeds_only_over_a_complete_store_and_a_hole_reopens_it(store_u
     assert done is not None and done.state == "succeeded" and (done.n_done, done.total) == (3, 3)
 
 
+def test_a_finished_job_s_counters_equal_its_rows(store_url: str) -> None:
+    """The counters change with each store, in its transaction; finishing recounts them only when their
+    sum is not the store's count (a scan of every row of the job, under the write lock)."""
+    db = open_database(Settings(db_url=store_url))
+    try:
+        job = _claimed_sweep(db)
+        part = Request(0, 0, 0, np.arange(3), np.array([[0.5, 0.1, 0.09], [1.0, 0.2, 0.09], [1.5, 0.1, 0.09]]))
+        batch = toy_batch(part.designs, Road.parse("flat"), fail_above_l2=0.15)  # the second design fails
+        rows = rows_from_results([(part, batch, batch.fitness_m, [f"{i:x}" * 64 for i in range(3)], False)])
+        with db.write() as session:
+            store_results(session, "s1", job.id, rows, [])
+        with db.write() as session:  # counters off, as no store leaves them
+            session.execute(update(Job).where(Job.id == job.id).values(n_done=7, n_failed=0, n_cached=5))
+        with db.write() as session:
+            assert finish_if_complete(session, scheduler_id="s1", job_id=job.id, evaluations=3, generations=0,
+                                      planned=job.total) == "finished"
+        with db.read() as session:
+            done = session.get(Job, job.id)
+    finally:
+        db.dispose()
+    assert done is not None and (done.n_done, done.n_failed, done.n_cached) == (2, 1, 0)
+
+
 def test_bulk_stores_keep_every_value_and_skip_what_is_stored(store_url: str) -> None:
     """Hundreds of rows a transaction (PostgreSQL: by COPY): every column read back as given, NULLs,
     a reason with tabs, newlines and backslashes; a second store overlapping the first, in the same
@@ -142,6 +166,36 @@ def test_bulk_stores_keep_every_value_and_skip_what_is_stored(store_url: str) ->
     assert after == recounted and sum(c[3] for c in after) == counts[0]
     assert counts == (sum(r[ROW_COLUMNS.index("status")] == "ok" for r in rows),
                       sum(r[ROW_COLUMNS.index("status")] != "ok" for r in rows))
+
+
+def test_stored_rows_carry_their_job_and_the_store_s_time(store_url: str) -> None:
+    """The job and the time, the same for every row of a store, are written into the statement (or, by
+    COPY, the INSERT's parameters): read back as the job's id and the database's time of the store."""
+    from finaldrive.service.db.leases import db_now
+    from finaldrive.service.db.results import COPY_ROWS
+
+    db = open_database(Settings(db_url=store_url))
+    try:
+        job = _claimed_sweep(db)
+        n = 3 + 3 * COPY_ROWS   # a store of 3 rows (executemany), then one of 300 (PostgreSQL: COPY)
+        designs = np.column_stack([np.linspace(0, 3, n), np.full(n, 0.1), np.full(n, 0.09)])
+        batch = toy_batch(designs, Road.parse("flat"))
+        rows = rows_from_results([(Request(0, 0, 0, np.arange(n), designs), batch, batch.fitness_m,
+                                   [f"{i:064x}" for i in range(n)], False)])
+        times = []
+        for part in (rows[:3], rows[3:]):
+            with db.write() as session:
+                times.append(db_now(session))
+                store_results(session, "s1", job.id, part, [])
+                times.append(db_now(session))
+        with db.read() as session:
+            stored = session.execute(select(Evaluation.candidate, Evaluation.job_id, Evaluation.created_at)
+                                     .order_by(Evaluation.candidate)).all()
+    finally:
+        db.dispose()
+    assert [c for c, *_ in stored] == list(range(n)) and {j for _, j, _ in stored} == {job.id}
+    for (low, high), part in zip([times[:2], times[2:]], [stored[:3], stored[3:]], strict=True):
+        assert all(low <= created <= high for *_, created in part), (low, high, part[0])
 
 
 def test_bulk_stored_generations_keep_their_json(store_url: str) -> None:
