@@ -150,8 +150,8 @@ class CMAES(AskTell):
 
     # ------------------------------------------------------------------ state
     def state(self, *, history: bool = True, arrays: bool = False) -> dict[str, Any]:
-        """Everything needed to continue exactly, as JSON types (NaN -> None; with ``arrays`` too: its
-        state is a few small arrays, and its rounds are few)."""
+        """Everything needed to continue exactly, as JSON types (NaN -> None); ``arrays`` changes nothing
+        here (a few small arrays, and few rounds: nothing to gain from keeping them)."""
         cma = self._cma
         out: dict[str, Any] = {
             "method": self.method, "version": STATE_VERSION,
