@@ -75,6 +75,7 @@ from finaldrive.engine.optimize.common import (
     encode,
     generator_for,
     jsonable,
+    plain_json,
     rank_key,
 )
 
@@ -237,11 +238,8 @@ class DifferentialEvolution(AskTell):
         O(NP) rather than O(generations), and the stored states O(generations) in all.
         ``arrays=True`` keeps the population, fitness (NaN where failed) and pending designs as numpy
         arrays of their own: quick to take and to hand to another process, made plain JSON types
-        there by :func:`~finaldrive.engine.optimize.common.plain_json`.
+        there by :func:`~finaldrive.engine.optimize.common.plain_json` (which makes the plain state here).
         """
-        def values(array: np.ndarray) -> Any:
-            return array.copy() if arrays else array.tolist()
-
         out = {
             "method": self.method,
             "version": STATE_VERSION,
@@ -259,19 +257,19 @@ class DifferentialEvolution(AskTell):
                 "patience": self.patience,
                 "tol": self.tol,
             },
-            "population": values(self._population),
-            "fitness": self._fitness.copy() if arrays else [encode(v) for v in self._fitness],
+            "population": self._population.copy(),
+            "fitness": self._fitness.copy(),
             "generation": self.generation,
             "n_evals": self.n_evals,
             "stall": self._stall.count,
             "stall_ref": encode(self._stall.ref),
             "stop_reason": self.stop_reason,
-            "pending": None if self._pending is None else values(self._pending),
+            "pending": None if self._pending is None else self._pending.copy(),
             "rng": jsonable(self._rng.bit_generator.state),
         }
         if history:
             out["history"] = self._history_json()
-        return out
+        return out if arrays else plain_json(out)
 
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> DifferentialEvolution:

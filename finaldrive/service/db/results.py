@@ -174,7 +174,7 @@ def store_results(session: Session, scheduler_id: str, job_id: int, rows: Sequen
         _insert_many(session, "generations", columns, [  # arrays made plain JSON here, in the writer
             (g["run"], g["generation"], *(json.dumps(plain_json(g[name])) for name in columns[2:5]),
              g["best_fitness_m"], g["mean_fitness_m"], g["n_evals"], g["n_failed"]) for g in generations],
-            ("job_id", "run", "generation"), fixed={"job_id": job_id, "created_at": db_now(session)})
+            ("job_id", "run", "generation"), fixed={"job_id": job_id, "created_at": now})
     return inserted
 
 
