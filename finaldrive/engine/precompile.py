@@ -293,14 +293,23 @@ def _lower_priority() -> None:
 _PR_SET_PDEATHSIG = 1
 
 
-def _end_with(parent: int) -> None:
-    """End this process (SIGTERM, the locks it holds removed) when ``parent``, its caller, ends:
-    Linux's parent-death signal; where there is none, it ends once its compilation is done."""
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))   # unwinds through main's finally: unlocked
+def _end_with(parent: int, methods: list[str]) -> None:
+    """End this process at once, the locks of ``methods`` removed, when ``parent``, its caller, ends
+    (SIGTERM: Linux's parent-death signal; where there is none, it ends once its compilation is done).
+
+    The handler ends the process with ``os._exit``, not by raising SystemExit: raised where numba's
+    compiler is called back from LLVM (a ctypes callback), the exception was printed and dropped,
+    and the compilation went on for its remaining 10-40 s with no caller."""
+    def end(*_: object) -> None:
+        for method in methods:
+            _lock(method).unlink(missing_ok=True)
+        os._exit(1)
+
+    signal.signal(signal.SIGTERM, end)
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
     if os.getppid() != parent:   # the caller ended before the signal was armed
-        sys.exit(1)
+        end()
 
 
 def main(argv: list[str]) -> None:
@@ -309,8 +318,8 @@ def main(argv: list[str]) -> None:
     :func:`_compile`)."""
     if "--parent" in argv:
         at = argv.index("--parent")
-        _end_with(int(argv[at + 1]))
-        argv = argv[:at] + argv[at + 2:]
+        parent, argv = int(argv[at + 1]), argv[:at] + argv[at + 2:]
+        _end_with(parent, [name for name in argv if name != "--nice"])
     if "--nice" in argv:
         _lower_priority()
     if "--builder" in argv:

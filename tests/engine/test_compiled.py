@@ -427,6 +427,39 @@ def _zombie(pid: int) -> bool:
     return True
 
 
+_TERM_IN_A_CALLBACK = """
+import ctypes, os, signal, sys, time
+from finaldrive.engine import precompile
+precompile.cache_dir().mkdir(parents=True, exist_ok=True)
+precompile._lock("reference").touch()
+precompile._end_with(os.getppid(), ["reference"])
+
+@ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p)
+def compare(a, b):   # called back from C, as LLVM calls numba's compiler back
+    os.kill(os.getpid(), signal.SIGTERM)   # the caller's death, as Linux signals it
+    time.sleep(0.5)
+    return 0
+
+numbers = (ctypes.c_int * 2)(2, 1)
+ctypes.CDLL(None).qsort(numbers, 2, ctypes.sizeof(ctypes.c_int), compare)
+print("went on", flush=True)
+time.sleep(5)
+"""
+
+
+def test_a_background_compilation_ends_at_once_even_inside_a_callback_from_c(tmp_path: Path) -> None:
+    """The caller's death arriving while numba is called back from LLVM (a ctypes callback, where an
+    exception is printed and dropped): the compilation ends at once, its lock removed, rather than
+    going on (the cause of Ray's test finding a 'python' process alive 10 s after its driver ended)."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    start = time.monotonic()
+    proc = subprocess.run([sys.executable, "-c", _TERM_IN_A_CALLBACK], env=env, capture_output=True, text=True,
+                          timeout=60)
+    assert (proc.returncode, proc.stdout) == (1, ""), proc.stderr[-2000:]
+    assert time.monotonic() - start < 4.5   # not through the 5 s it would sleep had it gone on
+    assert not (tmp_path / "compiling-reference").exists()
+
+
 def _imports_by_ast(path: Path, modules: set[str]) -> set[str]:
     """The engine modules a file imports, read with Python's parser (the regex's check)."""
     import ast
