@@ -8,7 +8,8 @@ import math
 from functools import partial
 
 import numpy as np
-from sqlalchemy import select, update
+import pytest
+from sqlalchemy import func, select, update
 
 from finaldrive.engine import DIAGNOSTICS, BatchResult, Request, Road
 from finaldrive.service.config import Settings
@@ -94,6 +95,50 @@ def test_a_job_succeeds_only_over_a_complete_store_and_a_hole_reopens_it(store_u
         db.dispose()
     assert reopened is not None and (reopened.state, reopened.owner) == ("interrupted", None)
     assert done is not None and done.state == "succeeded" and (done.n_done, done.total) == (3, 3)
+
+
+def test_a_store_by_a_scheduler_that_lost_the_job_writes_nothing(store_url: str) -> None:
+    """The fence is the store's last statement (the job's row is locked only from there to the commit):
+    a store by a scheduler that does not own the job raises LeaseLost, and none of its rows, index
+    entries, best, ranges or generations is left; the owner's store of the same slots then stores each
+    once, and a repeat leaves the counters equal to the rows."""
+    from finaldrive.service.db.levels import TABLES
+    from finaldrive.service.db.models import Generation, RoadExplored
+    from finaldrive.service.db.results import LeaseLost
+
+    db = open_database(Settings(db_url=store_url))
+    try:
+        job = _claimed_sweep(db)
+        part = Request(0, 0, 1, np.arange(3), np.array([[0.5, 0.1, 0.09], [1.0, 0.2, 0.09], [1.5, 0.1, 0.09]]))
+        batch = toy_batch(part.designs, Road.parse("sine:0.025:3"), fail_above_l2=0.15)
+        rows = rows_from_results([(part, batch, batch.fitness_m, [f"{i:x}" * 64 for i in range(3)], False)])
+        told = [{"run": 0, "generation": 1, "population": [[0.5, 0.1, 0.09]], "fitness_m": [20.0], "state": {},
+                 "best_fitness_m": 20.0, "mean_fitness_m": 20.0, "n_evals": 3, "n_failed": 1}]
+
+        def left() -> tuple[int, ...]:
+            with db.read() as session:
+                counts = [session.scalar(select(func.count()).select_from(table).where(table.job_id == job.id))
+                          for table in (Evaluation, Generation, RoadExplored)]
+                entries = [session.connection().exec_driver_sql(f"SELECT COUNT(*) FROM {name}").scalar()
+                           for name in TABLES]
+                road = session.get(JobRoad, (job.id, 1))
+                stored = session.get(Job, job.id)
+                assert road is not None and stored is not None
+                return (*counts, *entries, road.best_evaluation_id is not None,
+                        stored.n_done, stored.n_failed, stored.n_cached)
+
+        with pytest.raises(LeaseLost), db.write() as session:
+            store_results(session, "s2", job.id, rows, told)
+        assert left() == (0, 0, 0, 0, 0, False, 0, 0, 0)
+        with db.write() as session:
+            assert store_results(session, "s1", job.id, rows, told) == 3
+        with db.write() as session:  # the same slots again: nothing new, counted once
+            assert store_results(session, "s1", job.id, rows, []) == 0
+        evaluations, generations, ranges, *entries, best, n_done, n_failed, n_cached = left()
+    finally:
+        db.dispose()
+    assert (evaluations, generations, entries, best, n_done, n_failed, n_cached) == (3, 1, [3, 2], True, 2, 1, 0)
+    assert ranges >= 1
 
 
 def test_a_finished_job_s_counters_equal_its_rows(store_url: str) -> None:
