@@ -96,7 +96,7 @@ def cached_evaluations(session: Session, keys: Iterable[str]) -> dict[str, dict[
     On PostgreSQL each hash is looked up by itself (a LATERAL subquery, fenced by ``OFFSET 0``): the
     plain join's plan depended on the tables' statistics, which a new job's tables do not have until
     autovacuum's next ANALYZE, and without them PostgreSQL scanned both tables for every lookup
-    (104 ms for 500 keys against 5 ms: 5 s of a paper-plan run's 10 s in the scheduler's loop)."""
+    (about 100 ms a lookup of 900 keys against 5 ms: 5 s of a paper-plan run's 10 s in the scheduler's loop)."""
     wanted = set(keys)
     hashes = sorted({key_hash(key) for key in wanted})
     connection = session.connection()
