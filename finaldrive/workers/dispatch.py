@@ -22,17 +22,26 @@ generations in one task rather than a task each).
 A batch whose task raised, or whose worker was lost for good, is tried again one design a
 task, so only the design at fault fails (``on_failure``), never its neighbours in the batch.
 
-A task that runs far longer than its designs should take (:data:`HEDGE_AFTER` times the source's
-measured time a design, at least :data:`HEDGE_MIN_S`) is run again as a copy, and again if that
-copy is overdue too, up to :data:`MAX_COPIES` copies a task (first copies: as many a worker in flight): whichever
-returns first is delivered, the others' results are dropped. A node that died (SIGKILLed: Ray
-takes ~15 s to declare it dead and retry its tasks) or one still compiling the engine then holds no
-DE generation for longer than that (issue 30). A cluster slowed down as a whole is not doubled:
-the measured time a design (the workers' own clock) slows with it.
+A task that runs far longer than its designs should take is run again as a copy, and again if
+that copy is overdue too, up to :data:`MAX_COPIES` copies a task (first copies: as many a worker in
+flight): whichever returns first is delivered, the others' results are dropped. A node that died
+(SIGKILLed: Ray takes ~15 s to declare it dead and retry its tasks) or one still compiling the
+engine then holds no DE generation for longer than that (issue 30). Overdue means: running (its
+clock starts once as many tasks have returned as were queued ahead of it: executors start tasks
+first in, first out) for longer
+than :data:`HEDGE_AFTER` times its designs' expected time (the source's measured time a design),
+at least :data:`HEDGE_MIN_S`, with the expected time scaled by the *pace* of the tasks that
+finished since it started (their time on the workers' own clock over their expected time; the
+slowest of them). A machine or cluster slowed down as a whole (an API under load beside
+the workers) slows those tasks too, and is not doubled; a dead node's tasks stay overdue against
+the live nodes' pace. While no task has finished since it started, nothing says the others are
+faster, and a task is overdue only past :data:`HEDGE_UNSEEN` times its expected time.
 """
 
 from __future__ import annotations
 
+import bisect
+import itertools
 import logging
 import math
 import time
@@ -98,12 +107,17 @@ class Work:
 
 log = logging.getLogger(__name__)
 
-#: A task is run again (a copy) once its latest copy has run this many times its designs' expected time ...
+#: A task is run again (a copy) once its latest copy has run this many times its designs' expected time,
+#: scaled by the pace of the tasks finished since it started ...
 HEDGE_AFTER = 4.0
+#: ... or, while none has finished since it started, this many times ...
+HEDGE_UNSEEN = 16.0
 #: ... and at least this long [s] (a loaded machine's pauses stay below it), looked at this often [s] ...
 HEDGE_MIN_S, HEDGE_CHECK_S = 0.5, 0.1
 #: ... up to this many copies besides the first.
 MAX_COPIES = 2
+#: The paces of this many tasks finished last are kept (the slowest since a task started scales its expected time).
+PACES_KEPT = 64
 
 #: Work queued in the executor beyond one task a worker, in seconds of the cluster's time.
 QUEUE_S = 0.05
@@ -134,11 +148,13 @@ class Load:
     backlog_designs: int
 
 
-@dataclass(frozen=True)
+@dataclass
 class _Task:
     work: Work
     parts: tuple[Request, ...]  # consecutive in the task's rows
     handed_at: float
+    start_after: int   # a worker could take it once the executor has returned this many tasks (first in, first out)
+    started_at: float | None   # ... which it had by then (None: not yet)
 
 
 class Dispatcher:
@@ -167,6 +183,9 @@ class Dispatcher:
         self._load_tasks = self._load_designs = 0
         self._busy_integral = 0.0
         self._copies: dict[int, list[int]] = {}   # a hedged task's id (and each copy's) -> all copies, in order
+        self._freed = 0   # tasks the executor has returned (each freed a worker), since the start
+        # the pace of the tasks finished lately: (when, their time on the workers over their expected time)
+        self._paces: deque[tuple[float, float]] = deque(maxlen=PACES_KEPT)
         self._next_hedge = 0.0
         #: copies of overdue tasks started (HEDGE_AFTER), since the start
         self.hedged = 0
@@ -232,10 +251,15 @@ class Dispatcher:
         if now < self._next_hedge:
             return
         self._next_hedge = now + HEDGE_CHECK_S
+        finished_at = [at for at, _ in self._paces]
+        slowest = list(itertools.accumulate(reversed([pace for _, pace in self._paces]), max))[::-1]
         for task_id, task in list(self._tasks.items()):
+            if task.started_at is None and self._freed >= task.start_after:
+                task.started_at = now
             sizer = task.work.sizer
             copies = self._copies.get(task_id, [task_id])
-            if copies[-1] != task_id or len(copies) > MAX_COPIES or sizer is None or not sizer.designs_done:
+            if (task.started_at is None or copies[-1] != task_id or len(copies) > MAX_COPIES or sizer is None
+                    or not sizer.designs_done):
                 continue
             extra = len(self._copies) - len({id(c) for c in self._copies.values()})   # copies in flight
             if extra >= MAX_COPIES * self.executor.num_workers and len(copies) == 1:
@@ -243,9 +267,13 @@ class Dispatcher:
             designs = sum(len(part) for part in task.parts)
             overhead = sizer.overhead_s if math.isfinite(sizer.overhead_s) else 0.0
             expected = designs * sizer.compute_s / sizer.designs_done + overhead
-            if now - task.handed_at > max(HEDGE_MIN_S, HEDGE_AFTER * expected):
-                log.info("a task of %d designs has run %.1f s (expected %.3f s): running it again", designs,
-                         now - task.handed_at, expected)
+            since = bisect.bisect_right(finished_at, task.started_at)   # the first task finished since it started
+            pace = slowest[since] if since < len(slowest) else None
+            after = HEDGE_AFTER * pace if pace is not None else HEDGE_UNSEEN
+            if now - task.started_at > max(HEDGE_MIN_S, after * expected):
+                log.info("a task of %d designs has run %.1f s (expected %.3f s; the slowest pace of the tasks "
+                         "finished since: %s): running it again", designs, now - task.started_at, expected,
+                         "none finished" if pace is None else f"{pace:.1f}x")
                 copy = self._submit(task.work, self._works[task.work.key][1], list(task.parts), again=len(copies))
                 copies = [*copies, copy]
                 for member in copies:
@@ -293,8 +321,12 @@ class Dispatcher:
     def _submit(self, work: Work, handles: tuple[Any, ...], parts: list[Request], again: int = 0) -> int:
         rows = np.concatenate([np.column_stack([np.full(len(part), float(part.road)), part.designs])
                                for part in parts])
+        # tasks ahead of it to return before a worker takes it; a copy starts at once (Ray gives copies
+        # workers of their own, Executor.submit)
+        ahead = max(0, len(self._tasks) - self.executor.num_workers + 1) if not again else 0
         task_id = self.executor.submit(_apply, rows, self._fn, *handles, again=again)
-        self._tasks[task_id] = _Task(work, tuple(parts), time.perf_counter())
+        now = time.perf_counter()
+        self._tasks[task_id] = _Task(work, tuple(parts), now, self._freed + ahead, None if ahead else now)
         work.in_flight += 1
         work.waited_in_flight += sum(len(part) for part in parts if part.waited)
         return task_id
@@ -339,6 +371,7 @@ class Dispatcher:
             self._window_busy_s += time.perf_counter() - begun
             done = self.executor.poll(timeout)  # waiting for results is not
             begun = time.perf_counter()
+        self._freed += len(done)
         for d in done:
             task = self._forget(d.task)
             if task is None:
@@ -364,6 +397,9 @@ class Dispatcher:
             else:
                 timed: Timed = d.result
                 assert work.sizer is not None
+                if work.sizer.designs_done:   # its pace, against what the source's designs took so far
+                    self._paces.append((time.perf_counter(), timed.compute_s * work.sizer.designs_done
+                                        / max(1e-9, designs * work.sizer.compute_s)))
                 work.sizer.observe(designs, time.perf_counter() - task.handed_at, timed.busy_s, timed.compute_s,
                                    timed.idle_s)
                 self._measured = work.sizer

@@ -207,6 +207,41 @@ def test_a_task_far_overdue_is_run_again_and_delivered_once(tmp_path: Any) -> No
     assert load.backlog_designs == 0 and 0.0 < load.busy_share <= 1.0
 
 
+def slowed(rows: np.ndarray, roads: Any, factor_file: str) -> list[tuple[int, BatchResult]]:
+    """``task``, taking 10 ms a design times the factor in ``factor_file`` (a machine slowed as a whole)."""
+    import time
+    from pathlib import Path
+
+    time.sleep(0.01 * len(rows) * float(Path(factor_file).read_text()))
+    return task(rows, roads)
+
+
+def test_a_machine_slowed_down_as_a_whole_has_no_task_run_again(tmp_path: Any) -> None:
+    """Every worker 10 times slower at once (an API under load beside them): a task then takes 10 times
+    its designs' expected time, and it and the tasks queued behind it are on time against the pace of
+    the others: no copy, where copies would take the slowed workers from other work."""
+    from functools import partial
+
+    factor = tmp_path / "factor"
+    factor.write_text("1")
+    sink = Sink()
+    with ProcessExecutor(num_workers=2) as executor:
+        dispatcher = Dispatcher(executor, partial(slowed, factor_file=str(factor)), batch_size=10)
+        work = sink.work("a", request(300))
+        dispatcher.add(work)
+        slowed_at = None
+        while work.queue or dispatcher.in_flight():
+            dispatcher.step(1.0)
+            if slowed_at is None and len(sink.results) >= 20:   # 200 designs at 10 ms, then 100 at 100 ms
+                (tmp_path / "slow").write_text("10")
+                (tmp_path / "slow").replace(factor)   # at once: no worker reads a file half written
+                slowed_at = len(sink.results)
+    assert slowed_at is not None and len(sink.results) - slowed_at >= 6   # tasks of 1 s ran
+    assert dispatcher.hedged == 0
+    got = sorted(int(c) for p, _ in sink.results for c in p.candidates)
+    assert got == list(range(300)) and not sink.failures
+
+
 def test_load_counts_the_backlog_and_the_busy_share() -> None:
     dispatcher = Dispatcher(SerialExecutor(), task, batch_size=2)
     work = Sink().work("a", request(10))
