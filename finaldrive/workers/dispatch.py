@@ -28,14 +28,13 @@ flight): whichever returns first is delivered, the others' results are dropped. 
 (SIGKILLed: Ray takes ~15 s to declare it dead and retry its tasks) or one still compiling the
 engine then holds no DE generation for longer than that (issue 30). Overdue means: running (its
 clock starts once as many tasks have returned as were queued ahead of it: executors start tasks
-first in, first out) for longer
-than :data:`HEDGE_AFTER` times its designs' expected time (the source's measured time a design),
-at least :data:`HEDGE_MIN_S`, with the expected time scaled by the *pace* of the tasks that
-finished since it started (their time on the workers' own clock over their expected time; the
-slowest of them). A machine or cluster slowed down as a whole (an API under load beside
-the workers) slows those tasks too, and is not doubled; a dead node's tasks stay overdue against
-the live nodes' pace. While no task has finished since it started, nothing says the others are
-faster, and a task is overdue only past :data:`HEDGE_UNSEEN` times its expected time.
+first in, first out) for longer than :data:`HEDGE_AFTER` times its designs' expected time (the
+source's measured time a design), at least :data:`HEDGE_MIN_S`, with the expected time scaled by
+the *pace* of the tasks that started after it and have finished (their time on the workers' own
+clock over their expected time; the slowest of them). A machine or cluster slowed down as a whole
+(an API under load beside the workers) slows those tasks too, and is not doubled; a dead node's
+tasks stay overdue against the live nodes' pace. While no such task has finished, nothing says the
+others are faster, and a task is overdue only past :data:`HEDGE_UNSEEN` times its expected time.
 """
 
 from __future__ import annotations
@@ -108,15 +107,15 @@ class Work:
 log = logging.getLogger(__name__)
 
 #: A task is run again (a copy) once its latest copy has run this many times its designs' expected time,
-#: scaled by the pace of the tasks finished since it started ...
+#: scaled by the pace of the tasks started after it and finished ...
 HEDGE_AFTER = 4.0
-#: ... or, while none has finished since it started, this many times ...
+#: ... or, while none has, this many times ...
 HEDGE_UNSEEN = 16.0
 #: ... and at least this long [s] (a loaded machine's pauses stay below it), looked at this often [s] ...
 HEDGE_MIN_S, HEDGE_CHECK_S = 0.5, 0.1
 #: ... up to this many copies besides the first.
 MAX_COPIES = 2
-#: The paces of this many tasks finished last are kept (the slowest since a task started scales its expected time).
+#: The paces of this many tasks finished last are kept (the slowest of those started after a task scales its own).
 PACES_KEPT = 64
 
 #: Work queued in the executor beyond one task a worker, in seconds of the cluster's time.
@@ -184,7 +183,7 @@ class Dispatcher:
         self._busy_integral = 0.0
         self._copies: dict[int, list[int]] = {}   # a hedged task's id (and each copy's) -> all copies, in order
         self._freed = 0   # tasks the executor has returned (each freed a worker), since the start
-        # the pace of the tasks finished lately: (when, their time on the workers over their expected time)
+        # the tasks finished lately: (when they started, their time on the workers over their expected time)
         self._paces: deque[tuple[float, float]] = deque(maxlen=PACES_KEPT)
         self._next_hedge = 0.0
         #: copies of overdue tasks started (HEDGE_AFTER), since the start
@@ -251,8 +250,9 @@ class Dispatcher:
         if now < self._next_hedge:
             return
         self._next_hedge = now + HEDGE_CHECK_S
-        finished_at = [at for at, _ in self._paces]
-        slowest = list(itertools.accumulate(reversed([pace for _, pace in self._paces]), max))[::-1]
+        paces = sorted(self._paces)
+        started = [at for at, _ in paces]
+        slowest = list(itertools.accumulate(reversed([pace for _, pace in paces]), max))[::-1]   # from each on
         for task_id, task in list(self._tasks.items()):
             if task.started_at is None and self._freed >= task.start_after:
                 task.started_at = now
@@ -267,12 +267,14 @@ class Dispatcher:
             designs = sum(len(part) for part in task.parts)
             overhead = sizer.overhead_s if math.isfinite(sizer.overhead_s) else 0.0
             expected = designs * sizer.compute_s / sizer.designs_done + overhead
-            since = bisect.bisect_right(finished_at, task.started_at)   # the first task finished since it started
-            pace = slowest[since] if since < len(slowest) else None
+            # the first finished task started after it (its clock is read every HEDGE_CHECK_S: one started in the
+            # same look may have started before it)
+            after_it = bisect.bisect_right(started, task.started_at)
+            pace = slowest[after_it] if after_it < len(slowest) else None
             after = HEDGE_AFTER * pace if pace is not None else HEDGE_UNSEEN
             if now - task.started_at > max(HEDGE_MIN_S, after * expected):
                 log.info("a task of %d designs has run %.1f s (expected %.3f s; the slowest pace of the tasks "
-                         "finished since: %s): running it again", designs, now - task.started_at, expected,
+                         "started after it: %s): running it again", designs, now - task.started_at, expected,
                          "none finished" if pace is None else f"{pace:.1f}x")
                 copy = self._submit(task.work, self._works[task.work.key][1], list(task.parts), again=len(copies))
                 copies = [*copies, copy]
@@ -397,8 +399,9 @@ class Dispatcher:
             else:
                 timed: Timed = d.result
                 assert work.sizer is not None
-                if work.sizer.designs_done:   # its pace, against what the source's designs took so far
-                    self._paces.append((time.perf_counter(), timed.compute_s * work.sizer.designs_done
+                if work.sizer.designs_done:   # its pace, against what the source's designs took so far; its
+                    start = task.handed_at if task.started_at is None else task.started_at   # start, or the earliest
+                    self._paces.append((start, timed.compute_s * work.sizer.designs_done
                                         / max(1e-9, designs * work.sizer.compute_s)))
                 work.sizer.observe(designs, time.perf_counter() - task.handed_at, timed.busy_s, timed.compute_s,
                                    timed.idle_s)
