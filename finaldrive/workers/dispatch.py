@@ -256,10 +256,11 @@ class Dispatcher:
         for task_id, task in list(self._tasks.items()):
             if task.started_at is None and self._freed >= task.start_after:
                 task.started_at = now
+            if task.started_at is None or now - task.started_at <= HEDGE_MIN_S:
+                continue   # (most tasks: nothing more to look at)
             sizer = task.work.sizer
             copies = self._copies.get(task_id, [task_id])
-            if (task.started_at is None or copies[-1] != task_id or len(copies) > MAX_COPIES or sizer is None
-                    or not sizer.designs_done):
+            if copies[-1] != task_id or len(copies) > MAX_COPIES or sizer is None or not sizer.designs_done:
                 continue
             extra = len(self._copies) - len({id(c) for c in self._copies.values()})   # copies in flight
             if extra >= MAX_COPIES * self.executor.num_workers and len(copies) == 1:
