@@ -116,7 +116,7 @@ class BatchSizer:
         sizer = cls(earlier.num_workers, round_trip_s=earlier.round_trip_s, idle_s=earlier.idle_s.copy())
         if earlier.designs_done:
             sizer.designs_done = min(earlier.designs_done, PRIOR_DESIGNS)
-            sizer.compute_s = earlier.compute_s / earlier.designs_done * sizer.designs_done
+            sizer.compute_s = earlier.per_design_s * sizer.designs_done
         return sizer
 
     def observe(self, n_designs: int, round_trip_s: float, busy_s: float, compute_s: float,
@@ -127,6 +127,11 @@ class BatchSizer:
         self.round_trip_s = min(self.round_trip_s, max(0.0, round_trip_s - busy_s))
         if idle_s is not None:
             self.idle_s.append(idle_s)
+
+    @property
+    def per_design_s(self) -> float:
+        """The measured compute time a design (rule 1); only once designs were done."""
+        return self.compute_s / self.designs_done
 
     @property
     def overhead_s(self) -> float:
@@ -144,7 +149,7 @@ class BatchSizer:
         return batch_size(
             remaining=remaining,
             num_workers=self.num_workers,
-            per_design_s=self.compute_s / self.designs_done,
+            per_design_s=self.per_design_s,
             overhead_s=self.overhead_s,
             driver_s=driver_s,
             first=first,

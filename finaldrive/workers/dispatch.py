@@ -267,7 +267,7 @@ class Dispatcher:
                 continue   # the cap holds back first copies; a second goes on (its first may be on the dead node)
             designs = sum(len(part) for part in task.parts)
             overhead = sizer.overhead_s if math.isfinite(sizer.overhead_s) else 0.0
-            expected = designs * sizer.compute_s / sizer.designs_done + overhead
+            expected = designs * sizer.per_design_s + overhead
             # the first finished task started after it (its clock is read every HEDGE_CHECK_S: one started in the
             # same look may have started before it)
             after_it = bisect.bisect_right(started, task.started_at)
@@ -402,8 +402,7 @@ class Dispatcher:
                 assert work.sizer is not None
                 if work.sizer.designs_done:   # its pace, against what the source's designs took so far; its
                     start = task.handed_at if task.started_at is None else task.started_at   # start, or the earliest
-                    self._paces.append((start, timed.compute_s * work.sizer.designs_done
-                                        / max(1e-9, designs * work.sizer.compute_s)))
+                    self._paces.append((start, timed.compute_s / max(1e-9, designs * work.sizer.per_design_s)))
                 work.sizer.observe(designs, time.perf_counter() - task.handed_at, timed.busy_s, timed.compute_s,
                                    timed.idle_s)
                 self._measured = work.sizer
