@@ -10,8 +10,9 @@ paper-study job: the Table 9 sweep on the 23 roads and 23 DEs (NP 50, 50 generat
 evaluations, submitted through the service's own submission path into a fresh store (a SQLite file
 unless ``--db``). Before timing, every Ray worker is started (one sleeping task a CPU, which also
 loads the stand-in) and a small job (``WARM_UP``) runs through the scheduler, so the figure is a
-running service's scheduler, not Ray's start-up nor the scheduler's (a scheduler's first job waits
-~0.35 s for its writer process to start: docs/performance-log.md).
+running service's scheduler, not Ray's start-up nor the scheduler's (its writer process, forked from
+the fork server, imports this module again before it serves: ~0.35 s, where the service's own main
+module takes 8 ms; docs/performance-log.md).
 
 The plan ``big`` is two jobs submitted together: a dense sweep of 1,018,080 evaluations over 4 roads
 (a2 every 2 deg, L2 every 2 mm, 14 R_WS) and the paper's 23 DEs (Table 10 on the 23 roads).
@@ -282,8 +283,8 @@ def _hold(task: SleepTask | None) -> None:
 
 
 #: A job run through the scheduler before the clock starts, so that the figure is a running service's:
-#: its writer process started (it imports this module again, ~0.35 s) and its store opened. Off every
-#: plan's grid and roads: nothing of it is reused from the result cache.
+#: its writer process started (it imports this module, the parent's main, again: ~0.35 s) and its store
+#: opened. Off every plan's grid and roads: nothing of it is reused from the result cache.
 WARM_UP = {"kind": "sweep", "roads": ["sine:0.011:3.3"], "grid": "a2_deg=1.5:7.5:2,l2_m=0.0501:0.0601:0.005"}
 
 
