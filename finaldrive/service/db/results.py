@@ -237,9 +237,9 @@ def _insert_many(session: Session, table: str, columns: Sequence[str], values: S
     if not values:
         return 0
     if session.get_bind().dialect.name == "postgresql":  # SQLite stores a NaN as NULL itself
-        values = [tuple(None if isinstance(v, float) and v != v else v for v in row) for row in values]
         if len(values) >= COPY_ROWS:
             return _copy_many(session, table, columns, values, unique, fixed)
+        values = [tuple(None if isinstance(v, float) and v != v else v for v in row) for row in values]
     m = marker(session.connection())
     sql = (f"INSERT INTO {table} ({', '.join([*fixed, *columns])}) "
            f"VALUES ({', '.join([*map(_constant, fixed.values()), *[m] * len(columns)])}) "
@@ -260,8 +260,10 @@ def _copy_many(session: Session, table: str, columns: Sequence[str], values: Seq
     """PostgreSQL: ``values`` through ``COPY`` into ``_staging_<table>`` (temporary, emptied at commit), in
     the binary format with the staging table's column types (8 times the text format's rows a second for
     the evaluations' rows: no number formatted as text and parsed back); in text when a column is JSON,
-    whose binary dumper would encode the stored JSON text again. The ``fixed`` values are parameters of
-    the ``INSERT ... SELECT``."""
+    whose binary dumper would encode the stored JSON text again. A NaN goes in as PostgreSQL's NaN and
+    becomes NULL in the ``INSERT ... SELECT`` (``NULLIF``: PostgreSQL's NaN equals NaN), not in Python: the
+    rows' conversion value by value cost the writer more than the COPY (issue 27). The ``fixed`` values
+    are parameters of the ``INSERT ... SELECT``."""
     names = ", ".join(columns)
     staging = f"_staging_{table}"
     connection = session.connection()
@@ -279,16 +281,18 @@ def _copy_many(session: Session, table: str, columns: Sequence[str], values: Seq
                 copy.set_types(types)
             for row in values:
                 copy.write_row(row)
+        selected = [f"NULLIF({name}, 'NaN')" if oid in _FLOAT_OIDS else name for name, oid in zip(columns, types,
+                                                                                                   strict=True)]
         cursor.execute(f"INSERT INTO {table} ({', '.join([*fixed, *columns])}) SELECT "
-                       f"{', '.join([*['%s'] * len(fixed), *columns])} FROM {staging} "
+                       f"{', '.join([*['%s'] * len(fixed), *selected])} FROM {staging} "
                        f"ON CONFLICT ({', '.join(unique)}) DO NOTHING", tuple(fixed.values()))
         inserted = cursor.rowcount
         cursor.execute(f"DELETE FROM {staging}")  # a second insert in the transaction starts empty (no new file)
     return int(inserted)
 
 
-#: PostgreSQL's json and jsonb type oids.
-_JSON_OIDS = {114, 3802}
+#: PostgreSQL's json and jsonb type oids; real and double precision's.
+_JSON_OIDS, _FLOAT_OIDS = {114, 3802}, {700, 701}
 #: varchar goes by text's binary dumper (the same bytes; psycopg 3.1 has no binary dumper for varchar).
 _VARCHAR_OID, _TEXT_OID = 1043, 25
 
