@@ -28,7 +28,9 @@ simulated by the engine at start-up (sine:0.04:3, the Table 8 box, compilation e
 
 Printed (JSON with ``--json``): ``ideal_s`` (total evaluation time / CPUs), ``wall_s`` (submission to
 the jobs' end), ``efficiency`` (ideal_s / wall_s), ``peak_in_flight`` (most tasks in flight at once),
-``evaluations_per_s`` (stored), with the machine and the settings (``ray_costs``, ``eval_dist``).
+``evaluations_per_s`` (stored), ``cpu_s`` (the CPU seconds each role used while the clock ran:
+:data:`CPU_ROLES`, from Linux's /proc) and ``cpu_us_per_evaluation`` (the same a stored evaluation),
+with the machine and the settings (``ray_costs``, ``eval_dist``).
 """
 
 from __future__ import annotations
@@ -312,6 +314,52 @@ def _count_submissions(executor: Any) -> list[int]:
     return count
 
 
+#: Where the machine's CPU went while the clock ran: this process, the scheduler's writer process, the
+#: database server's processes, this process's other descendants (Ray's), and the rest of the machine.
+CPU_ROLES = ("driver", "writer", "database", "ray", "other")
+
+
+def _processes() -> dict[int, tuple[int, str, float]]:
+    """Every process's parent, name and CPU time so far [s] (Linux's /proc; empty elsewhere)."""
+    tick = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+    out = {}
+    for entry in Path("/proc").glob("[0-9]*"):
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:  # gone meanwhile
+            continue
+        name, fields = stat[stat.index("(") + 1:stat.rindex(")")], stat[stat.rindex(")") + 2:].split()
+        out[int(entry.name)] = (int(fields[1]), name, (int(fields[11]) + int(fields[12])) / tick)
+    return out
+
+
+def cpu_roles(before: dict[int, tuple[int, str, float]], after: dict[int, tuple[int, str, float]],
+              writer: int | None) -> dict[str, float]:
+    """CPU seconds each of :data:`CPU_ROLES` used between two :func:`_processes` (a process that ended
+    between them is not counted: none of the roles' does while the clock runs)."""
+    me = os.getpid()
+
+    def role(pid: int) -> str:
+        if pid == me:
+            return "driver"
+        if pid == writer:
+            return "writer"
+        if after[pid][1].startswith("postgres"):
+            return "database"
+        seen = set()
+        while pid in after and pid not in seen:  # a descendant of this process
+            seen.add(pid)
+            pid = after[pid][0]
+            if pid == me:
+                return "ray"
+        return "other"
+
+    used = dict.fromkeys(CPU_ROLES, 0.0)
+    for pid, (_, _, cpu) in after.items():
+        used[role(pid)] += cpu - (before[pid][2] if pid in before else 0.0)
+    return {name: round(value, 2) for name, value in used.items()}
+
+
 def _stamp(seconds: float) -> tuple[int, float, float]:
     """A measuring task: (process id, start, end) on the wall clock around ``seconds`` of sleep."""
     start = time.time()
@@ -379,6 +427,7 @@ def run(cpus: int, plan: str, db_url: str | None, executor_kind: str, times: np.
             scheduler.turn(0.02)
         held_before = cluster.held_s if cluster is not None else 0.0
         tasks = _count_submissions(executor)
+        processes = _processes()
         start = time.perf_counter()
         jobs = _submit(db, PLANS[plan])
         peak = 0
@@ -388,6 +437,7 @@ def run(cpus: int, plan: str, db_url: str | None, executor_kind: str, times: np.
             if not scheduler.jobs and _finished(db, jobs):  # the scheduler lets a job go once it is finished
                 break
         wall = time.perf_counter() - start
+        cpu = cpu_roles(processes, _processes(), getattr(scheduler.writer, "pid", None))
         scheduler.shutdown()
         with db.read() as session:
             rows = [session.get(Job, job) for job in jobs]
@@ -411,7 +461,9 @@ def run(cpus: int, plan: str, db_url: str | None, executor_kind: str, times: np.
             "evaluations": stored, "ideal_s": round(ideal, 3), "wall_s": round(wall, 3),
             "efficiency": round(ideal / wall, 4) if wall else None, "peak_in_flight": peak,
             "tasks": tasks[0], "designs_per_task": round(stored / max(1, tasks[0]), 2),
-            "evaluations_per_s": round(stored / wall, 1), "store_bytes": size,
+            "evaluations_per_s": round(stored / wall, 1), "cpu_s": cpu,
+            "cpu_us_per_evaluation": {name: round(1e6 * value / max(1, stored), 1) for name, value in cpu.items()},
+            "store_bytes": size,
             "bytes_per_evaluation": round(size / max(1, stored), 1), "machine": describe()}
 
 
