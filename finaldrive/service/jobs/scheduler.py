@@ -504,14 +504,23 @@ def _writer(db: Database, scheduler_id: str) -> Writer | WriterProcess:
 
 
 def _first_designs(requests: deque[Request], designs: int) -> list[Request]:
-    """The smallest requests, while they hold no more than ``designs`` designs together (at least one)."""
+    """The smallest requests, while they hold no more than ``designs`` designs together. A sweep's request
+    (a road's whole grid) that does not fit is split in ``requests``: its first designs that fit are taken,
+    the rest stays (its keys hashed and looked up at once stopped the loop for ~1.5 s a road of the big plan,
+    nothing dispatched meanwhile). A DE generation is taken whole (at least one request)."""
     out: list[Request] = []
-    total = 0
+    room = designs
     for request in sorted(requests, key=len):
-        if out and total + len(request) > designs:
+        if len(request) > room and not request.waited and room > 0:
+            head, rest = request.split(room)
+            at = next(i for i, r in enumerate(requests) if r is request)
+            requests[at] = rest
+            requests.insert(at, head)
+            request = head
+        elif out and len(request) > room:
             break
         out.append(request)
-        total += len(request)
+        room -= len(request)
     return out
 
 

@@ -410,3 +410,28 @@ def test_scheduler_ids_fit_the_store(settings: Settings) -> None:
     assert scheduler_id("host", ":1:2") == "host:1:2"
     with pytest.raises(ValueError, match="at most 64"):
         Scheduler(open_database(settings), SerialExecutor(), scheduler_id="x" * 65)
+
+
+def test_the_intake_splits_a_sweep_s_road_in_place_and_takes_a_de_generation_whole() -> None:
+    """About ``designs`` designs a turn, the smallest requests first: a sweep's road (its whole grid) is
+    split, its first designs taken and the rest left where it was; a DE generation is never split."""
+    from collections import deque
+
+    from finaldrive.engine.study.runs import Request
+    from finaldrive.service.jobs.scheduler import _first_designs
+
+    def request(n: int, road: int, *, waited: bool = False) -> Request:
+        candidates = np.arange(n)
+        return Request(0, 0, road, candidates, np.column_stack([candidates] * 3).astype(float), waited)
+
+    sweep, generation = request(10_000, 0), request(50, 1, waited=True)
+    intake = deque([sweep, generation])
+    taken = _first_designs(intake, 4096)
+    assert taken[0] is generation and [len(r) for r in taken] == [50, 4046]
+    assert len(intake) == 3 and intake[0] is taken[1] and intake[2] is generation
+    assert np.array_equal(np.concatenate([r.candidates for r in list(intake)[:2]]), sweep.candidates)
+    assert np.array_equal(np.concatenate([r.designs for r in list(intake)[:2]]), sweep.designs)
+    large = request(5000, 2, waited=True)
+    intake = deque([large, request(9000, 0)])
+    taken = _first_designs(intake, 4096)
+    assert len(taken) == 1 and taken[0] is large and len(intake) == 2
