@@ -359,20 +359,27 @@ class Scheduler:
     def _admit(self, job: ActiveJob, request: Request, stored: dict[int, float], keys: list[str],
                hits: dict[str, dict[str, Any]]) -> None:
         """Tell what is known, queue the rest: each distinct design once (duplicates are copied)."""
-        keep = np.array([int(c) not in stored for c in request.candidates], dtype=bool)
-        if not keep.all():
+        if stored:
+            keep = np.array([c not in stored for c in request.candidates.tolist()], dtype=bool)
             known = request.part(np.flatnonzero(~keep))
-            self._tell(job, known, np.array([stored[int(c)] for c in known.candidates]))
-        request = request.part(np.flatnonzero(keep))
+            self._tell(job, known, np.array([stored[c] for c in known.candidates.tolist()]))
+            request = request.part(np.flatnonzero(keep))
+        candidates = request.candidates.tolist()
+        if not candidates:
+            return
+        if not hits and len(set(keys)) == len(keys):  # the common case: nothing known, no duplicate
+            job.keys.update(zip(((request.road, request.step, c) for c in candidates), keys, strict=True))
+            assert job.work is not None
+            job.work.queue.append(request)
+            return
         firsts: dict[str, int] = {}
         todo, hit = [], []
         for i, key in enumerate(keys):
-            slot = (request.road, request.step, int(request.candidates[i]))
+            slot = (request.road, request.step, candidates[i])
             if key in hits:
                 hit.append(i)
             elif key in firsts:
-                job.copies.setdefault((request.road, request.step, int(request.candidates[firsts[key]])),
-                                      []).append(slot[2])
+                job.copies.setdefault((request.road, request.step, candidates[firsts[key]]), []).append(slot[2])
             else:
                 firsts[key] = i
                 todo.append(i)
@@ -391,8 +398,9 @@ class Scheduler:
         if job.id not in self.jobs:
             return
         fitness = fitness_values(batch)
-        keys = [job.keys.pop((part.road, part.step, int(c))) for c in part.candidates]
-        copies = [job.copies.pop((part.road, part.step, int(c)), None) for c in part.candidates] if job.copies else []
+        candidates = part.candidates.tolist()
+        keys = [job.keys.pop((part.road, part.step, c)) for c in candidates]
+        copies = [job.copies.pop((part.road, part.step, c), None) for c in candidates] if job.copies else []
         if not any(copies):
             job.writes.finish((part, batch, fitness, keys, transient))
             self._tell(job, part, fitness)

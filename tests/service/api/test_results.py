@@ -133,6 +133,20 @@ def test_a_designs_job_evaluates_each_roads_own_designs(client: TestClient) -> N
         assert r.status_code == 422 and field in r.text, bad
 
 
+def test_a_design_given_twice_in_a_request_is_simulated_once(client: TestClient, fake: ToyTask) -> None:
+    """Each distinct design of a request is simulated once; its copy is stored in its own slot as cached,
+    with the same result."""
+    design = [10.0, 0.05, 0.09]
+    spec = {"kind": "designs", "roads": ["flat"], "designs": [[design, [20.0, 0.06, 0.09], design]]}
+    before = fake.simulated
+    job = wait_done(client, client.post("/v1/jobs", json=spec).json()["id"])
+    assert fake.simulated - before == 2
+    assert (job["state"], job["done"], job["cached"]) == ("succeeded", 3, 1)
+    items = sorted(client.get(f"/v1/jobs/{job['id']}/evaluations").json()["items"], key=lambda e: e["candidate"])
+    assert [e["cached"] for e in items] == [False, False, True]
+    assert items[2]["fitness_m"] == items[0]["fitness_m"] != items[1]["fitness_m"]
+
+
 def test_a_client_cannot_take_a_sensitivity_or_band_key(client: TestClient) -> None:
     job = wait_done(client, client.post("/v1/jobs", json=SWEEP | {"roads": ["flat"]}).json()["id"])
     for key in (f"sensitivity:{job['id']}", f"band:tight:{job['id']}", f"model-band:drive_half:{job['id']}"):
