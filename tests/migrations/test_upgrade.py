@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sqlite3
 from pathlib import Path
 
 import pytest
@@ -14,7 +15,7 @@ from sqlalchemy import text
 
 from finaldrive.service.cli import main, server_cmds
 from finaldrive.service.config import Settings
-from finaldrive.service.db.engine import make_engine
+from finaldrive.service.db.engine import PAGE_SIZE, make_engine
 from finaldrive.service.db.migrate import SchemaMismatchError, alembic_config, current_revision, head_revision, upgrade
 from finaldrive.service.db.models import Base
 from finaldrive.service.main import create_app
@@ -33,6 +34,25 @@ def test_empty_database_upgraded_to_head_matches_models(url: str) -> None:
         assert conn.exec_driver_sql("PRAGMA journal_mode").scalar() == "wal"
         assert conn.exec_driver_sql("PRAGMA foreign_keys").scalar() == 1
         assert conn.exec_driver_sql("PRAGMA synchronous").scalar() == 2  # FULL
+        assert conn.exec_driver_sql("PRAGMA page_size").scalar() == PAGE_SIZE != 4096
+    assert current_revision(engine) == head_revision()
+    engine.dispose()
+
+
+def test_a_store_made_with_sqlite_s_default_pages_keeps_them_and_is_upgraded(tmp_path: Path) -> None:
+    path = tmp_path / "old.db"
+    old = sqlite3.connect(path)  # a store from before PAGE_SIZE: made by SQLite's defaults, in WAL mode
+    old.execute("PRAGMA journal_mode = WAL")
+    old.execute("CREATE TABLE earlier (x INTEGER)")
+    old.close()
+    url = f"sqlite:///{path}"
+    upgrade(url)
+    engine = make_engine(url)
+    with engine.connect() as conn:
+        assert conn.exec_driver_sql("PRAGMA page_size").scalar() == 4096
+        assert conn.exec_driver_sql("PRAGMA integrity_check").scalar() == "ok"
+        diff = compare_metadata(MigrationContext.configure(conn), Base.metadata)
+        assert [(change[0], change[1].name) for change in diff] == [("remove_table", "earlier")]  # ours all there
     assert current_revision(engine) == head_revision()
     engine.dispose()
 

@@ -1,7 +1,7 @@
 """Database engine and sessions.
 
 SQLite (the default) gets, on every new connection, ``journal_mode=WAL``, ``synchronous=FULL``
-and ``foreign_keys=ON``. pysqlite's
+and ``foreign_keys=ON``; a new database file gets pages of :data:`PAGE_SIZE` bytes. pysqlite's
 implicit transactions are replaced by explicit ``BEGIN`` (SQLAlchemy's SQLite recipe), each
 preceded by the transaction's ``busy_timeout``, and write transactions start with
 ``BEGIN IMMEDIATE`` so a reader never has to upgrade its lock.
@@ -35,6 +35,13 @@ POOL_SIZE = 40
 #: at random; 16 MiB stores 1.07x as many evaluations a second in 50,000-row transactions
 #: (``bench/bench_commit.py --cache-kib``, issue 27, docs/performance-log.md).
 WRITER_CACHE_KIB = 16384
+#: The page size [bytes] of a SQLite database this service creates (SQLite's default is 4,096; a file
+#: keeps the size it was made with). Storing results writes each transaction's pages to the log and
+#: moves index entries between levels page by page: with 16 KiB pages the writer used 6 % less CPU on the
+#: big plan of bench/bench_scheduler.py (efficiency 0.89-0.90 against 0.87), and /best on a million
+#: evaluations took 36 ms against 31 (bench/bench_best.py); 32 KiB stored no faster and read slower
+#: (52 ms). Issue 27, docs/performance-log.md.
+PAGE_SIZE = 16384
 #: Seconds to open a connection to a database server before giving up.
 CONNECT_TIMEOUT_S = 5
 
@@ -129,6 +136,7 @@ def make_engine(url: str, *, cache_kib: int | None = None, **kwargs: Any) -> Eng
         dbapi_conn.isolation_level = None  # we emit BEGIN ourselves (see _on_begin)
         cur = dbapi_conn.cursor()
         try:
+            cur.execute(f"PRAGMA page_size = {PAGE_SIZE}")  # before the file's first page; else nothing changes
             if not memory:
                 mode = _journal_mode_wal(cur)
                 if str(mode).lower() != "wal":
