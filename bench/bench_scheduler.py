@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import gc
 import heapq
 import itertools
 import json
@@ -54,7 +55,7 @@ from finaldrive.engine import DIAGNOSTICS, BatchResult, Bounds, Design, Road, Si
 from finaldrive.service.config import Settings
 from finaldrive.service.db.engine import Database
 from finaldrive.service.db.models import Job
-from finaldrive.service.jobs.scheduler import Scheduler, SchedulerConfig
+from finaldrive.service.jobs.scheduler import GC_THRESHOLDS, Scheduler, SchedulerConfig
 from finaldrive.service.jobs.submit import submit_job
 from finaldrive.service.machine import describe
 from finaldrive.service.schemas import JobSpec
@@ -411,7 +412,8 @@ def run(cpus: int, plan: str, db_url: str | None, executor_kind: str, times: np.
     tmp = tempfile.TemporaryDirectory(prefix="finaldrive-bench-")
     url = db_url or f"sqlite:///{Path(tmp.name) / 'bench.db'}"
     settings = Settings(db_url=url, executor="ray", num_workers=cpus)
-    db = open_database(settings)  # as finaldrive.service.jobs.scheduler.run_scheduler
+    gc.set_threshold(*GC_THRESHOLDS)  # as finaldrive.service.jobs.scheduler.run_scheduler
+    db = open_database(settings)
     virtual = executor_kind != "ray"
     cluster = VirtualCluster(cpus, costs if executor_kind == "virtual" else None, task_cpus=task_cpus) \
         if virtual else None

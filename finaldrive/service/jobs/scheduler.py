@@ -19,6 +19,7 @@ carry SQL; the details go to the log.
 
 from __future__ import annotations
 
+import gc
 import logging
 import math
 import os
@@ -86,6 +87,11 @@ log = logging.getLogger(__name__)
 
 #: A scheduler's transactions wait this long for a lock, then retry later (the loop keeps dispatching).
 SCHEDULER_LOCK_TIMEOUT_S = 2.0
+#: The cyclic garbage collector's thresholds in a scheduler's process (Python's are 700, 10, 10). The loop
+#: makes a few container objects a design (requests, the slots' keys, results, rows' parts): on the big plan
+#: of bench/bench_scheduler.py Python's ran ~2,400 collections, 0.86 s of the driver's 9.6 s, the full ones
+#: 45-78 ms each with the loop held; these ran 16, 0.10 s, and the driver used 8.2-8.7 s (issue 27).
+GC_THRESHOLDS = (50_000, 20, 20)
 #: Designs of a job looked up in the store a turn (the rest wait for the next turns).
 _INTAKE_DESIGNS = 4096
 #: An idle loop waits this long per turn: with jobs (a result may be on its way to the store), without.
@@ -570,6 +576,7 @@ def run_scheduler(settings: Settings, stop: threading.Event, *, scheduler_id: st
     from finaldrive.service.services import open_database
     from finaldrive.workers import make_executor
 
+    gc.set_threshold(*GC_THRESHOLDS)
     db = open_database(settings)
     db.lock_timeout_s = SCHEDULER_LOCK_TIMEOUT_S
     if not in_memory(db.url):
