@@ -118,6 +118,8 @@ class Executor(Protocol):
 
     num_workers: int
     capacity: int
+    #: CPUs a task holds, its designs run on as many threads (1 but for Ray's wide tasks)
+    task_cpus: int
 
     def share(self, value: Any) -> Shared:
         """Make ``value`` available to tasks; it is sent to each worker once (serial: kept as is;
@@ -175,7 +177,10 @@ def cancel_unseen(executor: Executor, tasks: Iterable[int]) -> None:
 
 
 class ExecutorMixin:
-    """What every executor shares: ``with executor:`` closes it."""
+    """What every executor shares: ``with executor:`` closes it; a task on one thread, unless the
+    executor says otherwise."""
+
+    task_cpus: int = 1
 
     def close(self) -> None:
         raise NotImplementedError

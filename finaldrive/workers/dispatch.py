@@ -350,7 +350,7 @@ class Dispatcher:
         at, ahead, queued = work.next_request()
         assert work.sizer is not None
         room = self._batch_size or work.sizer.next_size(queued, self.driver_s, first=ahead,
-                                                        waited=work.queue[at].waited)
+                                                        waited=work.queue[at].waited, threads=self.executor.task_cpus)
         parts: list[Request] = []
         while True:
             request = work.queue[at]

@@ -147,3 +147,18 @@ def test_waited_on_work_on_a_small_cluster_keeps_one_wave() -> None:
     # the same round on 2 workers: rules 1-4 already run it in one wave of large tasks; rule 5 changes nothing
     args = {"remaining": 50_000, "num_workers": 2, "per_design_s": 0.004, "overhead_s": 0.001, "driver_s": 6.5e-4}
     assert batch_size(**args, first=1150, waited=True) == batch_size(**args, first=1150)
+
+
+def test_a_wide_task_holds_whole_rounds_of_its_threads_but_a_generation_is_not_cut() -> None:
+    """16 threads a task, designs of 4 ms on 256 CPUs: a sweep's task is a multiple of 16 designs (no
+    last round part-empty); the last piece of what remains, a size under 16, and a waited-on request
+    keep their sizes."""
+    args = {"num_workers": 16, "per_design_s": 0.004 / 16, "overhead_s": 0.001, "driver_s": 6.5e-4}
+    one_thread = batch_size(remaining=10**6, **args)
+    wide = batch_size(remaining=10**6, **args, threads=16)
+    assert one_thread % 16 and wide % 16 == 0 and one_thread - 16 < wide < one_thread
+    assert batch_size(remaining=wide - 3, **args, threads=16) in (wide - 3, wide - 16)
+    assert batch_size(remaining=10, **args, threads=16) == 10
+    assert batch_size(remaining=10**6, **args, threads=10**4) == one_thread
+    first = {"remaining": 10**6, "first": 1150, "waited": True}
+    assert batch_size(**first, **args, threads=16) == batch_size(**first, **args) == math.ceil(1150 / 16) == 72
