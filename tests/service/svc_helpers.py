@@ -39,12 +39,14 @@ def toy_rows(rows: np.ndarray, roads: tuple[Road, ...], settings: SimSettings,
 
 
 class ToyTask:
-    """:func:`toy_rows` run in this process (serial executor), with a counter, a delay a design and a gate."""
+    """:func:`toy_rows` run in this process (serial executor), with a counter, a delay a design, a gate
+    and, for each design in the order they were run, its job's first road (a job's roads come with its tasks)."""
 
     def __init__(self, *, fail_above_l2: float | None = None, delay: float = 0.0) -> None:
         self.fail_above_l2 = fail_above_l2
         self.delay = delay
         self.simulated = 0
+        self.first_roads_run: list[str] = []
         self.gate = threading.Event()
         self.gate.set()
 
@@ -54,6 +56,7 @@ class ToyTask:
         if self.delay:
             time.sleep(self.delay * len(rows))
         self.simulated += len(rows)
+        self.first_roads_run += [roads[0].spec] * len(rows)
         return [(road, toy_batch(x, roads[road], self.fail_above_l2)) for road, x in by_road(rows)]
 
 
