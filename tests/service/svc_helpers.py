@@ -46,7 +46,7 @@ class ToyTask:
         self.fail_above_l2 = fail_above_l2
         self.delay = delay
         self.simulated = 0
-        self.first_roads_run: list[str] = []
+        self.roads_run: list[str] = []
         self.gate = threading.Event()
         self.gate.set()
 
@@ -56,7 +56,7 @@ class ToyTask:
         if self.delay:
             time.sleep(self.delay * len(rows))
         self.simulated += len(rows)
-        self.first_roads_run += [roads[0].spec] * len(rows)
+        self.roads_run += [roads[int(road)].spec for road in rows[:, 0]]
         return [(road, toy_batch(x, roads[road], self.fail_above_l2)) for road, x in by_road(rows)]
 
 
