@@ -118,7 +118,7 @@ class SchedulerConfig:
     lease_s: float = 15.0          # a job's lease, renewed every heartbeat
     heartbeat_s: float = 1.0       # also how fast a cancel is obeyed
     max_jobs: int = 32             # jobs run at once by this scheduler
-    flush_s: float = 0.25          # results are written at most this long after they arrive
+    flush_s: float = 0.25          # results are written at most this long after they arrive (at once to an idle writer)
     max_backlog_rows: int = 50_000  # results waiting for the store before dispatching pauses
     batch_size: int | None = None  # designs per task (None: adaptive)
     max_simulation_s: float | None = 60.0  # wall-time limit of one simulation (reason "time limit ...")
@@ -204,11 +204,7 @@ class Scheduler:
             keeper.start()
         try:
             while not stop.is_set():
-                finished = self.turn(0.05 if self.dispatcher.in_flight() else 0.2)
-                if not finished and not self.dispatcher.in_flight():
-                    # nothing ran nor came back: executors answer at once then, so wait here rather than
-                    # spin (an idle loop held a core and the GIL the recordings' thread needs)
-                    stop.wait(_IDLE_WAIT_S if self.jobs else _IDLE_POLL_S)
+                self.cycle(stop)
         finally:
             done.set()
             if keeper.is_alive():
@@ -229,6 +225,23 @@ class Scheduler:
                                              load=self._load), "heartbeat") is not None:
                 self._beaten = time.monotonic()
 
+    def cycle(self, stop: threading.Event) -> int:
+        """One turn as :meth:`run` takes them, and as the benches drive a scheduler; returns how many
+        tasks finished. When nothing ran nor came back, executors answer at once, so it waits rather
+        than spin (an idle loop holds a core and the GIL that the recordings' thread, the writer and
+        the workers need). While the writer has results to store, the wait ends with its next
+        transaction: a job paused behind its backlog, or done and waiting for its last results, goes
+        on at once, not after a fixed pause (issue 27: with the pause, and results handed over only
+        every ``flush_s``, the paper plan through a local Ray stored 37,400-40,900 evaluations a
+        second against 41,800-44,500, alternated)."""
+        finished = self.turn(0.05 if self.dispatcher.in_flight() else 0.2)
+        if not finished and not self.dispatcher.in_flight():
+            if self.writer.busy():
+                self.writer.wait(_IDLE_WAIT_S)
+            else:
+                stop.wait(_IDLE_WAIT_S if self.jobs else _IDLE_POLL_S)
+        return finished
+
     def turn(self, timeout: float) -> int:
         """One turn of the loop (tests drive it step by step); returns how many tasks finished."""
         now = self._turned = time.monotonic()
@@ -244,7 +257,7 @@ class Scheduler:
         self._intake()
         finished = self.dispatcher.step(timeout)
         self._finish_ready()
-        if time.monotonic() >= self._next_flush:
+        if time.monotonic() >= self._next_flush or not self.writer.busy():  # an idle writer gets them now
             self._flush()
         return finished
 

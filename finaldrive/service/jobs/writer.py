@@ -160,7 +160,7 @@ class Writer:
             else:
                 self._waiting[job_id] = writes
                 self._queue.append(job_id)
-            self._cond.notify()
+            self._cond.notify_all()  # (the scheduler's loop may wait on it too: wait)
 
     def pending(self, job_id: int) -> int:
         """Rows and generations of the job not yet stored."""
@@ -190,6 +190,12 @@ class Writer:
         """Wait until everything queued is stored (or ``timeout`` s); True if it was."""
         with self._cond:
             return self._cond.wait_for(lambda: not (self._waiting or self._busy), timeout)
+
+    def wait(self, timeout: float) -> None:
+        """Wait until the next transaction ends (or ``timeout`` s); at once if nothing waits to be stored."""
+        with self._cond:
+            if self._busy or self._queue:
+                self._cond.wait(timeout)
 
     def close(self) -> None:
         """Stop the thread; what still waits is dropped (the jobs resume from what is stored)."""

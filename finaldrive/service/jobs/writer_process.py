@@ -59,7 +59,7 @@ def start_fork_server() -> None:
 
 class WriterProcess:
     """A :class:`Writer` in a child process: ``put``, ``pending``, ``busy``, ``lost``, ``forget``,
-    ``drain`` and ``close`` as the thread's."""
+    ``drain``, ``wait`` and ``close`` as the thread's."""
 
     def __init__(self, db: Database, scheduler_id: str) -> None:
         self.scheduler_id = scheduler_id
@@ -115,6 +115,13 @@ class WriterProcess:
         """Wait until everything handed over is stored (or ``timeout`` s); True if it was."""
         with self._cond:
             return self._cond.wait_for(lambda: not self._unacked, timeout)
+
+    def wait(self, timeout: float) -> None:
+        """Wait until the child acknowledges its next transaction (or ``timeout`` s); at once if
+        nothing waits to be stored."""
+        with self._cond:
+            if self._unacked:
+                self._cond.wait(timeout)
 
     def close(self) -> None:
         """Stop the child; what it has not stored is dropped (the jobs resume from what is stored)."""

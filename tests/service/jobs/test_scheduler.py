@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import signal
 import sqlite3
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,7 @@ from finaldrive.service.db.leases import claim_jobs, db_now, scheduler_id
 from finaldrive.service.db.models import Evaluation, Generation, Job
 from finaldrive.service.db.results import generation_records
 from finaldrive.service.jobs.scheduler import Scheduler, SchedulerConfig
+from finaldrive.service.jobs.writer import Writer
 from finaldrive.service.jobs.writer_process import WriterProcess
 from finaldrive.service.main import create_app
 from finaldrive.service.services import open_database
@@ -254,6 +256,47 @@ def test_a_killed_writer_process_is_replaced_and_nothing_is_lost_or_stored_twice
     assert job["state"] == "succeeded" and job["done"] == 6 * 13
     slots = _slots(settings, job_id)
     assert len(slots) == len(set(slots)) == 6 * 13
+
+
+def test_results_go_to_an_idle_writer_at_once_not_at_the_next_flush(settings: Settings) -> None:
+    """The loop hands what arrived to a writer with nothing to store in the same turn: a job's results
+    are stored while it runs, although the flush interval is a minute."""
+    job_id = _submit(settings, SWEEP)
+    config = SchedulerConfig(lease_s=120.0, heartbeat_s=0.05, flush_s=60.0, recordings=False)
+    scheduler = Scheduler(open_database(settings), SerialExecutor(), config=config, task=ToyTask(delay=0.02),
+                          warmup=None)
+    running, stored_meanwhile = threading.Event(), []
+    try:
+        deadline = time.monotonic() + 30.0
+        while _job(settings, job_id)["state"] != "succeeded":
+            assert time.monotonic() < deadline, "timed out"
+            scheduler.cycle(running)
+            job = _job(settings, job_id)
+            if job["state"] == "running" and 0 < job["done"] < 24:
+                stored_meanwhile.append(job["done"])
+    finally:
+        scheduler.shutdown()
+        scheduler.db.dispose()
+    # (the first turn flushes: the interval starts there; later results reach the store only by the rule)
+    assert len(set(stored_meanwhile)) >= 2, f"stored while the job ran: {stored_meanwhile}"
+
+
+def test_a_writer_s_wait_ends_with_its_transaction(settings: Settings) -> None:
+    """``wait`` returns when the writer has stored what it holds, not at its timeout; at once when it
+    holds nothing (the scheduler's idle loop waits on it)."""
+    writer = Writer(open_database(settings), "s1")
+    stored = threading.Event()
+    writer._store = lambda job_id, writes: (time.sleep(0.3), stored.set(), True)[-1]  # type: ignore[method-assign]
+    try:
+        writer.put(1, [object()] * 3)  # type: ignore[arg-type]
+        begun = time.monotonic()
+        writer.wait(10.0)
+        assert stored.is_set() and time.monotonic() - begun < 5.0
+        begun = time.monotonic()
+        writer.wait(10.0)
+        assert time.monotonic() - begun < 1.0
+    finally:
+        writer.close()
 
 
 def test_health_reports_each_scheduler_and_is_503_without_one(settings: Settings) -> None:
