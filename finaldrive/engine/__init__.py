@@ -38,7 +38,8 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("Cost", "estimate_cost"), "finaldrive.engine.cost"),
     **dict.fromkeys(("StaticLoads", "calibration_design", "solve_chassis_cog", "solve_torque", "static_loads"),
                     "finaldrive.engine.calibrate"),
-    **dict.fromkeys(("CMAES", "DifferentialEvolution", "OPTIMISERS", "Optimiser", "plain_json"),
+    **dict.fromkeys(("CMAES", "DifferentialEvolution", "OPTIMISERS", "Optimiser", "plain_json", "with_population",
+                     "without_population"),
                     "finaldrive.engine.optimize"),
     **dict.fromkeys(("BAND_LIMIT_M", "TIE_CANDIDATES", "TIGHT_FACTOR", "band_of", "band_settings", "best_distinct",
                      "numerical_bands", "reference_refusal", "tie_flags"), "finaldrive.engine.study.band"),
@@ -124,6 +125,8 @@ if TYPE_CHECKING:  # the same names, for type checkers (explicit re-exports)
         DifferentialEvolution as DifferentialEvolution,
         Optimiser as Optimiser,
         plain_json as plain_json,
+        with_population as with_population,
+        without_population as without_population,
     )
     from finaldrive.engine.precompile import (
         compile_engine as compile_engine,

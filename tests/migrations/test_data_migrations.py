@@ -4,7 +4,8 @@ v0.2.0.b derives the indexed cache hash from each stored key; v0.2.0.c renames t
 with their units (a2 converted from radians to degrees) and rewrites stored grid specs and
 recording requests in the new names; v0.2.0.e moves each DE generation's record out of its stored
 state; v0.3.0.e indexes stored evaluations in the index tables of levels, and v0.3.0.f counts
-their levels. Downgrading restores the earlier rows.
+their levels; from v0.3.0.g states are stored without the population and fitness their rows hold.
+Downgrading restores the earlier rows.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import sqlalchemy as sa
 from alembic import command
 
 from finaldrive.engine import parse_grid
-from finaldrive.engine.optimize import DifferentialEvolution
+from finaldrive.engine.optimize import DifferentialEvolution, plain_json, without_population
 from finaldrive.service.db.migrate import alembic_config
 from finaldrive.service.db.results import key_hash
 
@@ -203,3 +204,36 @@ def test_stored_evaluations_are_indexed_at_the_last_level(url: str) -> None:
     engine.dispose()
     assert not tables & {"cache_index", "fitness_index"}
     assert {"ix_evaluations_cache_hash", "ix_evaluations_job_road_fitness"} <= indexes
+
+
+def test_a_downgrade_puts_the_population_back_into_the_stored_states(url: str) -> None:
+    """v0.3.0.g: a state stored without its population and fitness (the row's columns hold them) is
+    whole again after a downgrade, and restores the optimiser exactly; a state stored whole before is
+    left as it is, and upgrading rewrites nothing."""
+    de = DifferentialEvolution([0.0, 0.0], [1.0, 1.0], pop_size=6, max_iter=5, seed=7)
+    for _ in range(2):
+        rows = de.ask()
+        values = -((rows - 0.3) ** 2).sum(axis=1)
+        values[0] = np.nan  # a failed design: its fitness stored as null
+        de.tell(values)
+    whole = plain_json(de.state(history=False))
+    population, fitness = plain_json(de.population), plain_json(de.fitness)
+    config = alembic_config(url)
+    command.upgrade(config, "head")
+    engine = sa.create_engine(url)
+    with engine.begin() as conn:
+        _insert(conn, "jobs", id=1, kind="de", state="interrupted", spec={})
+        _insert(conn, "generations", job_id=1, run=0, generation=2, state=without_population(whole),
+                population=population, fitness_m=fitness, best_fitness_m=de.best_f, n_evals=de.n_evals)
+        _insert(conn, "generations", job_id=1, run=1, generation=2, state=whole, population=population,
+                fitness_m=fitness, best_fitness_m=de.best_f, n_evals=de.n_evals)
+    command.downgrade(config, "v0.3.0.f")
+    with engine.connect() as conn:
+        states = [r["state"] for r in sorted(_rows(conn, "generations"), key=lambda r: r["run"])]
+    assert states == [whole, whole] and "population" not in without_population(whole)
+    resumed = DifferentialEvolution.from_state(states[0])
+    assert np.array_equal(resumed.population, de.population) and np.array_equal(resumed.ask(), de.ask())
+    command.upgrade(config, "head")
+    with engine.connect() as conn:
+        assert [r["state"] for r in sorted(_rows(conn, "generations"), key=lambda r: r["run"])] == states
+    engine.dispose()

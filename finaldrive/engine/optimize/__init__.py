@@ -8,9 +8,17 @@ Fig. 7, Table 10), :class:`CMAES` is IPOP-CMA-ES; see docs/optimisation.md.
 from finaldrive.engine.optimize.cma_es import CMAES
 from finaldrive.engine.optimize.common import plain_json
 from finaldrive.engine.optimize.de import DifferentialEvolution
-from finaldrive.engine.optimize.protocol import OPTIMISERS, Optimiser, register, restore
+from finaldrive.engine.optimize.protocol import (
+    OPTIMISERS,
+    Optimiser,
+    register,
+    restore,
+    with_population,
+    without_population,
+)
 
 register(DifferentialEvolution)
 register(CMAES)
 
-__all__ = ["CMAES", "OPTIMISERS", "DifferentialEvolution", "Optimiser", "plain_json", "register", "restore"]
+__all__ = ["CMAES", "OPTIMISERS", "DifferentialEvolution", "Optimiser", "plain_json", "register", "restore",
+           "with_population", "without_population"]

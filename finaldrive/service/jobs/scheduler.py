@@ -46,6 +46,8 @@ from finaldrive.engine import (
     Road,
     Run,
     fitness_values,
+    with_population,
+    without_population,
 )
 from finaldrive.service.config import Settings
 from finaldrive.service.db.engine import Database, in_memory
@@ -449,7 +451,8 @@ class Scheduler:
             de.history.clear()  # the rows hold the history: the optimiser here stays O(NP)
             job.writes.generations.append({  # the state without its history: each row holds its own record;
                 "run": run.index, "generation": run.generation,  # arrays, made JSON in the writer (off this thread)
-                "state": de.state(history=False, arrays=True), "population": de.population, "fitness_m": de.fitness,
+                "state": without_population(de.state(history=False, arrays=True)),  # the next two hold those
+                "population": de.population, "fitness_m": de.fitness,
                 "best_fitness_m": nullable([de.best_f])[0], "mean_fitness_m": nullable([record["mean_f"]])[0],
                 "n_evals": de.n_evals, "n_failed": record["n_failed"],
             })
@@ -563,7 +566,8 @@ def _load(session: Any, job_id: int
     if not resumed:
         return dict(job.spec), profiles, False, set(), {}
     sweep_step = PAPER_SWEEP_STEP if job.kind == "paper-study" else 0
-    de_states = {i: (g.state, g.generation) for i, g in last_generations(session, job_id).items()}
+    de_states = {i: (with_population(g.state, g.population, g.fitness_m), g.generation)
+                 for i, g in last_generations(session, job_id).items()}
     return dict(job.spec), profiles, True, stored_slots(session, job_id, sweep_step), de_states
 
 
