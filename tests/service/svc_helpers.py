@@ -40,7 +40,7 @@ def toy_rows(rows: np.ndarray, roads: tuple[Road, ...], settings: SimSettings,
 
 class ToyTask:
     """:func:`toy_rows` run in this process (serial executor), with a counter, a delay a design, a gate
-    and, for each design in the order they were run, its job's first road (a job's roads come with its tasks)."""
+    and, for each design in the order they were run, its own road's spec."""
 
     def __init__(self, *, fail_above_l2: float | None = None, delay: float = 0.0) -> None:
         self.fail_above_l2 = fail_above_l2

@@ -197,7 +197,7 @@ class Scheduler:
     def run(self, stop: threading.Event) -> None:
         """Serve until ``stop`` is set; then give the jobs back and release the workers."""
         log.info("scheduler %s starting (executor %s, capacity %d tasks, %d CPUs a task)", self.id,
-                 self.executor_kind, self.executor.capacity, getattr(self.executor, "task_cpus", 1))
+                 self.executor_kind, self.executor.capacity, self.executor.task_cpus)
         if self.recordings is not None:
             self.recordings.start()
         done = threading.Event()
