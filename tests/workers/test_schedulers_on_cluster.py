@@ -3,7 +3,8 @@
 One scheduler drives a Ray cluster; a second one on it waits as a standby (Ray keeps a pool of
 workers per driver, and two drivers filling the same CPUs evict each other's workers: 13 worker
 restarts in 3.4 min before). Four jobs with one scheduler, then four beside a standby: all succeed,
-each evaluation stored once, and the Ray workers started are as many as with one scheduler.
+each evaluation stored once; the standby's Ray job starts no worker, and the first's starts none
+beyond its copies of overdue tasks.
 SIGKILLed, the first scheduler leaves no process behind, and the standby's results flow within a
 lease plus 10 s.
 """
@@ -66,13 +67,21 @@ def cluster() -> Iterator[tuple[str, dict[str, str], list[str]]]:
 
 def worker_starts(dirs: list[str]) -> dict[str, int]:
     """Ray worker processes started on the nodes so far, by Ray job id where the log's name carries it
-    (``ffffffff``: started ahead of any job; Ray 2.40 names every log so): one ``worker-*.err`` each."""
+    (``ffffffff``: started ahead of any job; Ray 2.40 names every log so): one ``worker-*.err`` each
+    (read in the sessions' own folders, not again through the ``session_latest`` link)."""
     starts: dict[str, int] = {}
     for d in dirs:
         for log in Path(d).glob("session_*/logs/worker-*.err"):
-            job = log.stem.split("-")[2]
-            starts[job] = starts.get(job, 0) + 1
+            if not log.parents[1].is_symlink():
+                job = log.stem.split("-")[2]
+                starts[job] = starts.get(job, 0) + 1
     return starts
+
+
+def _hedges(proc: Proc) -> int:
+    """Copies of overdue tasks the scheduler has started so far (``workers/dispatch.py`` logs each one):
+    a copy is of a scheduling class of its own, so Ray may start a worker for it."""
+    return proc.log.read_text().count("running it again")
 
 
 def _scheduler(name: str, db_url: str, address: str, env: dict[str, str], log: Path) -> Proc:
@@ -107,7 +116,7 @@ def test_a_second_scheduler_waits_as_a_standby_and_takes_over(
         _wait_log(first, "scheduler first starting", 120)
         # four jobs with one scheduler, then four more beside a standby: the standby starts no Ray
         # worker and evicts none of the first's (two drivers evicted each other's 13 times in 3.4 min)
-        starts = []
+        starts, hedges = [], []
         for seed_shift in (0, 100):
             if seed_shift:
                 second = _scheduler("second", db_url, address, env, tmp_path / "second.log")
@@ -120,8 +129,16 @@ def test_a_second_scheduler_waits_as_a_standby_and_takes_over(
             assert [job["state"] for job in jobs] == ["succeeded"] * 4, jobs
             for job in jobs:
                 _stored_once(client, job)
-            starts.append(sum(worker_starts(dirs).values()))
-        assert starts[1] == starts[0], f"Ray workers started: {starts[0]} with one scheduler, {starts[1]} with two"
+            starts.append(worker_starts(dirs))
+            hedges.append(_hedges(first))
+        # the first's own workers: none started anew but for its copies of overdue tasks (a loaded CI machine
+        # makes some); the standby's Ray job: none at all
+        ours = set(starts[0]) - {"ffffffff"}
+        added = {job: n - starts[0].get(job, 0) for job, n in starts[1].items() if n != starts[0].get(job, 0)}
+        said = f"Ray workers started, by Ray job: {starts[0]} with one scheduler, {starts[1]} with two; " \
+               f"copies of overdue tasks in the second round: {hedges[1] - hedges[0]}"
+        assert not set(added) - ours, said
+        assert sum(added.values()) <= hedges[1] - hedges[0], said
         health = client.get("/v1/health").json()
         assert [s["id"] for s in health["schedulers"]] == ["first"]   # the standby has not registered
         load = health["schedulers"][0]
