@@ -40,11 +40,14 @@ def toy_rows(rows: np.ndarray, roads: tuple[Road, ...], settings: SimSettings,
 
 class ToyTask:
     """:func:`toy_rows` run in this process (serial executor), with a counter, a delay a design, a gate
-    and, for each design in the order they were run, its own road's spec."""
+    and, for each design in the order they were run, its own road's spec. ``stop_after`` (n, event):
+    set the event once n designs or more have run (a scheduler's stop, seen as this task returns)."""
 
-    def __init__(self, *, fail_above_l2: float | None = None, delay: float = 0.0) -> None:
+    def __init__(self, *, fail_above_l2: float | None = None, delay: float = 0.0,
+                 stop_after: tuple[int, threading.Event] | None = None) -> None:
         self.fail_above_l2 = fail_above_l2
         self.delay = delay
+        self.stop_after = stop_after
         self.simulated = 0
         self.roads_run: list[str] = []
         self.gate = threading.Event()
@@ -57,6 +60,8 @@ class ToyTask:
             time.sleep(self.delay * len(rows))
         self.simulated += len(rows)
         self.roads_run += [roads[int(road)].spec for road in rows[:, 0]]
+        if self.stop_after is not None and self.simulated >= self.stop_after[0]:
+            self.stop_after[1].set()
         return [(road, toy_batch(x, roads[road], self.fail_above_l2)) for road, x in by_road(rows)]
 
 
@@ -66,12 +71,14 @@ FAST = SchedulerConfig(lease_s=3.0, heartbeat_s=0.05, flush_s=0.02, recordings=T
 
 @contextmanager
 def running_scheduler(settings: Settings, task: Any, *, executor: Executor | None = None,
-                      config: SchedulerConfig = FAST, scheduler_id: str | None = None) -> Iterator[Scheduler]:
-    """A scheduler on ``settings.db_url`` in a thread, stopped (and its jobs given back) on exit."""
+                      config: SchedulerConfig = FAST, scheduler_id: str | None = None,
+                      stop: threading.Event | None = None) -> Iterator[Scheduler]:
+    """A scheduler on ``settings.db_url`` in a thread, stopped (and its jobs given back) on exit, or
+    once ``stop`` is set."""
     db = open_database(settings)
     scheduler = Scheduler(db, executor or SerialExecutor(), config=config, task=task, warmup=None,
                           scheduler_id=scheduler_id, executor_kind="serial")
-    stop = threading.Event()
+    stop = stop or threading.Event()
     thread = threading.Thread(target=scheduler.run, args=(stop,), name="test-scheduler", daemon=True)
     thread.start()
     deadline = time.monotonic() + 30.0

@@ -80,10 +80,10 @@ def _drive(scheduler: Scheduler, until: Any, timeout: float = 30.0) -> None:
 
 def test_a_sweep_resumes_with_only_what_is_missing(settings: Settings) -> None:
     job_id = _submit(settings, SWEEP)
-    slow = ToyTask(delay=0.02)
-    with running_scheduler(settings, slow):
-        while _job(settings, job_id)["done"] < 6:
-            time.sleep(0.02)
+    stop = threading.Event()   # set by the task itself once 6 designs have run: a stop with work left on any machine
+    slow = ToyTask(delay=0.02, stop_after=(6, stop))
+    with running_scheduler(settings, slow, stop=stop):
+        assert stop.wait(30)
     stopped = _job(settings, job_id)
     assert stopped["state"] == "interrupted" and 6 <= stopped["done"] < 24
     fresh = ToyTask()
