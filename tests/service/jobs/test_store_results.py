@@ -68,6 +68,40 @@ def test_rows_are_stored_once_with_the_roads_best_and_read_back_as_cache_hits(st
     assert best is not None and best.candidate == 0 and job_road.best_fitness_m == batch.fitness_m[0]
 
 
+def test_a_row_holds_each_column_s_value_as_a_plain_python_value() -> None:
+    """Each row, built a block at a time, holds ROW_COLUMNS' values for its own design: the slot, the
+    design in degrees and metres, the result record with the job's fitness (NaN where not produced),
+    status, reason, flags and key, each a plain int, float, str or bool (the driver binds no numpy
+    scalar), whatever the row's neighbours."""
+    from finaldrive.engine import VALUES
+    from finaldrive.service.db.results import HASH_DIGITS, ROW_COLUMNS
+
+    designs = np.array([[0.5, 0.1, 0.09], [1.0, 0.2, 0.09], [-1.5, 0.05, 0.12]])
+    part = Request(2, 7, 3, np.array([4, 9, 11]), designs)
+    batch = toy_batch(designs, Road.parse("sine:0.025:3"), fail_above_l2=0.15)   # the second fails
+    job_fitness = np.array([1.5, np.nan, np.inf])                                # the third not finite
+    keys = [f"{i:x}" * 64 for i in (10, 11, 12)]
+    rows = rows_from_results([(part, batch, job_fitness, keys, False)])
+    plain = {int: int, float: float, str: str, bool: bool}
+    for i, row in enumerate(rows):
+        fitness = float(job_fitness[i])
+        record = dict(zip(VALUES, batch.values[i].tolist(), strict=True)) | {"fitness_m": fitness}
+        fails = not math.isfinite(fitness)
+        a2, l2, rws = designs[i].tolist()
+        want = {"road_index": 3, "step": 7, "candidate": [4, 9, 11][i], "a2_deg": math.degrees(a2), "l2_m": l2,
+                "rws_m": rws,
+                **{name: v if math.isfinite(v) else math.nan for name, v in record.items()},
+                "status": "failed" if fails else "ok",
+                "reason": batch.reason[i] or (f"non-finite fitness ({fitness})" if fails else ""),
+                "cached": False, "cache_key": keys[i], "cache_hash": int(keys[i][:HASH_DIGITS], 16),
+                "transient": False}
+        assert list(want) == list(ROW_COLUMNS)
+        got = dict(zip(ROW_COLUMNS, row, strict=True))
+        for name, value in want.items():
+            assert type(got[name]) is plain[type(value)], (name, type(got[name]))
+            assert got[name] == value or (math.isnan(value) and math.isnan(got[name])), (i, name)
+
+
 def test_a_job_succeeds_only_over_a_complete_store_and_a_hole_reopens_it(store_url: str) -> None:
     """finish_if_complete counts what the store holds in the finishing transaction: fewer rows than the
     runs made (results lost after they were acknowledged) give the job back to resume, never a success."""
