@@ -64,7 +64,7 @@ def _store(db: Database, rows: int, transactions: int, first: int) -> float:
     start = time.perf_counter()
     for batch in batches:
         with db.write() as session:
-            store_results(session, "bench", job.id, batch, [])
+            store_results(session, "bench", job.id, [batch], [])
     return rows * transactions / (time.perf_counter() - start)
 
 
@@ -121,7 +121,7 @@ def grow(url: str, rows: int, total: int, steps: int, drop: list[str], cache_kib
             for batch in batches:
                 began = time.perf_counter()
                 with db.write() as session:
-                    store_results(session, "bench", job.id, batch, [])
+                    store_results(session, "bench", job.id, [batch], [])
                 slowest = max(slowest, time.perf_counter() - began)
             seconds = time.perf_counter() - start
             stored += per_step * rows

@@ -13,7 +13,7 @@ import logging
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
@@ -22,7 +22,7 @@ from sqlalchemy.exc import SQLAlchemyError
 from finaldrive.service.db.engine import Database
 from finaldrive.service.db.leases import report_store_error
 from finaldrive.service.db.results import LeaseLost, Row, store_results
-from finaldrive.service.jobs.rows import Block, Finished, block_from_results, rows_from_block
+from finaldrive.service.jobs.rows import CHUNK_ROWS, Block, Finished, block_from_results, rows_from_block
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -45,7 +45,7 @@ class Writes:
         return len(self.rows) + self.unmade + len(self.generations)
 
     def finish(self, result: Finished) -> None:
-        """A finished part of a request, made a row later (:meth:`make_rows`)."""
+        """A finished part of a request, made rows later (:meth:`chunks`)."""
         self.finished.append(result)
         self.unmade += len(result[0])
 
@@ -66,17 +66,20 @@ class Writes:
 
     def pack(self) -> None:
         """The finished results concatenated into a block (a few array operations a result; the
-        rows' per-value work is left to :meth:`make_rows`, in the writer)."""
+        rows' per-value work is left to :meth:`chunks`, in the writer)."""
         if self.finished:
             self.blocks.append(block_from_results(self.finished))
             self.finished = []
 
-    def make_rows(self) -> None:
-        """The blocks made rows, all at once."""
+    def chunks(self) -> Iterator[list[Row]]:
+        """The rows to store, :data:`CHUNK_ROWS` at a time, the blocks' made rows as they are asked for
+        (``store_results`` stores each chunk before the next is built); can be read again."""
         self.pack()
+        for start in range(0, len(self.rows), CHUNK_ROWS):
+            yield self.rows[start:start + CHUNK_ROWS]
         for block in self.blocks:
-            self.rows += rows_from_block(block)
-        self.blocks, self.unmade = [], 0
+            for start in range(0, len(block), CHUNK_ROWS):
+                yield rows_from_block(block, slice(start, start + CHUNK_ROWS))
 
 
 #: An outage is logged as over once the store has answered without a failure for this long [s]
@@ -229,10 +232,10 @@ class Writer:
 
     def _store(self, job_id: int, writes: Writes) -> bool:
         """True when stored, or dropped because the job is no longer ours."""
-        writes.make_rows()
         try:
-            done = self._guard(lambda s: store_results(s, self.scheduler_id, job_id, writes.rows, writes.generations),
-                               f"store results of job {job_id}")
+            done = self._guard(
+                lambda s: store_results(s, self.scheduler_id, job_id, writes.chunks(), writes.generations),
+                f"store results of job {job_id}")
         except LeaseLost:
             log.info("scheduler %s: lost job %s before storing its results", self.scheduler_id, job_id)
             with self._cond:

@@ -91,12 +91,12 @@ def test_every_evaluation_is_looked_up_through_every_level(store_url: str, monke
             rows, batch_keys = _batch(rng, i % 2, 10 * i, COPY_ROWS + 5 if i == 11 else 1 + i % 5)
             keys += batch_keys
             with db.write() as session:
-                store_results(session, "s1", job.id, rows, [])
+                store_results(session, "s1", job.id, [rows], [])
             if i == 5:  # slots stored already add no entry, beside new ones
                 more, more_keys = _batch(rng, 1, 1000, 3)
                 keys += more_keys
                 with db.write() as session:
-                    assert store_results(session, "s1", job.id, rows + more, []) == len(more)
+                    assert store_results(session, "s1", job.id, [rows + more], []) == len(more)
             with db.read() as session:
                 for levels_seen, now in zip(seen, _check(session, session.get(Job, job.id), keys), strict=True):
                     levels_seen |= now
@@ -118,7 +118,7 @@ def test_a_full_level_moves_a_chunk_at_a_time_round_its_keys(store_url: str, mon
         job = _claimed_sweep(db)
         rows, _ = _batch(np.random.default_rng(8), 0, 0, 80)
         with db.write() as session:
-            store_results(session, "s1", job.id, rows, [])
+            store_results(session, "s1", job.id, [rows], [])
             for table in levels.TABLES:  # all on level 2 (size 16), level 3 empty
                 n = session.execute(text(f"UPDATE {table} SET level = 2")).rowcount  # type: ignore[attr-defined]
                 session.execute(text("UPDATE index_levels SET entries = CASE WHEN level = 2 THEN :n ELSE 0 END "
@@ -195,7 +195,7 @@ def test_two_writers_moving_levels_at_once_keep_one_entry_each(store_url: str, m
                     for _attempt in range(20):
                         try:
                             with db.write() as session:
-                                store_results(session, scheduler, job_id, rows, [])
+                                store_results(session, scheduler, job_id, [rows], [])
                             break
                         except OperationalError as exc:
                             if "deadlock" not in str(exc):

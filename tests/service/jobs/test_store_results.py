@@ -48,9 +48,9 @@ def test_rows_are_stored_once_with_the_roads_best_and_read_back_as_cache_hits(st
         stable, lost = (rows_from_results([finished]) for finished in (
             (first, batch, batch.fitness_m, [k0, k1], False), (last, again, again.fitness_m, [k2], True)))
         with db.write() as session:
-            assert store_results(session, "s1", job.id, stable + lost, []) == 3
+            assert store_results(session, "s1", job.id, [stable + lost], []) == 3
         with db.write() as session:  # the same slots again: stored once
-            assert store_results(session, "s1", job.id, stable, []) == 0
+            assert store_results(session, "s1", job.id, [stable], []) == 0
         with db.read() as session:
             hits = cached_evaluations(session, [k0, k1, k2, k3])
             job_road = session.get(JobRoad, (job.id, 1))
@@ -112,7 +112,7 @@ def test_a_job_succeeds_only_over_a_complete_store_and_a_hole_reopens_it(store_u
         batch = toy_batch(part.designs, Road.parse("flat"))
         rows = rows_from_results([(part, batch, batch.fitness_m, [f"{i:x}" * 64 for i in range(3)], False)])
         with db.write() as session:
-            store_results(session, "s1", job.id, rows, [])
+            store_results(session, "s1", job.id, [rows], [])
         finish = partial(finish_if_complete, scheduler_id="s1", job_id=job.id, generations=0, planned=job.total)
         with db.write() as session:  # the runs made 4: one is missing
             assert finish(session, evaluations=4) == "reopened"
@@ -162,12 +162,12 @@ def test_a_store_by_a_scheduler_that_lost_the_job_writes_nothing(store_url: str)
                         stored.n_done, stored.n_failed, stored.n_cached)
 
         with pytest.raises(LeaseLost), db.write() as session:
-            store_results(session, "s2", job.id, rows, told)
+            store_results(session, "s2", job.id, [rows], told)
         assert left() == (0, 0, 0, 0, 0, False, 0, 0, 0)
         with db.write() as session:
-            assert store_results(session, "s1", job.id, rows, told) == 3
+            assert store_results(session, "s1", job.id, [rows], told) == 3
         with db.write() as session:  # the same slots again: nothing new, counted once
-            assert store_results(session, "s1", job.id, rows, []) == 0
+            assert store_results(session, "s1", job.id, [rows], []) == 0
         evaluations, generations, ranges, *entries, best, n_done, n_failed, n_cached = left()
     finally:
         db.dispose()
@@ -185,7 +185,7 @@ def test_a_finished_job_s_counters_equal_its_rows(store_url: str) -> None:
         batch = toy_batch(part.designs, Road.parse("flat"), fail_above_l2=0.15)  # the second design fails
         rows = rows_from_results([(part, batch, batch.fitness_m, [f"{i:x}" * 64 for i in range(3)], False)])
         with db.write() as session:
-            store_results(session, "s1", job.id, rows, [])
+            store_results(session, "s1", job.id, [rows], [])
         with db.write() as session:  # counters off, as no store leaves them
             session.execute(update(Job).where(Job.id == job.id).values(n_done=7, n_failed=0, n_cached=5))
         with db.write() as session:
@@ -199,9 +199,10 @@ def test_a_finished_job_s_counters_equal_its_rows(store_url: str) -> None:
 
 
 def test_bulk_stores_keep_every_value_and_skip_what_is_stored(store_url: str) -> None:
-    """Hundreds of rows a transaction (PostgreSQL: by COPY): every column read back as given, NULLs,
-    a reason with tabs, newlines and backslashes; a second store overlapping the first, in the same
-    transaction, adds only the new slots; the explored ranges equal their recount."""
+    """Hundreds of rows a transaction (PostgreSQL: by COPY), in chunks smaller than COPY_ROWS: every
+    column read back as given, NULLs, a reason with tabs, newlines and backslashes; a second store
+    overlapping the first, in the same transaction, adds only the new slots; the explored ranges equal
+    their recount; the road's best is the best of all the chunks' rows."""
     from sqlalchemy import text
 
     from finaldrive.service.db.results import COPY_ROWS, ROW_COLUMNS
@@ -222,11 +223,16 @@ def test_bulk_stores_keep_every_value_and_skip_what_is_stored(store_url: str) ->
         half = 2 * COPY_ROWS
         explored = "SELECT * FROM road_explored ORDER BY road_index, bucket"
         with db.write() as session:  # new slots only: the writer merges them into road_explored
-            assert store_results(session, "s1", job.id, rows[:half], []) == half
+            chunks = [rows[start:min(start + COPY_ROWS // 3, half)] for start in range(0, half, COPY_ROWS // 3)]
+            assert store_results(session, "s1", job.id, chunks, []) == half
+            best = session.execute(text("SELECT best_fitness_m FROM job_roads WHERE job_id = :j AND road_index = 0"),
+                                   {"j": job.id}).scalar()
+            assert best == max(r[ROW_COLUMNS.index("fitness_m")] for r in rows[:half]
+                           if r[ROW_COLUMNS.index("status")] == "ok")
             merged = session.execute(text(explored)).all()
             recount_explored(session, job.id)
             assert merged == session.execute(text(explored)).all() and len(merged) > 30
-            assert store_results(session, "s1", job.id, rows[COPY_ROWS:], []) == n - half
+            assert store_results(session, "s1", job.id, [rows[COPY_ROWS:]], []) == n - half
         with db.read() as session:
             stored = session.execute(text(f"SELECT {', '.join(ROW_COLUMNS)} FROM evaluations WHERE job_id = :j "
                                           "ORDER BY candidate"), {"j": job.id}).all()
@@ -265,7 +271,7 @@ def test_stored_rows_carry_their_job_and_the_store_s_time(store_url: str) -> Non
         for part in (rows[:3], rows[3:]):
             with db.write() as session:
                 times.append(db_now(session))
-                store_results(session, "s1", job.id, part, [])
+                store_results(session, "s1", job.id, [part], [])
                 times.append(db_now(session))
         with db.read() as session:
             stored = session.execute(select(Evaluation.candidate, Evaluation.job_id, Evaluation.created_at)
