@@ -73,7 +73,8 @@ class Writes:
 
     def chunks(self) -> Iterator[list[Row]]:
         """The rows to store, :data:`CHUNK_ROWS` at a time, the blocks' made rows as they are asked for
-        (``store_results`` stores each chunk before the next is built); can be read again."""
+        (``store_results`` stores each chunk before the next is built); each call reads them afresh (a
+        transaction that failed is tried again with a new one)."""
         self.pack()
         for start in range(0, len(self.rows), CHUNK_ROWS):
             yield self.rows[start:start + CHUNK_ROWS]
