@@ -124,7 +124,9 @@ def test_roads_and_health(client: TestClient) -> None:
 
 def test_concurrent_jobs_share_the_executor_round_robin(client: TestClient, fake: ToyTask) -> None:
     fake.gate.clear()
-    fake.delay = 0.005  # a's designs outlast the scheduler's claim interval, so b joins while a runs
+    # a's designs (0.48 s) outlast the scheduler's heartbeat (0.05 s) and its look for new jobs (0.2 s) with room
+    # to spare, so b joins while a runs (at 5 ms a design, 0.12 s, a loaded CI ran all of a's before b's)
+    fake.delay = 0.02
     a = client.post("/v1/jobs", json=SWEEP).json()["id"]
     b_roads = ["bump:0.01:0.5", "bump:0.02:0.5"]  # none of a's: a task may hold both jobs' rows
     b = client.post("/v1/jobs", json=SWEEP | {"seed": 1, "roads": b_roads}).json()["id"]
