@@ -17,14 +17,14 @@ from datetime import datetime
 from typing import Any
 
 import numpy as np
-from sqlalchemy import func, select, update
+from sqlalchemy import Boolean, func, select, update
 from sqlalchemy.orm import Session
 
 from finaldrive.engine import VALUES, plain_json
 from finaldrive.service.db.engine import marker
 from finaldrive.service.db.leases import db_now, finish_job, owns, release_jobs
 from finaldrive.service.db.levels import ALL_LEVELS, add_entries, merge_if_full
-from finaldrive.service.db.models import EvalStatus, Evaluation, Generation, Job, JobState
+from finaldrive.service.db.models import Base, EvalStatus, Evaluation, Generation, Job, JobState
 from finaldrive.service.db.summaries import add_explored, recount_explored
 
 log = logging.getLogger(__name__)
@@ -253,13 +253,16 @@ def _insert_many(session: Session, table: str, columns: Sequence[str], chunks: I
         if second is not None or len(first) >= COPY_ROWS:
             return _copy_many(session, table, columns, itertools.chain([first], chunks), unique, fixed)
     m = marker(session.connection())
+    flags = {at for at, name in enumerate(columns)  # PostgreSQL takes a bool for a boolean, not 0 or 1
+             if postgres and isinstance(Base.metadata.tables[table].c[name].type, Boolean)}
     sql = (f"INSERT INTO {table} ({', '.join([*fixed, *columns])}) "
            f"VALUES ({', '.join([*map(_constant, fixed.values()), *[m] * len(columns)])}) "
            f"ON CONFLICT ({', '.join(unique)}) DO NOTHING")
     inserted = 0
     for rows in itertools.chain([first], chunks):
-        if postgres:  # SQLite stores a NaN as NULL itself
-            rows = [tuple(None if isinstance(v, float) and v != v else v for v in row) for row in rows]
+        if postgres:  # SQLite stores a NaN as NULL itself, and a flag's 0 or 1 as it is
+            rows = [tuple(None if isinstance(v, float) and v != v else bool(v) if at in flags else v
+                          for at, v in enumerate(row)) for row in rows]
         inserted += int(session.connection().exec_driver_sql(sql, list(rows)).rowcount)
     return inserted
 

@@ -71,8 +71,8 @@ def test_rows_are_stored_once_with_the_roads_best_and_read_back_as_cache_hits(st
 def test_a_row_holds_each_column_s_value_as_a_plain_python_value() -> None:
     """Each row, built a block at a time, holds ROW_COLUMNS' values for its own design: the slot, the
     design in degrees and metres, the result record with the job's fitness (NaN where not produced),
-    status, reason, flags and key, each a plain int, float, str or bool (the driver binds no numpy
-    scalar), whatever the row's neighbours."""
+    status, reason, flags (0 or 1) and key, each a plain int, float or str (the driver binds no numpy
+    scalar, and no bool: SQLite's driver adapts a bool at a cost), whatever the row's neighbours."""
     from finaldrive.engine import VALUES
     from finaldrive.service.db.results import HASH_DIGITS, ROW_COLUMNS
 
@@ -82,7 +82,7 @@ def test_a_row_holds_each_column_s_value_as_a_plain_python_value() -> None:
     job_fitness = np.array([1.5, np.nan, np.inf])                                # the third not finite
     keys = [f"{i:x}" * 64 for i in (10, 11, 12)]
     rows = rows_from_results([(part, batch, job_fitness, keys, False)])
-    plain = {int: int, float: float, str: str, bool: bool}
+    plain = {int: int, float: float, str: str}
     for i, row in enumerate(rows):
         fitness = float(job_fitness[i])
         record = dict(zip(VALUES, batch.values[i].tolist(), strict=True)) | {"fitness_m": fitness}
@@ -93,8 +93,8 @@ def test_a_row_holds_each_column_s_value_as_a_plain_python_value() -> None:
                 **{name: v if math.isfinite(v) else math.nan for name, v in record.items()},
                 "status": "failed" if fails else "ok",
                 "reason": batch.reason[i] or (f"non-finite fitness ({fitness})" if fails else ""),
-                "cached": False, "cache_key": keys[i], "cache_hash": int(keys[i][:HASH_DIGITS], 16),
-                "transient": False}
+                "cached": 0, "cache_key": keys[i], "cache_hash": int(keys[i][:HASH_DIGITS], 16),
+                "transient": 0}
         assert list(want) == list(ROW_COLUMNS)
         got = dict(zip(ROW_COLUMNS, row, strict=True))
         for name, value in want.items():
