@@ -200,9 +200,9 @@ def test_a_finished_job_s_counters_equal_its_rows(store_url: str) -> None:
 
 def test_bulk_stores_keep_every_value_and_skip_what_is_stored(store_url: str) -> None:
     """Hundreds of rows a transaction (PostgreSQL: by COPY), in chunks smaller than COPY_ROWS: every
-    column read back as given, NULLs, a reason with tabs, newlines and backslashes; a second store
-    overlapping the first, in the same transaction, adds only the new slots; the explored ranges equal
-    their recount; the road's best is the best of all the chunks' rows."""
+    column read back as given, NULLs, flags of 1 (a boolean's true), a reason with tabs, newlines and
+    backslashes; a second store overlapping the first, in the same transaction, adds only the new slots;
+    the explored ranges equal their recount; the road's best is the best of all the chunks' rows."""
     from sqlalchemy import text
 
     from finaldrive.service.db.results import COPY_ROWS, ROW_COLUMNS
@@ -220,6 +220,9 @@ def test_bulk_stores_keep_every_value_and_skip_what_is_stored(store_url: str) ->
         batch = dataclasses.replace(batch, reason=reasons)
         keys = [f"{i:064x}" for i in range(n)]
         rows = rows_from_results([(Request(0, 0, 0, np.arange(n), designs), batch, batch.fitness_m, keys, False)])
+        cached, transient = ROW_COLUMNS.index("cached"), ROW_COLUMNS.index("transient")
+        rows = [tuple(1 if (at == cached and i % 3 == 0) or (at == transient and i % 5 == 0) else v  # flags set
+                      for at, v in enumerate(row)) for i, row in enumerate(rows)]
         half = 2 * COPY_ROWS
         explored = "SELECT * FROM road_explored ORDER BY road_index, bucket"
         with db.write() as session:  # new slots only: the writer merges them into road_explored
@@ -245,9 +248,8 @@ def test_bulk_stores_keep_every_value_and_skip_what_is_stored(store_url: str) ->
     finally:
         db.dispose()
     assert len(stored) == n and any(r[ROW_COLUMNS.index("fitness_m")] is None for r in stored)
-    for got, given in zip(stored, rows, strict=True):  # a row's NaN (not produced) is stored as NULL
-        assert tuple(bool(v) if isinstance(w, bool) else v for v, w in zip(got, given, strict=True)) == tuple(
-            None if isinstance(w, float) and math.isnan(w) else w for w in given)
+    for got, given in zip(stored, rows, strict=True):  # a row's NaN (not produced) is stored as NULL; a flag's
+        assert tuple(got) == tuple(None if isinstance(w, float) and math.isnan(w) else w for w in given)  # 1: true
     assert after == recounted and sum(c[3] for c in after) == counts[0]
     assert counts == (sum(r[ROW_COLUMNS.index("status")] == "ok" for r in rows),
                       sum(r[ROW_COLUMNS.index("status")] != "ok" for r in rows))
