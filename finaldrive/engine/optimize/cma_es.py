@@ -44,6 +44,7 @@ from finaldrive.engine.optimize.common import (
     generator_for,
     jsonable,
     rank_key,
+    rank_of,
 )
 
 if TYPE_CHECKING:
@@ -117,7 +118,7 @@ class CMAES(AskTell):
         self.n_evals += len(rows)
         order = np.argsort(-rank_key(values), kind="stable")
         self._population, self._fitness = rows[order], values[order]
-        if rank_key(values[order[0]]) > rank_key(self._best_f):
+        if rank_of(values[order[0]]) > rank_of(self._best_f):
             self._best_x, self._best_f = rows[order[0]].copy(), float(values[order[0]])
         if first:
             self._stall.start(self._best_f)

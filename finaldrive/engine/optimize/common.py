@@ -96,15 +96,27 @@ class Stall:
 
     def update(self, best: float) -> None:
         """A later round's best: a gain of more than ``tol`` restarts the count."""
-        if rank_key(best) > rank_key(self.ref) + self.tol:
+        if rank_of(best) > rank_of(self.ref) + self.tol:
             self.count, self.ref = 0, best
         else:
             self.count += 1
 
 
+#: The largest float: where rank_key puts an infinity (as numpy's ``nan_to_num`` does).
+_FMAX = float(np.finfo(float).max)
+
+
 def rank_key(values: npt.ArrayLike) -> np.ndarray:
-    """Ranking key: failed (NaN) ranks below every finite value."""
-    return np.asarray(np.nan_to_num(np.asarray(values, dtype=float), nan=-np.inf), dtype=float)
+    """Ranking key: failed (NaN) ranks below every finite value (numpy's ``nan_to_num`` with
+    ``nan=-inf``, +-inf made +-the largest float, in three ufuncs: ``nan_to_num`` cost a DE's tell
+    15 us a call, issue 27)."""
+    x = np.asarray(values, dtype=float)
+    return np.where(np.isnan(x), -np.inf, np.minimum(np.maximum(x, -_FMAX), _FMAX))
+
+
+def rank_of(value: float) -> float:
+    """:func:`rank_key` of one value, without numpy."""
+    return -math.inf if math.isnan(value) else min(max(float(value), -_FMAX), _FMAX)
 
 
 def check_int(name: str, value: Any, minimum: int) -> int:

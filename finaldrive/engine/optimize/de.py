@@ -164,6 +164,11 @@ class DifferentialEvolution(AskTell):
 
         self._width = self._upper - self._lower
         self._mr = self.mr_fraction * self._width  # MR, Table 10
+        self._safe_width = np.where(self._width > 0, self._width, 1.0)
+        # rng.uniform(-MR, MR)'s draws as its C code makes them (low + (high - low) u, u = rng.random()),
+        # without its broadcasting of array bounds (7.7 us a call, against 1 us)
+        self._mr_low, self._mr_range = -self._mr, self._mr - (-self._mr)
+        self._wrap = np.flatnonzero(self._periodic)   # the periodic columns
         self.generation = 0           # completed generations after the initial population
         self.n_evals = 0              # evaluations told so far
         self.history: list[dict[str, Any]] = []
@@ -305,8 +310,10 @@ class DifferentialEvolution(AskTell):
         r2 = rng.integers(0, self.pop_size - 1, n)
         r2 = r2 + (r2 >= r1)
         diff = pop[r1] - pop[r2]
-        half, safe_w = 0.5 * self._width, np.where(self._width > 0, self._width, 1.0)
-        diff = np.where(self._periodic, np.mod(diff + half, safe_w) - half, diff)  # short way round
+        if self._wrap.size:  # short way round
+            p = self._wrap
+            half = 0.5 * self._width[p]
+            diff[:, p] = np.mod(diff[:, p] + half, self._safe_width[p]) - half
         donor = pop[0] + self.f * diff
         # Step 4: binomial crossover, at least one donor component.
         from_donor = rng.random((n, d)) < self.cp
@@ -314,7 +321,7 @@ class DifferentialEvolution(AskTell):
         child = np.where(from_donor, donor, pop[:n])
         # Step 5: each component mutates with probability MP, uniformly within +-MR.
         mutate = rng.random((n, d)) < self.mp
-        child = child + mutate * rng.uniform(-self._mr, self._mr, (n, d))
+        child = child + mutate * (self._mr_low + self._mr_range * rng.random((n, d)))
         return self._bound(child)
 
     def _select(self, rows: np.ndarray, values: np.ndarray) -> None:
@@ -326,8 +333,7 @@ class DifferentialEvolution(AskTell):
 
     def _bound(self, x: np.ndarray) -> np.ndarray:
         """Wrap periodic dimensions into [lower, upper), reflect the others into [lower, upper]."""
-        lo, hi, w = self._lower, self._upper, self._width
-        safe_w = np.where(w > 0, w, 1.0)
+        lo, hi, safe_w = self._lower, self._upper, self._safe_width
         wrapped = lo + np.mod(x - lo, safe_w)
         wrapped = np.where(wrapped >= hi, lo, wrapped)  # mod can round up to the full range
         folded = hi - np.abs(np.mod(x - lo, 2.0 * safe_w) - safe_w)  # triangle wave
