@@ -6,17 +6,18 @@ pages all over it: on a store of 2.24 M evaluations the writer fell from ~70,000
 ~22,000 (docs/performance.md, bench/bench_commit.py --grow). Each lookup is instead a table of
 entries (its key and the evaluation's slot), in :data:`LEVELS` levels, as a log-structured merge:
 
-- **level 0** takes each stored batch's entries; it is small (about :data:`LEVEL0_ROWS`), so a
-  batch dirties few pages;
+- **level 0** takes each stored batch's entries;
 - level ``i`` holds about :data:`LEVEL0_ROWS` x :data:`GROWTH` ** ``i`` entries; the last has no limit;
-- when level 0 is full the writer moves it whole to level 1; when a later level is full it moves one
-  chunk of it (about as many entries as level 0 holds, the next keys after the last chunk's, round
-  the key range) to the level above. Each move is one sorted statement, so a page above is written
-  once for many entries, and a store's transaction holds the write lock for at most a chunk a level,
-  never for a whole level: moving whole levels held SQLite's lock for 24 s at 18 M evaluations
-  stored, growing with the store.
+- when a level is full the writer moves one chunk of it (:data:`MOVE_ROWS` entries and its excess, the
+  next keys after the last chunk's, round the key range) to the level above. Each move is one sorted statement, so a
+  page above is written once for many entries; a chunk's keys span a share of its level's key range, so
+  a move writes about as many pages of the level above whatever the levels' sizes, and a store's
+  transaction holds the write lock for at most a chunk a level, never for a whole level: moving whole
+  levels held SQLite's lock for 24 s at 18 M evaluations stored, growing with the store; level 0 of
+  2^18 entries moved whole held it up to 2 s at 10^7, chunks of 2^16 under 1 s.
 
-Level 0 is counted (it is small); the sizes of the others are kept in ``index_levels``, changed by
+Level 0 is counted, once this process's own count says it is full (its size at the last check plus
+what the process added since); the sizes of the others are kept in ``index_levels``, changed by
 each move in its transaction. A lookup reads every level (the level is the first column of each
 table's key: a seek each). An entry is written in the transaction that stores its evaluation and
 moved in one transaction, so a lookup never misses or doubles one. ``fitness_index`` holds the
@@ -33,8 +34,12 @@ from sqlalchemy.orm import Session
 
 from finaldrive.service.db.engine import marker
 
-#: Entries level 0 holds before the writer moves it to level 1; level i holds GROWTH ** i times as many.
-LEVEL0_ROWS = 1 << 16
+#: Entries level 0 holds before the writer moves a chunk of it to level 1; level i holds GROWTH ** i times as
+#: many. Larger than a move: each entry then passes through fewer levels (a store of 10^6 evaluations
+#: fills levels 0 and 1 only).
+LEVEL0_ROWS = 1 << 18
+#: Entries a move takes from a level at its size (from one over it: its excess as well).
+MOVE_ROWS = 1 << 16
 GROWTH = 8
 #: Levels of each table. The last (from 3.8 x 10^7 entries on) has no limit: a chunk from level 3 writes a
 #: slice of it that grows with it (a chunk times its size over level 3's), a few chunks up to 10^8 evaluations.
@@ -66,48 +71,48 @@ def add_entries(session: Session, job_id: int, after_id: int = 0) -> int:
     return int(added[0])   # cache_index: every evaluation
 
 
-#: A check counts level 0 once this process has added this share of :data:`LEVEL0_ROWS` entries since
-#: the last (a count of up to 65,536 entries with every small store cost the writer more than the store).
-CHECK_SHARE = 1 / 16
-_unchecked: dict[str, int] = {}   # database -> entries this process added since its last check
+_added: dict[str, int] = {}    # database -> entries this process added since its last check
+_level0: dict[str, int] = {}   # database -> level 0's entries at this process's last check, after its moves
 #: (database, table, level) -> the key of the last entry this process moved from that level (None: start
 #: from the lowest key); lost with the process, which then starts again from the lowest.
 _cursors: dict[tuple[str, str, int], tuple[Any, ...] | None] = {}
 
 
-def merge_if_full(session: Session, added: int, rows: int | None = None) -> None:
-    """After ``added`` entries, once :data:`CHECK_SHARE` of ``rows`` (:data:`LEVEL0_ROWS`) were added
-    since the last check: move each table's level 0 to level 1 if it holds ``rows`` entries or more,
-    then one chunk of each later level that holds ``rows`` x :data:`GROWTH` ** level or more, of
-    ``rows`` entries (or as many as were added since the last check, if more: the chunks keep up
-    with the stores).
+def merge_if_full(session: Session, added: int) -> None:
+    """After ``added`` entries, once level 0 is full by this process's count (its size at the last check
+    plus what this process added since: counting it with every store cost the writer more than the
+    store): move one chunk of each level that holds its size (:data:`LEVEL0_ROWS` x :data:`GROWTH` **
+    level) or more to the level above, of :data:`MOVE_ROWS` entries and the level's excess over its
+    size (a level is left :data:`MOVE_ROWS` below its size, however large the stores).
 
     SQLite: the writer holds the database's write lock, so nothing is added between the copy and the
     delete. PostgreSQL: one statement moves exactly the rows it deletes (an entry another writer adds
     or moves meanwhile stays where it is), and ``index_levels`` counts what was moved."""
-    rows = LEVEL0_ROWS if rows is None else rows
     connection = session.connection()
     store = str(connection.engine.url)
-    since = _unchecked.get(store, 0) + added
-    if since < rows * CHECK_SHARE:
-        _unchecked[store] = since
+    since = _added.get(store, 0) + added
+    if _level0.get(store, LEVEL0_ROWS) + since < LEVEL0_ROWS:
+        _added[store] = since
         return
-    _unchecked[store] = 0
+    _added[store] = 0
     m = marker(connection)
+    level0 = 0
     for table in TABLES:
         sizes = dict(connection.exec_driver_sql(
             f"SELECT level, entries FROM index_levels WHERE index_table = {m}", (table,)).all())
-        sizes[0] = connection.exec_driver_sql(
-            f"SELECT COUNT(*) FROM (SELECT 1 FROM {table} WHERE level = 0 LIMIT {rows}) AS t").scalar() or 0
+        sizes[0] = connection.exec_driver_sql(f"SELECT COUNT(*) FROM {table} WHERE level = 0").scalar() or 0
         for level in range(LEVELS - 1):
-            if sizes.get(level, 0) < rows * GROWTH ** level:
+            excess = sizes.get(level, 0) - LEVEL0_ROWS * GROWTH ** level
+            if excess < 0:
                 continue
-            moved = _move(connection, table, level, *(
-                ("", ()) if level == 0 else _next_chunk(connection, table, level, max(rows, since), store)))
+            moved = _move(connection, table, level, *_next_chunk(connection, table, level, MOVE_ROWS + excess, store))
+            sizes[level] -= moved
             sizes[level + 1] = sizes.get(level + 1, 0) + moved
             connection.exec_driver_sql(
                 f"UPDATE index_levels SET entries = entries + {m} WHERE index_table = {m} AND level = {m}",
                 [(sign * moved, table, at) for sign, at in ((-1, level), (1, level + 1)) if at > 0])
+        level0 = max(level0, sizes[0])
+    _level0[store] = level0
 
 
 def _next_chunk(connection: Connection, table: str, level: int, chunk: int,

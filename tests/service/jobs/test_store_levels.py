@@ -80,6 +80,7 @@ def _check(session: Session, job: Job, keys: list[str]) -> tuple[set[int], set[i
 
 def test_every_evaluation_is_looked_up_through_every_level(store_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(levels, "LEVEL0_ROWS", 3)
+    monkeypatch.setattr(levels, "MOVE_ROWS", 2)
     monkeypatch.setattr(levels, "GROWTH", 2)
     rng = np.random.default_rng(5)
     db = open_database(Settings(db_url=store_url))
@@ -106,11 +107,11 @@ def test_every_evaluation_is_looked_up_through_every_level(store_url: str, monke
 
 
 def test_a_full_level_moves_a_chunk_at_a_time_round_its_keys(store_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    """A level over its size gives the level above one chunk a check (as many entries as level 0 holds,
-    or as were added since the last check if more), the next keys after the last chunk's, the rest of
-    the level when fewer remain, then from the lowest again: a store's transaction never moves a whole
-    large level."""
+    """A level at its size gives the level above one chunk a check (``MOVE_ROWS`` entries, and its excess
+    when over it), the next keys after the last chunk's, the rest of the level when fewer remain, then
+    from the lowest again: a store's transaction never moves a whole large level."""
     monkeypatch.setattr(levels, "LEVEL0_ROWS", 4)
+    monkeypatch.setattr(levels, "MOVE_ROWS", 4)
     monkeypatch.setattr(levels, "GROWTH", 2)
     monkeypatch.setattr(levels, "_cursors", {})
     db = open_database(Settings(db_url=store_url))
@@ -127,16 +128,18 @@ def test_a_full_level_moves_a_chunk_at_a_time_round_its_keys(store_url: str, mon
             keys = {table: _entries(session, table)[0] for table in levels.TABLES}
         assert min(len(k) for k in keys.values()) >= 16 + 4 + 9 + 4 + 2 + 4 + 4
 
-        def merge(added: int) -> dict[str, list[tuple[object, ...]]]:
+        def merge(chunk: int) -> dict[str, list[tuple[object, ...]]]:
+            """A check, with level 2 kept as ``chunk`` - MOVE_ROWS over its size of 16."""
             with db.write() as session:
-                levels.merge_if_full(session, added)
+                session.execute(text("UPDATE index_levels SET entries = :n WHERE level = 2"), {"n": 16 + chunk - 4})
+                levels.merge_if_full(session, levels.LEVEL0_ROWS)
             with db.read() as session:
                 return {table: _entries_at(session, table, 3) for table in levels.TABLES}
 
         levels._cursors.clear()
         for table, k in merge(4).items():
             assert k == keys[table][:4]
-        for table, k in merge(9).items():  # more added since the last check than level 0 holds
+        for table, k in merge(9).items():  # over its size: its excess as well
             assert k == keys[table][:13]
         low = {"cache_index": [(h, job.id, 0, -1, h) for h in (0, 1)],   # keys below the first chunk's
                "fitness_index": [(job.id, -1, f, 0, 0) for f in (0.0, 1.0)]}
@@ -163,6 +166,34 @@ def test_a_full_level_moves_a_chunk_at_a_time_round_its_keys(store_url: str, mon
         db.dispose()
 
 
+def test_level_0_moves_a_chunk_once_full(store_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Level 0 at its size gives level 1 ``MOVE_ROWS`` entries, its lowest keys, and is not emptied;
+    over its size, its excess as well."""
+    for name, value in (("LEVEL0_ROWS", 8), ("MOVE_ROWS", 2), ("_cursors", {}), ("_added", {}), ("_level0", {})):
+        monkeypatch.setattr(levels, name, value)
+    rng = np.random.default_rng(3)
+    db = open_database(Settings(db_url=store_url))
+    try:
+        job = _claimed_sweep(db)
+
+        def store(first: int, n: int) -> tuple[list[tuple[object, ...]], list[tuple[object, ...]]]:
+            with db.write() as session:
+                store_results(session, "s1", job.id, [_batch(rng, 0, first, n)[0]], [])
+            with db.read() as session:
+                return _entries_at(session, "cache_index", 0), _entries_at(session, "cache_index", 1)
+
+        for i in range(7):
+            level0, level1 = store(i, 1)
+        assert (len(level0), level1) == (7, [])
+        level0, level1 = store(7, 1)   # at its size: a chunk
+        assert (len(level0), len(level1)) == (6, 2)
+        assert max(level1) < min(level0)   # the lowest keys
+        level0, level1 = store(8, 3)   # 9 entries: one over, and a chunk
+        assert (len(level0), len(level1)) == (6, 5)
+    finally:
+        db.dispose()
+
+
 def _entries_at(session: Session, table: str, level: int) -> list[tuple[object, ...]]:
     """The entries of a level, without it, by key."""
     rows = session.execute(text(f"SELECT * FROM {table} WHERE level = {level}")).mappings().all()
@@ -176,6 +207,7 @@ def test_two_writers_moving_levels_at_once_keep_one_entry_each(store_url: str, m
     deadlock between two of them, which PostgreSQL breaks, is retried, as the writer retries a failed
     store."""
     monkeypatch.setattr(levels, "LEVEL0_ROWS", 3)
+    monkeypatch.setattr(levels, "MOVE_ROWS", 3)
     monkeypatch.setattr(levels, "GROWTH", 2)
     db = open_database(Settings(db_url=store_url))
     errors: list[BaseException] = []
