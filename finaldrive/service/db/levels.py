@@ -8,13 +8,14 @@ entries (its key and the evaluation's slot), in :data:`LEVELS` levels, as a log-
 
 - **level 0** takes each stored batch's entries;
 - level ``i`` holds about :data:`LEVEL0_ROWS` x :data:`GROWTH` ** ``i`` entries; the last has no limit;
-- when a level is full the writer moves one chunk of it (:data:`MOVE_ROWS` entries and its excess, the
-  next keys after the last chunk's, round the key range) to the level above. Each move is one sorted statement, so a
-  page above is written once for many entries; a chunk's keys span a share of its level's key range, so
-  a move writes about as many pages of the level above whatever the levels' sizes, and a store's
-  transaction holds the write lock for at most a chunk a level, never for a whole level: moving whole
-  levels held SQLite's lock for 24 s at 18 M evaluations stored, growing with the store; level 0 of
-  2^18 entries moved whole held it up to 2 s at 10^7, chunks of 2^16 under 1 s.
+- when a level is full the writer moves one chunk of it (:data:`MOVE_ROWS` entries and its excess,
+  the next keys after the last chunk's, round the key range) to the level above. Each move is one
+  sorted statement, so a page above is written once for many entries; a chunk's keys span a share of
+  its level's key range, so a move writes about as many pages of the level above whatever the levels'
+  sizes, and a store's transaction holds the write lock for at most a chunk a level, never for a
+  whole level: moving whole levels held SQLite's lock for 24 s at 18 M evaluations stored, growing
+  with the store; level 0 of 2^18 entries moved whole held it up to 2 s at 10^7, chunks of 2^16
+  under 1 s.
 
 Level 0 is counted, once this process's own count says it is full (its size at the last check plus
 what the process added since); the sizes of the others are kept in ``index_levels``, changed by
@@ -83,7 +84,9 @@ def merge_if_full(session: Session, added: int) -> None:
     plus what this process added since: counting it with every store cost the writer more than the
     store): move one chunk of each level that holds its size (:data:`LEVEL0_ROWS` x :data:`GROWTH` **
     level) or more to the level above, of :data:`MOVE_ROWS` entries and the level's excess over its
-    size (a level is left :data:`MOVE_ROWS` below its size, however large the stores).
+    size (a level is left :data:`MOVE_ROWS` below its size, however large the stores). Another writer's
+    entries are not in this count: they make level 0 fuller than it says until the next check, whose
+    chunk takes them as excess.
 
     SQLite: the writer holds the database's write lock, so nothing is added between the copy and the
     delete. PostgreSQL: one statement moves exactly the rows it deletes (an entry another writer adds
