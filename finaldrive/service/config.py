@@ -63,6 +63,8 @@ class Settings(BaseSettings):
     heartbeat_seconds: float = Field(1.0, gt=0, le=5, description="how often a scheduler renews its leases and "
                                      "looks for cancelled jobs")
     max_jobs: int = Field(32, ge=1, description="jobs one scheduler runs at once")
+    max_backlog_rows: int = Field(50_000, ge=1, description="a job's results waiting for the store before its "
+                                  "dispatch pauses (what an outage of the store holds in memory a job)")
     niceness: int = Field(10, ge=0, le=19, description="OS priority offset of the simulation worker processes "
                           "(the API keeps its core)")
     events_poll_seconds: float = Field(0.5, gt=0, description="SSE progress poll interval")

@@ -602,7 +602,8 @@ def run_scheduler(settings: Settings, stop: threading.Event, *, scheduler_id: st
     executor = make_executor(settings.executor, num_workers=settings.num_workers, address=settings.ray_address,
                              niceness=settings.niceness, standby=stop, task_cpus=settings.task_cpus)
     config = SchedulerConfig(lease_s=settings.lease_seconds, heartbeat_s=settings.heartbeat_seconds,
-                             max_jobs=settings.max_jobs, batch_size=settings.batch_size,
+                             max_jobs=settings.max_jobs, max_backlog_rows=settings.max_backlog_rows,
+                             batch_size=settings.batch_size,
                              max_simulation_s=settings.max_simulation_seconds,
                              max_job_cpu_s=settings.max_job_cpu_hours * 3600)
     if handle_signals:
