@@ -163,11 +163,11 @@ class DifferentialEvolution(AskTell):
         self._rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
 
         self._width = self._upper - self._lower
-        self._mr = self.mr_fraction * self._width  # MR, Table 10
+        mr = self.mr_fraction * self._width  # MR, Table 10
         self._safe_width = np.where(self._width > 0, self._width, 1.0)
         # rng.uniform(-MR, MR)'s draws as its C code makes them (low + (high - low) u, u = rng.random()),
         # without its broadcasting of array bounds (7.7 us a call, against 1 us)
-        self._mr_low, self._mr_range = -self._mr, self._mr - (-self._mr)
+        self._mr_low, self._mr_range = -mr, mr - (-mr)
         self._wrap = np.flatnonzero(self._periodic)   # the periodic columns
         self.generation = 0           # completed generations after the initial population
         self.n_evals = 0              # evaluations told so far

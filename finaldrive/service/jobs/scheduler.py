@@ -115,7 +115,7 @@ CLAIM_BELOW_BUSY = 0.9
 
 @dataclass(frozen=True)
 class SchedulerConfig:
-    """How a scheduler paces itself (``finaldrive scheduler --help`` documents each)."""
+    """How a scheduler paces itself (its FINALDRIVE_* settings: docs/service.md)."""
 
     lease_s: float = 15.0          # a job's lease, renewed every heartbeat
     heartbeat_s: float = 1.0       # also how fast a cancel is obeyed
