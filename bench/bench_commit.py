@@ -15,7 +15,6 @@ transaction holds what arrived in one flush); printed: evaluations stored per se
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import statistics
 import sys
@@ -27,11 +26,12 @@ import numpy as np
 from bench_scheduler import SleepTask
 from sqlalchemy import event
 
-from finaldrive.engine import Request
+from finaldrive.engine import Request, Road, SimSettings
 from finaldrive.service.config import Settings
 from finaldrive.service.db.engine import WRITER_CACHE_KIB, Database
 from finaldrive.service.db.leases import claim_jobs, register_scheduler
 from finaldrive.service.db.results import store_results
+from finaldrive.service.jobs.cache import context_digest, design_keys
 from finaldrive.service.jobs.rows import rows_from_results
 from finaldrive.service.jobs.submit import submit_job
 from finaldrive.service.machine import describe
@@ -43,13 +43,13 @@ SPEC = {"kind": "sweep", "roads": ["flat"], "grid": "a2_deg=0:90:30"}
 
 def _rows(n: int, first: int) -> list[tuple[object, ...]]:
     """``n`` evaluations of one road, candidates ``first`` on (the stand-in's results, engine-shaped:
-    every value finite; cache keys sha256 hashes, as the scheduler's, so their index is filled at
-    random places as in a real job)."""
+    every value finite; the scheduler's cache keys, so their index is filled at random places as in a
+    real job)."""
     rng = np.random.default_rng(first)
     designs = np.column_stack([rng.uniform(0, 6.28, n), rng.uniform(0, 0.2, n), rng.uniform(0.05, 0.2, n)])
     part = Request(0, 0, 0, np.arange(first, first + n), designs)
     batch = SleepTask(0.0, sleep=False).results(designs)
-    keys = [hashlib.sha256(str(first + i).encode()).hexdigest() for i in range(n)]  # as design_keys: spread
+    keys = design_keys(context_digest(Road("flat"), SimSettings(), None, "bench"), designs)
     return rows_from_results([(part, batch, batch.fitness_m, keys, False)])
 
 

@@ -1,8 +1,12 @@
 """Keys of the result cache: one simulation = design + road + vehicle + settings + engine.
 
 Two evaluations with the same key give the same result, so the store reuses the first
-one (within a job and across jobs). Designs are rounded to 1e-12 (rad, m) so that a value
-that went through JSON or the database still matches.
+one (within a job and across jobs). A key is 64 hex digits: 16 of the sha256 of everything but
+the design (the context, hashed once a road), then the design itself, its three float64 values'
+bits (big-endian), rounded to 1e-12 (rad, m) so that a value that went through JSON or the
+database still matches. The design is in the key as it is, not hashed: two designs never share a
+key, and a job's keys are made without a hash a design (sha256 a design was a fifth of the
+scheduler's loop, issue 27).
 """
 
 from __future__ import annotations
@@ -21,6 +25,8 @@ from finaldrive.service.profiles import content_hash
 #: wall-time limit (a run stopped by it is a transient failure, never reused).
 _OUTPUT_ONLY = frozenset({"series", "series_stride", "max_wall_s"})
 DESIGN_DECIMALS = 12
+#: Hex digits of a key taken by its context; the other 48 are the design's bits.
+CONTEXT_DIGITS = 16
 
 
 def road_key(road: Road) -> str:
@@ -34,25 +40,22 @@ def settings_key(settings: SimSettings) -> dict[str, object]:
     return {f.name: getattr(settings, f.name) for f in fields(settings) if f.name not in _OUTPUT_ONLY}
 
 
-def context_prefix(road: Road, settings: SimSettings, vehicle: Vehicle | None, engine_version: str) -> str:
-    """Everything but the design, serialised once per road (hashed with each design)."""
+def context_digest(road: Road, settings: SimSettings, vehicle: Vehicle | None, engine_version: str) -> str:
+    """Everything but the design, serialised and hashed once a road: the first 16 hex digits of its sha256."""
     context = {
         "road": road_key(road),
         "vehicle": (vehicle or default_vehicle()).fingerprint(),
         "settings": settings_key(settings),
         "engine": engine_version,
     }
-    return json.dumps(context, sort_keys=True, separators=(",", ":"))
+    text = json.dumps(context, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:CONTEXT_DIGITS]
 
 
-def design_keys(prefix: str, designs: np.ndarray) -> list[str]:
-    """sha256 per design row of ``"{prefix}|{a2!r},{l2!r},{rws!r}"`` (the design rounded; the context
-    prefix hashed once, its state copied for each design)."""
-    rounded = np.round(np.asarray(designs, dtype=float), DESIGN_DECIMALS) + 0.0  # -0.0 -> 0.0
-    context = hashlib.sha256(f"{prefix}|".encode())
-    keys = []
-    for a2, l2, rws in rounded.tolist():
-        key = context.copy()
-        key.update(f"{a2!r},{l2!r},{rws!r}".encode())
-        keys.append(key.hexdigest())
-    return keys
+def design_keys(context: str, designs: np.ndarray) -> list[str]:
+    """The key of each design row (a2, L2, R_WS) in ``context`` (:func:`context_digest`): the context's
+    digits, then the design rounded, as the hex of its three big-endian float64 values."""
+    rounded = np.round(np.asarray(designs, dtype=float).reshape(-1, 3), DESIGN_DECIMALS) + 0.0  # -0.0 -> 0.0
+    digits = rounded.astype(">f8").tobytes().hex()
+    width = 3 * 16
+    return [context + digits[at:at + width] for at in range(0, len(digits), width)]

@@ -17,7 +17,7 @@ import numpy as np
 
 from finaldrive.engine import STATUS_OK, VALUES, BatchResult, Request
 from finaldrive.service.db.models import EvalStatus
-from finaldrive.service.db.results import ROW_COLUMNS, Row, key_hash
+from finaldrive.service.db.results import ROW_COLUMNS, Row, key_hash, key_hashes
 
 #: How the engine's reason for a simulation stopped by its wall-time limit begins (not reused from the cache).
 TIME_LIMIT = "time limit"
@@ -107,7 +107,7 @@ def rows_from_block(block: Block, at: slice = slice(None)) -> list[Row]:
     columns = [
         block.roads[at].tolist(), block.steps[at].tolist(), block.candidates[at].tolist(), *numbers.tolist(),
         [_OK if good else _FAILED for good in ok], reasons, block.cached[at].astype(np.int8).tolist(), keys,
-        [key_hash(key) for key in keys], failed_for_now,
+        key_hashes(keys).tolist(), failed_for_now,
     ]
     return list(zip(*columns, strict=True))
 

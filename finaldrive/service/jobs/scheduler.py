@@ -73,7 +73,7 @@ from finaldrive.service.db.results import (
     stored_slots,
 )
 from finaldrive.service.jobs.budget import Budget, spent_s
-from finaldrive.service.jobs.cache import context_prefix, design_keys
+from finaldrive.service.jobs.cache import context_digest, design_keys
 from finaldrive.service.jobs.plan import JobPlan, build_plan
 from finaldrive.service.jobs.recordings import RecordingProducer
 from finaldrive.service.jobs.rows import block_from_results, nullable, row_from_cache
@@ -140,7 +140,7 @@ class ActiveJob:
         self.writes = Writes()
         self.copies: dict[tuple[int, int, int], list[int]] = {}   # (road, step, first candidate) -> duplicates
         self.keys: dict[tuple[int, int, int], str] = {}           # dispatched (road, step, candidate) -> key
-        self.prefixes = [context_prefix(r.road, plan.settings, plan.vehicle, engine_version)
+        self.contexts = [context_digest(r.road, plan.settings, plan.vehicle, engine_version)  # a road's cache keys'
                          for r in plan.study.roads]
         self.work: Work | None = None
         self.budget = Budget()
@@ -581,7 +581,7 @@ def _lookup(session: Any, job: ActiveJob, requests: list[Request]
                   if job.resumed else {})
         rest = request.part(np.array([i for i, c in enumerate(request.candidates) if int(c) not in stored],
                                      dtype=int))
-        out.append((stored, design_keys(job.prefixes[request.road], rest.designs)))
+        out.append((stored, design_keys(job.contexts[request.road], rest.designs)))
     return out, cached_evaluations(session, [key for _, keys in out for key in keys])
 
 

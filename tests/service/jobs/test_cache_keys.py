@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import struct
+
 import numpy as np
 
 from finaldrive.engine.api import SimSettings
 from finaldrive.engine.model.road import Road
 from finaldrive.engine.vehicle import Vehicle, default_vehicle
-from finaldrive.service.jobs.cache import context_prefix, design_keys
+from finaldrive.service.db.results import key_hash, key_hashes
+from finaldrive.service.jobs.cache import context_digest, design_keys
 
 ROW = np.array([[0.0, 0.1, 0.09]])
 
@@ -16,8 +19,8 @@ def key(
     design: np.ndarray = ROW, road: Road | None = None, settings: SimSettings | None = None,
     vehicle: Vehicle | None = None, engine: str = "1",
 ) -> str:
-    prefix = context_prefix(road or Road("flat"), settings or SimSettings(), vehicle, engine)
-    return design_keys(prefix, design)[0]
+    context = context_digest(road or Road("flat"), settings or SimSettings(), vehicle, engine)
+    return design_keys(context, design)[0]
 
 
 def test_inputs_that_change_results_change_the_key() -> None:
@@ -45,3 +48,42 @@ def test_profiles_are_keyed_by_their_points() -> None:
     a = Road.from_points([0, 1, 2], [0, 0.01, 0], name="p")
     b = Road.from_points([0, 1, 2], [0, 0.02, 0], name="p")
     assert a.spec == b.spec and key(road=a) != key(road=b)
+
+
+def test_a_key_holds_the_rounded_design_exactly() -> None:
+    """The key's last 48 digits are the design's float64 bits: designs 1e-11 apart (above the rounding)
+    have keys of their own, and the design reads back from its key."""
+    designs = np.array([[0.3, 0.1, 0.09], [0.3, 0.1 + 1e-11, 0.09], [0.3 + 1e-11, 0.1, 0.09]])
+    keys = design_keys(context_digest(Road("flat"), SimSettings(), None, "1"), designs)
+    assert len(set(keys)) == 3 and all(len(k) == 64 and int(k, 16) >= 0 for k in keys)
+    assert len({k[:16] for k in keys}) == 1
+    for k, design in zip(keys, designs, strict=True):
+        assert struct.unpack(">3d", bytes.fromhex(k[16:])) == tuple(np.round(design, 12))
+
+
+def _murmur_finaliser(h: int) -> int:
+    """MurmurHash3's fmix64 on Python's integers (its published constants), the oracle of the vectorised hash."""
+    mask = (1 << 64) - 1
+    h ^= h >> 33
+    h = (h * 0xFF51AFD7ED558CCD) & mask
+    h ^= h >> 33
+    h = (h * 0xC4CEB9FE1A85EC53) & mask
+    return h ^ (h >> 33)
+
+
+def test_the_indexed_hash_mixes_every_word_of_the_key() -> None:
+    """The hash is fmix64 chained over the key's four words from the last, its top 60 bits; keys that
+    share their context (every key of a job's road) spread over the index, as a hash of the context's
+    digits alone would not."""
+    context = context_digest(Road("flat"), SimSettings(), None, "1")
+    grid = np.array([[a, l, r] for a in (0.0, 0.1) for l in np.linspace(0, 0.1, 50) for r in (0.09, 0.1)])
+    keys = design_keys(context, grid)
+    for k in keys[:20]:
+        h = 0
+        for at in (48, 32, 16, 0):
+            h = _murmur_finaliser(h ^ int(k[at:at + 16], 16))
+        assert key_hash(k) == h >> 4
+    hashes = key_hashes(keys)
+    assert len(set(hashes.tolist())) == len(keys)
+    assert hashes.min() >= 0 and hashes.max() < 2 ** 60
+    assert np.unique(hashes >> 52).size > 100   # the top bits spread too (200 keys over 256 values)

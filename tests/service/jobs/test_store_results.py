@@ -74,7 +74,7 @@ def test_a_row_holds_each_column_s_value_as_a_plain_python_value() -> None:
     status, reason, flags (0 or 1) and key, each a plain int, float or str (the driver binds no numpy
     scalar, and no bool: SQLite's driver adapts a bool at a cost), whatever the row's neighbours."""
     from finaldrive.engine import VALUES
-    from finaldrive.service.db.results import HASH_DIGITS, ROW_COLUMNS
+    from finaldrive.service.db.results import ROW_COLUMNS, key_hash
 
     designs = np.array([[0.5, 0.1, 0.09], [1.0, 0.2, 0.09], [-1.5, 0.05, 0.12]])
     part = Request(2, 7, 3, np.array([4, 9, 11]), designs)
@@ -92,7 +92,7 @@ def test_a_row_holds_each_column_s_value_as_a_plain_python_value() -> None:
                 **{name: v if math.isfinite(v) else math.nan for name, v in record.items()},
                 "status": "failed" if fails else "ok",
                 "reason": batch.reason[i] or (f"non-finite fitness ({fitness})" if fails else ""),
-                "cached": 0, "cache_key": keys[i], "cache_hash": int(keys[i][:HASH_DIGITS], 16),
+                "cached": 0, "cache_key": keys[i], "cache_hash": key_hash(keys[i]),
                 "transient": 0}
         assert list(want) == list(ROW_COLUMNS)
         got = dict(zip(ROW_COLUMNS, row, strict=True))
