@@ -140,7 +140,7 @@ class ActiveJob:
         self.writes = Writes()
         self.copies: dict[tuple[int, int, int], list[int]] = {}   # (road, step, first candidate) -> duplicates
         self.keys: dict[tuple[int, int, int], str] = {}           # dispatched (road, step, candidate) -> key
-        self.contexts = [context_digest(r.road, plan.settings, plan.vehicle, engine_version)  # a road's cache keys'
+        self.contexts = [context_digest(r.road, plan.settings, plan.vehicle, engine_version)  # each road's keys' digits
                          for r in plan.study.roads]
         self.work: Work | None = None
         self.budget = Budget()
