@@ -8,6 +8,7 @@ a scheduler that lost its lease can never store anything. Rows are inserted in b
 
 from __future__ import annotations
 
+import base64
 import itertools
 import json
 import logging
@@ -52,11 +53,14 @@ _MIX = (np.uint64(0xFF51AFD7ED558CCD), np.uint64(0xC4CEB9FE1A85EC53))
 
 
 def key_hashes(keys: Sequence[str]) -> np.ndarray:
-    """The indexed hash of each cache key (64 hex digits, finaldrive.service.jobs.cache): its four
-    64-bit words mixed into 60 bits (a positive BIGINT on every backend), so that keys that share
-    their context's digits spread over the index. Not a secret: a collision only costs a comparison
-    of the whole key."""
-    words = np.frombuffer(bytes.fromhex("".join(keys)), dtype=">u8").reshape(-1, 4).astype(np.uint64)
+    """The indexed hash of each cache key (finaldrive.service.jobs.cache: 32 hex digits of its context,
+    then 32 characters of base64 of its design): its five 64-bit words mixed into 60 bits (a positive
+    BIGINT on every backend), so that keys that share their context spread over the index. Not a
+    secret: a collision only costs a comparison of the whole key."""
+    contexts = bytes.fromhex("".join([key[:32] for key in keys]))
+    designs = base64.b64decode("".join([key[32:] for key in keys]), validate=True)
+    words = np.hstack([np.frombuffer(contexts, dtype=">u8").reshape(-1, 2),
+                       np.frombuffer(designs, dtype=">u8").reshape(-1, 3)]).astype(np.uint64)
     mixed = np.zeros(len(words), dtype=np.uint64)
     with np.errstate(over="ignore"):  # multiplications modulo 2^64
         for word in words.T[::-1]:

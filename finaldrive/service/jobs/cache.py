@@ -1,16 +1,17 @@
 """Keys of the result cache: one simulation = design + road + vehicle + settings + engine.
 
 Two evaluations with the same key give the same result, so the store reuses the first
-one (within a job and across jobs). A key is 64 hex digits: 16 of the sha256 of everything but
-the design (the context, hashed once a road), then the design itself, its three float64 values'
-bits (big-endian), rounded to 1e-12 (rad, m) so that a value that went through JSON or the
-database still matches. The design is in the key as it is, not hashed: two designs never share a
-key, and a job's keys are made without a hash a design (sha256 a design was a fifth of the
-scheduler's loop, issue 27).
+one (within a job and across jobs). A key is 64 characters: 32 hex digits (128 bits) of the
+sha256 of everything but the design (the context, hashed once a road), then the design itself,
+its three float64 values rounded to 1e-12 (rad, m), so that a value that went through JSON or
+the database still matches, as base64 of their big-endian bits (32 characters). The design is in
+the key as it is, not hashed: two designs never share a key, and a job's keys are made without a
+hash a design (sha256 a design was a fifth of the scheduler's loop, issue 27).
 """
 
 from __future__ import annotations
 
+import base64
 import hashlib
 import json
 from dataclasses import fields
@@ -25,8 +26,10 @@ from finaldrive.service.profiles import content_hash
 #: wall-time limit (a run stopped by it is a transient failure, never reused).
 _OUTPUT_ONLY = frozenset({"series", "series_stride", "max_wall_s"})
 DESIGN_DECIMALS = 12
-#: Hex digits of a key taken by its context; the other 48 are the design's bits.
-CONTEXT_DIGITS = 16
+#: Hex digits of a key taken by its context (128 bits); the other 32 characters are the design's.
+CONTEXT_DIGITS = 32
+#: Characters of a design's part of a key: base64 of its three float64 values' 24 bytes.
+DESIGN_CHARS = 32
 
 
 def road_key(road: Road) -> str:
@@ -41,7 +44,7 @@ def settings_key(settings: SimSettings) -> dict[str, object]:
 
 
 def context_digest(road: Road, settings: SimSettings, vehicle: Vehicle | None, engine_version: str) -> str:
-    """Everything but the design, serialised and hashed once a road: the first 16 hex digits of its sha256."""
+    """Everything but the design, serialised and hashed once a road: the first 32 hex digits of its sha256."""
     context = {
         "road": road_key(road),
         "vehicle": (vehicle or default_vehicle()).fingerprint(),
@@ -54,8 +57,8 @@ def context_digest(road: Road, settings: SimSettings, vehicle: Vehicle | None, e
 
 def design_keys(context: str, designs: np.ndarray) -> list[str]:
     """The key of each design row (a2, L2, R_WS) in ``context`` (:func:`context_digest`): the context's
-    digits, then the design rounded, as the hex of its three big-endian float64 values."""
+    digits, then the design rounded, as base64 of its three big-endian float64 values (24 bytes a
+    design, so the base64 of a request's designs is theirs end to end, without padding)."""
     rounded = np.round(np.asarray(designs, dtype=float).reshape(-1, 3), DESIGN_DECIMALS) + 0.0  # -0.0 -> 0.0
-    digits = rounded.astype(">f8").tobytes().hex()
-    width = 3 * 16
-    return [context + digits[at:at + width] for at in range(0, len(digits), width)]
+    text = base64.b64encode(rounded.astype(">f8").tobytes()).decode()
+    return [context + text[at:at + DESIGN_CHARS] for at in range(0, len(text), DESIGN_CHARS)]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import struct
 
 import numpy as np
@@ -51,14 +52,14 @@ def test_profiles_are_keyed_by_their_points() -> None:
 
 
 def test_a_key_holds_the_rounded_design_exactly() -> None:
-    """The key's last 48 digits are the design's float64 bits: designs 1e-11 apart (above the rounding)
-    have keys of their own, and the design reads back from its key."""
+    """The key's last 32 characters are the design's float64 bits: designs 1e-11 apart (above the
+    rounding) have keys of their own, and the design reads back from its key."""
     designs = np.array([[0.3, 0.1, 0.09], [0.3, 0.1 + 1e-11, 0.09], [0.3 + 1e-11, 0.1, 0.09]])
     keys = design_keys(context_digest(Road("flat"), SimSettings(), None, "1"), designs)
-    assert len(set(keys)) == 3 and all(len(k) == 64 and int(k, 16) >= 0 for k in keys)
-    assert len({k[:16] for k in keys}) == 1
+    assert len(set(keys)) == 3 and all(len(k) == 64 for k in keys)
+    assert len({k[:32] for k in keys}) == 1 and int(keys[0][:32], 16) >= 0
     for k, design in zip(keys, designs, strict=True):
-        assert struct.unpack(">3d", bytes.fromhex(k[16:])) == tuple(np.round(design, 12))
+        assert struct.unpack(">3d", base64.b64decode(k[32:], validate=True)) == tuple(np.round(design, 12))
 
 
 def _murmur_finaliser(h: int) -> int:
@@ -72,16 +73,17 @@ def _murmur_finaliser(h: int) -> int:
 
 
 def test_the_indexed_hash_mixes_every_word_of_the_key() -> None:
-    """The hash is fmix64 chained over the key's four words from the last, its top 60 bits; keys that
+    """The hash is fmix64 chained over the key's five words from the last, its top 60 bits; keys that
     share their context (every key of a job's road) spread over the index, as a hash of the context's
     digits alone would not."""
     context = context_digest(Road("flat"), SimSettings(), None, "1")
     grid = np.array([[a, l, r] for a in (0.0, 0.1) for l in np.linspace(0, 0.1, 50) for r in (0.09, 0.1)])
     keys = design_keys(context, grid)
     for k in keys[:20]:
+        words = [int(k[:16], 16), int(k[16:32], 16), *struct.unpack(">3Q", base64.b64decode(k[32:]))]
         h = 0
-        for at in (48, 32, 16, 0):
-            h = _murmur_finaliser(h ^ int(k[at:at + 16], 16))
+        for word in reversed(words):
+            h = _murmur_finaliser(h ^ word)
         assert key_hash(k) == h >> 4
     hashes = key_hashes(keys)
     assert len(set(hashes.tolist())) == len(keys)
