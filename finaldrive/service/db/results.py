@@ -48,17 +48,20 @@ ROAD, STEP, CANDIDATE, A2, L2, RWS, FITNESS, STATUS, CACHED = (ROW_COLUMNS.index
     "road_index", "step", "candidate", "a2_deg", "l2_m", "rws_m", "fitness_m", "status", "cached"))
 _OK = EvalStatus.ok.value
 
+#: A cache key's layout (finaldrive.service.jobs.cache makes the keys): hex digits of its context's digest (128
+#: bits), then characters of base64 of its design (three float64 values, 24 bytes).
+CONTEXT_DIGITS, DESIGN_CHARS = 32, 32
 #: The finaliser of MurmurHash3's 64-bit hash (its multipliers), which mixes each of a key's words into the hash.
 _MIX = (np.uint64(0xFF51AFD7ED558CCD), np.uint64(0xC4CEB9FE1A85EC53))
 
 
 def key_hashes(keys: Sequence[str]) -> np.ndarray:
-    """The indexed hash of each cache key (finaldrive.service.jobs.cache: 32 hex digits of its context,
-    then 32 characters of base64 of its design): its five 64-bit words mixed into 60 bits (a positive
+    """The indexed hash of each cache key (:data:`CONTEXT_DIGITS` hex digits of its context, then
+    :data:`DESIGN_CHARS` characters of base64 of its design): its five 64-bit words mixed into 60 bits (a positive
     BIGINT on every backend), so that keys that share their context spread over the index. Not a
     secret: a collision only costs a comparison of the whole key."""
-    contexts = bytes.fromhex("".join([key[:32] for key in keys]))
-    designs = base64.b64decode("".join([key[32:] for key in keys]), validate=True)
+    contexts = bytes.fromhex("".join([key[:CONTEXT_DIGITS] for key in keys]))
+    designs = base64.b64decode("".join([key[CONTEXT_DIGITS:] for key in keys]), validate=True)
     words = np.hstack([np.frombuffer(contexts, dtype=">u8").reshape(-1, 2),
                        np.frombuffer(designs, dtype=">u8").reshape(-1, 3)]).astype(np.uint64)
     mixed = np.zeros(len(words), dtype=np.uint64)

@@ -19,6 +19,7 @@ from dataclasses import fields
 import numpy as np
 
 from finaldrive.engine import Road, SimSettings, Vehicle, default_vehicle
+from finaldrive.service.db.results import CONTEXT_DIGITS, DESIGN_CHARS
 from finaldrive.service.profiles import content_hash
 
 #: SimSettings fields that change what is returned or when a run is given up, never a result that
@@ -26,10 +27,6 @@ from finaldrive.service.profiles import content_hash
 #: wall-time limit (a run stopped by it is a transient failure, never reused).
 _OUTPUT_ONLY = frozenset({"series", "series_stride", "max_wall_s"})
 DESIGN_DECIMALS = 12
-#: Hex digits of a key taken by its context (128 bits); the other 32 characters are the design's.
-CONTEXT_DIGITS = 32
-#: Characters of a design's part of a key: base64 of its three float64 values' 24 bytes.
-DESIGN_CHARS = 32
 
 
 def road_key(road: Road) -> str:
