@@ -484,6 +484,13 @@ def store_bytes(db: Database) -> int:
         return int(pages) * int(connection.exec_driver_sql("PRAGMA page_size").scalar() or 0)
 
 
+def median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The run of median efficiency; of median rate where no run has an ideal (0 ms designs: every
+    efficiency is 0, and sorting by it would keep the runs' order)."""
+    key = "efficiency" if any(run["efficiency"] for run in runs) else "evaluations_per_s"
+    return sorted(runs, key=lambda run: run[key] or 0.0)[len(runs) // 2]
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cpus", type=int, help="logical CPUs of the local Ray or the virtual cluster")
@@ -528,7 +535,7 @@ def main() -> int:
             runs[kind].append(run(args.cpus, args.plan, args.db, kind, times, eval_ms, costs, args.task_cpus))
             if not args.json:
                 print(json.dumps(runs[kind][-1]), flush=True)
-    medians = {kind: sorted(out, key=lambda o: o["efficiency"] or 0.0)[len(out) // 2] for kind, out in runs.items()}
+    medians = {kind: median_run(out) for kind, out in runs.items()}
     if args.compare:
         result: dict[str, Any] = {
             "median": medians, "runs": runs,

@@ -3,6 +3,7 @@ leaves its figures unreproducible: bench_time_to_answer broke when the executors
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import sys
@@ -34,3 +35,17 @@ def test_commit_bench_grows_a_store_with_and_without_an_index(tmp_path: Path) ->
         assert result["dropped"] == drop[1:] and [r["stored"] for r in result["rates"]] == list(range(200, 2001, 200))
         rates[bool(drop)] = result["rates"]
     assert all(r["evaluations_per_s"] > 0 for rs in rates.values() for r in rs)
+
+
+def test_scheduler_bench_reports_the_median_rate_when_no_run_has_an_ideal(monkeypatch: pytest.MonkeyPatch) -> None:
+    """0 ms designs give every run an efficiency of 0: the median is then the runs' median rate, not the
+    middle run in the order they ran (which it was, sorted by the efficiency alone)."""
+    spec = importlib.util.spec_from_file_location("bench_scheduler", BENCH / "bench_scheduler.py")
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, bench)  # (its dataclasses look their module up there)
+    spec.loader.exec_module(bench)
+    rated = [{"efficiency": 0.0, "evaluations_per_s": rate} for rate in (30_000.0, 50_000.0, 40_000.0)]
+    assert bench.median_run(rated)["evaluations_per_s"] == 40_000.0
+    timed = [{"efficiency": e, "evaluations_per_s": r} for e, r in ((0.9, 1.0), (0.5, 3.0), (0.7, 2.0))]
+    assert bench.median_run(timed)["efficiency"] == 0.7
