@@ -6,6 +6,7 @@ in a PostgreSQL crash), in one run, as a ratio.
     python bench/bench_commit.py                                  # a temporary SQLite file
     python bench/bench_commit.py --db postgresql+psycopg://...    # any store; repeat --db for several
     python bench/bench_commit.py --grow 1000000 --rows 16000      # the rate as one store grows
+    python bench/bench_commit.py --writers 1 2 --rows 8000 --db postgresql+psycopg://...  # writers at once
 
 Each measurement stores ``--transactions`` transactions of ``--rows`` evaluations (the writer's
 transaction holds what arrived in one flush); printed: evaluations stored per second, the median of
@@ -16,11 +17,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
 import statistics
 import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from bench_scheduler import SleepTask
@@ -132,6 +135,57 @@ def grow(url: str, rows: int, total: int, steps: int, drop: list[str], cache_kib
     return {"store": url.split(":", 1)[0], "rows_per_transaction": rows, "dropped": drop, "rates": rates}
 
 
+def _writer(url: str, job_id: int, firsts: list[int], rows: int, cache_kib: int | None, start: Any,
+            done: Any) -> None:
+    """One writer process of :func:`parallel`: its transactions' rows made, then stored from ``start``."""
+    db = Database(url, cache_kib=cache_kib)
+    batches = [_rows(rows, first) for first in firsts]
+    start.wait()
+    for batch in batches:
+        with db.write() as session:
+            store_results(session, "bench", job_id, [batch], [])
+    db.dispose()
+    done.put(time.perf_counter())
+
+
+def parallel(url: str, rows: int, total: int, writers: list[int], repeat: int,
+             cache_kib: int | None) -> dict[str, object]:
+    """Durable evaluations stored a second by ``n`` writer processes at once, for each ``n`` of ``writers``
+    (finaldrive.service.jobs.writer_pool): ``total`` evaluations of one job, in transactions of ``rows``
+    dealt round the writers; a new job each measurement, the counts alternated ``repeat`` times."""
+    open_database(Settings(db_url=url)).dispose()  # the schema
+    context = multiprocessing.get_context("spawn")
+    found: dict[int, list[float]] = {n: [] for n in writers}
+    db = Database(url, cache_kib=cache_kib)
+    try:
+        with db.write() as session:
+            register_scheduler(session, "bench", host="h", pid=0, executor="serial", capacity=1)
+        for r in range(repeat):
+            for n in writers if r % 2 == 0 else writers[::-1]:
+                job, _ = submit_job(db, JobSpec.model_validate(SPEC), idempotency_key=None, max_evaluations=10**9,
+                                    max_cpu_hours=1e6)
+                with db.write() as session:
+                    claim_jobs(session, "bench", lease_s=3600, limit=100)
+                firsts = list(range(0, total // rows * rows, rows))
+                start, done = context.Event(), context.Queue()
+                processes = [context.Process(target=_writer, args=(url, job.id, firsts[k::n], rows, cache_kib, start,
+                                                                   done)) for k in range(n)]
+                for process in processes:
+                    process.start()
+                time.sleep(1.0 + 0.5 * n)   # their rows made (the clock starts after)
+                began = time.perf_counter()
+                start.set()
+                ended = max(done.get(timeout=600) for _ in processes)
+                for process in processes:
+                    process.join()
+                found[n].append(len(firsts) * rows / (ended - began))
+    finally:
+        db.dispose()
+    return {"store": url.split(":", 1)[0], "rows_per_transaction": rows, "evaluations": total,
+            "evaluations_per_s": {n: round(statistics.median(found[n])) for n in writers},
+            "runs": {n: [round(v) for v in found[n]] for n in writers}}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--db", action="append", help="SQLAlchemy URL (repeatable; default a temporary SQLite file)")
@@ -145,14 +199,24 @@ def main(argv: list[str] | None = None) -> int:
                              "over 10 parts")
     parser.add_argument("--drop-index", action="append", default=[], metavar="NAME",
                         help="with --grow: drop this index of evaluations first (repeatable)")
+    parser.add_argument("--writers", type=int, nargs="+", metavar="N",
+                        help="instead: durable rates of N writer processes storing one job at once (--rows a "
+                             "transaction, --evaluations in all), alternated --repeat times")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
+    if args.writers and (args.grow or min(args.writers) < 1):
+        parser.error("--writers takes counts of 1 or more, and not --grow")
     if args.drop_index and not args.grow:
         parser.error("--drop-index goes with --grow")
     if args.grow and (len(args.rows) != 1 or args.grow < 10 * args.rows[0]):
         parser.error("--grow N takes one --rows R, and N >= 10 R (10 parts)")
     with tempfile.TemporaryDirectory() as tmp:
         urls = args.db or [f"sqlite:///{Path(tmp) / 'commit.db'}"]
+        if args.writers:
+            found = [parallel(url, rows, args.evaluations, args.writers, args.repeat, args.cache_kib or None)
+                     for url in urls for rows in args.rows]
+            print(json.dumps({"machine": describe(), "results": found}, indent=None if args.json else 1))
+            return 0
         if args.grow:
             grown = [grow(url, args.rows[0], args.grow, 10, args.drop_index, args.cache_kib or None) for url in urls]
             print(json.dumps({"machine": describe(), "results": grown}, indent=None if args.json else 1))

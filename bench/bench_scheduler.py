@@ -338,7 +338,7 @@ def _processes() -> dict[int, tuple[int, str, float]]:
 
 
 def cpu_roles(before: dict[int, tuple[int, str, float]], after: dict[int, tuple[int, str, float]],
-              writer: int | None) -> dict[str, float]:
+              writers: list[int | None]) -> dict[str, float]:
     """CPU seconds each of :data:`CPU_ROLES` used between two :func:`_processes` (a process that ended
     between them is not counted: none of the roles' does while the clock runs)."""
     me = os.getpid()
@@ -346,7 +346,7 @@ def cpu_roles(before: dict[int, tuple[int, str, float]], after: dict[int, tuple[
     def role(pid: int) -> str:
         if pid == me:
             return "driver"
-        if pid == writer:
+        if pid in writers:
             return "writer"
         if after[pid][1].startswith("postgres"):
             return "database"
@@ -411,7 +411,7 @@ def measure_ray(tasks: int = 400, in_flight: tuple[int, ...] = (4, 256, 2048), c
 
 
 def run(cpus: int, plan: str, db_url: str | None, executor_kind: str, times: np.ndarray | None, eval_ms: float,
-        costs: RayCosts | None, task_cpus: int | None = None) -> dict[str, Any]:
+        costs: RayCosts | None, task_cpus: int | None = None, writers: int = SchedulerConfig.writers) -> dict[str, Any]:
     tmp = tempfile.TemporaryDirectory(prefix="finaldrive-bench-")
     url = db_url or f"sqlite:///{Path(tmp.name) / 'bench.db'}"
     settings = Settings(db_url=url, executor="ray", num_workers=cpus)
@@ -426,7 +426,7 @@ def run(cpus: int, plan: str, db_url: str | None, executor_kind: str, times: np.
         if not virtual:
             _warm(executor, executor.num_workers, task)
         scheduler = Scheduler(db, executor, task=task, warmup=None, executor_kind="virtual" if virtual else "ray",
-                              config=SchedulerConfig(recordings=False))
+                              config=SchedulerConfig(recordings=False, writers=writers))
         warm_up = _submit(db, [WARM_UP])
         while scheduler.jobs or not _finished(db, warm_up):
             scheduler.turn(0.02)
@@ -441,7 +441,9 @@ def run(cpus: int, plan: str, db_url: str | None, executor_kind: str, times: np.
             peak = max(peak, scheduler.dispatcher.in_flight())
             if not scheduler.jobs and _finished(db, jobs):  # the scheduler lets a job go once it is finished
                 break
-        cpu = cpu_roles(processes, _processes(), getattr(scheduler.writer, "pid", None))
+        writer = scheduler.writer
+        n_writers = len(getattr(writer, "pids", [writer]))
+        cpu = cpu_roles(processes, _processes(), getattr(writer, "pids", None) or [getattr(writer, "pid", None)])
         scheduler.shutdown()
         with db.read() as session:
             rows = [session.get(Job, job) for job in jobs]
@@ -463,7 +465,7 @@ def run(cpus: int, plan: str, db_url: str | None, executor_kind: str, times: np.
             "eval_ms": eval_ms if times is None else None,
             "eval_dist": describe_times(times) if times is not None else None,
             "ray_costs": costs.as_dict() if executor_kind == "virtual" and costs else None,
-            "store": url.split(":", 1)[0], "state": state,
+            "store": url.split(":", 1)[0], "writers": n_writers, "state": state,
             "evaluations": stored, "ideal_s": round(ideal, 3), "wall_s": round(wall, 3),
             "efficiency": round(ideal / wall, 4) if wall else None, "peak_in_flight": peak,
             "tasks": tasks[0], "designs_per_task": round(stored / max(1, tasks[0]), 2),
@@ -513,6 +515,8 @@ def main() -> int:
     parser.add_argument("--ray-poll", default=RAY_POLL, help="a poll's cost by tasks in flight, n:ms,...")
     parser.add_argument("--measure-ray", action="store_true",
                         help="measure Ray's per-task costs with the real RayExecutor (2 CPUs) and print them")
+    parser.add_argument("--writers", type=int, default=SchedulerConfig.writers,
+                        help="the scheduler's writer processes on PostgreSQL (SQLite: one)")
     parser.add_argument("--task-cpus", type=int,
                         help="CPUs a task holds (default: the executor's rule, workers.base.task_width)")
     parser.add_argument("--json", action="store_true", help="print JSON")
@@ -532,7 +536,8 @@ def main() -> int:
     runs: dict[str, list[dict[str, Any]]] = {kind: [] for kind in kinds}
     for _ in range(args.repeat):
         for kind in kinds:
-            runs[kind].append(run(args.cpus, args.plan, args.db, kind, times, eval_ms, costs, args.task_cpus))
+            runs[kind].append(run(args.cpus, args.plan, args.db, kind, times, eval_ms, costs, args.task_cpus,
+                                  args.writers))
             if not args.json:
                 print(json.dumps(runs[kind][-1]), flush=True)
     medians = {kind: median_run(out) for kind, out in runs.items()}

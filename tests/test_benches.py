@@ -37,6 +37,16 @@ def test_commit_bench_grows_a_store_with_and_without_an_index(tmp_path: Path) ->
     assert all(r["evaluations_per_s"] > 0 for rs in rates.values() for r in rs)
 
 
+@pytest.mark.slow
+def test_commit_bench_stores_one_job_with_writers_at_once(tmp_path: Path) -> None:
+    done = subprocess.run([sys.executable, str(BENCH / "bench_commit.py"), "--writers", "1", "2", "--rows", "100",
+                           "--evaluations", "400", "--repeat", "1", "--json"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stderr[-3000:]
+    [result] = json.loads(done.stdout)["results"]
+    assert set(result["evaluations_per_s"]) == {"1", "2"} and all(v > 0 for v in result["evaluations_per_s"].values())
+
+
 def test_scheduler_bench_reports_the_median_rate_when_no_run_has_an_ideal(monkeypatch: pytest.MonkeyPatch) -> None:
     """0 ms designs give every run an efficiency of 0: the median is then the runs' median rate, not the
     middle run in the order they ran (which it was, sorted by the efficiency alone)."""

@@ -65,6 +65,8 @@ class Settings(BaseSettings):
     max_jobs: int = Field(32, ge=1, description="jobs one scheduler runs at once")
     max_backlog_rows: int = Field(50_000, ge=1, description="a job's results waiting for the store before its "
                                   "dispatch pauses (what an outage of the store holds in memory a job)")
+    writers: int = Field(1, ge=1, le=16, description="writer processes of a scheduler storing results at once "
+                         "on PostgreSQL, for a server with cores to spare (SQLite takes one write at a time: one)")
     niceness: int = Field(10, ge=0, le=19, description="OS priority offset of the simulation worker processes "
                           "(the API keeps its core)")
     events_poll_seconds: float = Field(0.5, gt=0, description="SSE progress poll interval")

@@ -66,7 +66,8 @@ class ToyTask:
 
 
 #: Fast pacing for tests: leases short enough to take over quickly, heartbeats and writes often.
-FAST = SchedulerConfig(lease_s=3.0, heartbeat_s=0.05, flush_s=0.02, recordings=True)
+#: (two writers: a pool on PostgreSQL, finaldrive.service.jobs.writer_pool; one on SQLite)
+FAST = SchedulerConfig(lease_s=3.0, heartbeat_s=0.05, flush_s=0.02, recordings=True, writers=2)
 
 
 @contextmanager

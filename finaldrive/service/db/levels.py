@@ -60,14 +60,17 @@ def _columns(table: str) -> str:
     return key + "".join(f", {c}" for c in _SLOT.split(", ") if c not in key.split(", "))
 
 
-def add_entries(session: Session, job_id: int, after_id: int = 0) -> int:
+def add_entries(session: Session, job_id: int, after_id: int = 0, *, own: bool = False) -> int:
     """Level-0 entries for the job's evaluations with an id above ``after_id``: those stored in this
-    transaction by the one writer that owns the job (or, from 0, all of a job stored without them).
-    Returns how many evaluations got a cache entry."""
+    transaction (or, from 0, all of a job stored without them). ``own``: only the rows this transaction
+    inserted (PostgreSQL's ``xmin``), as a scheduler's parallel writers store one job's evaluations at
+    once (finaldrive.service.jobs.writer_pool); SQLite writes one transaction at a time. Returns how many
+    evaluations got a cache entry."""
     connection = session.connection()
     m = marker(connection)
+    mine = " AND xmin = pg_current_xact_id()::xid" if own else ""
     added = [connection.exec_driver_sql(f"INSERT INTO {table} (level, {_columns(table)}) SELECT 0, {_columns(table)} "
-                                        f"FROM evaluations WHERE job_id = {m} AND id > {m} AND {where}",
+                                        f"FROM evaluations WHERE job_id = {m} AND id > {m}{mine} AND {where}",
                                         (job_id, after_id)).rowcount for table, (_, where) in TABLES.items()]
     return int(added[0])   # cache_index: every evaluation
 

@@ -201,7 +201,7 @@ def store_results(session: Session, scheduler_id: str, job_id: int, chunks: Iter
     inserted = _insert_many(session, "evaluations", ROW_COLUMNS, map(values.add, chunks),
                             ("job_id", "road_index", "step", "candidate"), fixed={"job_id": job_id, "created_at": now})
     values.close()
-    merge_if_full(session, add_entries(session, job_id, before))
+    merge_if_full(session, add_entries(session, job_id, before, own=session.get_bind().dialect.name == "postgresql"))
     if inserted != len(values):  # some slots were stored already: count the job's ranges afresh
         recount_explored(session, job_id)
     else:
@@ -406,13 +406,14 @@ def _update_best(session: Session, job_id: int, best: dict[int, Row]) -> None:
     connection = session.connection()
     stored: dict[int, float | None] = dict(connection.exec_driver_sql(
         f"SELECT road_index, best_fitness_m FROM job_roads WHERE job_id = {m}", (job_id,)).all())
-    better = [row for road, row in best.items() if road in stored and _better(row[FITNESS], stored[road])]
-    if better:
+    better = [row for road, row in sorted(best.items()) if road in stored and _better(row[FITNESS], stored[road])]
+    if better:  # compared again in the statement: another writer of the job may have stored a better one since
         connection.exec_driver_sql(
             f"UPDATE job_roads SET best_fitness_m = {m}, best_evaluation_id = (SELECT id FROM evaluations "
             f"WHERE job_id = {m} AND road_index = {m} AND step = {m} AND candidate = {m}) "
-            f"WHERE job_id = {m} AND road_index = {m}",
-            [(row[FITNESS], job_id, row[ROAD], row[STEP], row[CANDIDATE], job_id, row[ROAD]) for row in better])
+            f"WHERE job_id = {m} AND road_index = {m} AND (best_fitness_m IS NULL OR best_fitness_m < {m})",
+            [(row[FITNESS], job_id, row[ROAD], row[STEP], row[CANDIDATE], job_id, row[ROAD], row[FITNESS])
+             for row in better])
 
 
 def _better(a: float | None, b: float | None) -> bool:

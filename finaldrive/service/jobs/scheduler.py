@@ -78,6 +78,7 @@ from finaldrive.service.jobs.plan import JobPlan, build_plan
 from finaldrive.service.jobs.recordings import RecordingProducer
 from finaldrive.service.jobs.rows import block_from_results, nullable, row_from_cache
 from finaldrive.service.jobs.writer import Guard, Writer, Writes
+from finaldrive.service.jobs.writer_pool import WriterPool
 from finaldrive.service.jobs.writer_process import WriterProcess, start_fork_server
 from finaldrive.service.profiles import profile_ids, resolver
 from finaldrive.service.schemas import JobSpec
@@ -122,6 +123,7 @@ class SchedulerConfig:
     max_jobs: int = 32             # jobs run at once by this scheduler
     flush_s: float = 0.25          # results are written at most this long after they arrive (at once to an idle writer)
     max_backlog_rows: int = 50_000  # results waiting for the store before dispatching pauses
+    writers: int = 1               # writer processes storing at once on PostgreSQL (SQLite: one)
     batch_size: int | None = None  # designs per task (None: adaptive)
     max_simulation_s: float | None = 60.0  # wall-time limit of one simulation (reason "time limit ...")
     max_job_cpu_s: float = 100.0 * 3600  # a job's budget of simulation time: failed beyond it (budget.py)
@@ -177,7 +179,7 @@ class Scheduler:
         self.jobs: dict[int, ActiveJob] = {}
         self.recordings = RecordingProducer(db, self.id, lease_s=config.lease_s) if config.recordings else None
         self._db = Guard(db, f"scheduler {self.id}")
-        self.writer = _writer(db, self.id)
+        self.writer = _writer(db, self.id, config.writers)
         self._registered = False
         self._next_beat = 0.0
         self._next_look = 0.0
@@ -525,11 +527,13 @@ class Scheduler:
             self._drop(job_id)
 
 
-def _writer(db: Database, scheduler_id: str) -> Writer | WriterProcess:
+def _writer(db: Database, scheduler_id: str, writers: int) -> Writer | WriterProcess | WriterPool:
     """The scheduler's writer: in a process of its own, unless the store is an in-memory SQLite
-    database (which only this process sees)."""
+    database (which only this process sees); ``writers`` of them on PostgreSQL."""
     if in_memory(db.url):
         return Writer(db, scheduler_id)
+    if writers > 1 and db.engine.dialect.name == "postgresql":
+        return WriterPool(db, scheduler_id, writers)
     return WriterProcess(db, scheduler_id)
 
 
@@ -603,7 +607,7 @@ def run_scheduler(settings: Settings, stop: threading.Event, *, scheduler_id: st
                              niceness=settings.niceness, standby=stop, task_cpus=settings.task_cpus)
     config = SchedulerConfig(lease_s=settings.lease_seconds, heartbeat_s=settings.heartbeat_seconds,
                              max_jobs=settings.max_jobs, max_backlog_rows=settings.max_backlog_rows,
-                             batch_size=settings.batch_size,
+                             batch_size=settings.batch_size, writers=settings.writers,
                              max_simulation_s=settings.max_simulation_seconds,
                              max_job_cpu_s=settings.max_job_cpu_hours * 3600)
     if handle_signals:

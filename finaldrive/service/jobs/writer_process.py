@@ -61,10 +61,11 @@ class WriterProcess:
     """A :class:`Writer` in a child process: ``put``, ``pending``, ``busy``, ``lost``, ``forget``,
     ``drain``, ``wait`` and ``close`` as the thread's."""
 
-    def __init__(self, db: Database, scheduler_id: str) -> None:
+    def __init__(self, db: Database, scheduler_id: str, *, cond: threading.Condition | None = None) -> None:
+        """``cond``: the condition its acknowledgements notify (shared by a pool's writers)."""
         self.scheduler_id = scheduler_id
         self._store = (db.url, db.lock_timeout_s)
-        self._cond = threading.Condition()
+        self._cond = cond or threading.Condition()
         self._unacked: dict[int, deque[tuple[int, Writes]]] = {}  # job -> (seq, writes) handed over
         self._pending: dict[int, int] = {}                         # job -> rows and generations of those
         self._lost: list[int] = []
@@ -77,8 +78,9 @@ class WriterProcess:
         threading.Thread(target=self._send, name="finaldrive-writer-send", daemon=True).start()
 
     # ------------------------------------------------------------------ the Writer interface
-    def put(self, job_id: int, writes: Writes) -> None:
-        """Hand ``writes`` to the child after everything handed over for the job before."""
+    def put(self, job_id: int, writes: Writes) -> int:
+        """Hand ``writes`` to the child after everything handed over for the job before; returns their
+        number (:meth:`acknowledged`)."""
         writes.pack()  # a block pickles in a few arrays; a result holds 30
         with self._cond:
             self._seq += 1
@@ -86,6 +88,18 @@ class WriterProcess:
             self._unacked.setdefault(job_id, deque()).append((writes.seq, writes))
             self._pending[job_id] = self._pending.get(job_id, 0) + len(writes)
             self._outbox.put((self._epoch, ("put", job_id, writes)))
+            return writes.seq
+
+    def acknowledged(self, job_id: int, seq: int) -> bool:
+        """Whether the job's writes numbered ``seq`` (and those before) are stored, or were dropped."""
+        with self._cond:
+            entries = self._unacked.get(job_id)
+            return not entries or entries[0][0] > seq
+
+    def pending_rows(self) -> int:
+        """Rows and generations of every job not yet stored."""
+        with self._cond:
+            return sum(self._pending.values())
 
     def pending(self, job_id: int) -> int:
         """Rows and generations of the job not yet stored."""

@@ -309,3 +309,81 @@ def test_bulk_stored_generations_keep_their_json(store_url: str) -> None:
     finally:
         db.dispose()
     assert got == generations
+
+
+def _interleaved(postgres: object, pause: str) -> tuple[int, list[tuple[float, int]], float | None]:
+    """Two writers of one job on PostgreSQL (finaldrive.service.jobs.writer_pool): writer A stores three
+    designs but stops at ``pause`` (a name in finaldrive.service.db.results) while writer B stores three
+    better ones of the same road and commits; then A goes on. Returns the evaluations stored, the fitness
+    index's entries (fitness, candidate) and the road's best fitness."""
+    import threading
+
+    from sqlalchemy import text
+
+    from finaldrive.service.db import results as store
+
+    db = open_database(Settings(db_url=str(postgres.new_database())))  # type: ignore[attr-defined]
+    road = Road.parse("sine:0.025:3")
+
+    def rows(candidates: list[int], a2: list[float], tag: str) -> list[tuple[object, ...]]:
+        designs = np.array([[a, 0.1, 0.09] for a in a2])  # other a2 buckets: no row lock in common before B ends
+        batch = toy_batch(designs, road)
+        keys = [f"{tag}{i:063x}" for i in candidates]
+        return rows_from_results([(Request(0, 0, 0, np.array(candidates), designs), batch, batch.fitness_m, keys,
+                                   False)])
+
+    paused, resume = threading.Event(), threading.Event()
+    real, writer_b = getattr(store, pause), threading.current_thread()
+    errors: list[BaseException] = []
+
+    def stop_in_a(*args: object, **kwargs: object) -> object:
+        if threading.current_thread() is not writer_b:
+            paused.set()
+            assert resume.wait(30)
+        return real(*args, **kwargs)
+
+    def store_a() -> None:
+        try:
+            with db.write() as session:
+                store_results(session, "s1", job.id, [rows([0, 1, 2], [3.0, 3.1, 3.2], "a")], [])
+        except BaseException as exc:  # reported by the test
+            errors.append(exc)
+
+    try:
+        job = _claimed_sweep(db)
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(store, pause, stop_in_a)
+            thread = threading.Thread(target=store_a)
+            thread.start()
+            assert paused.wait(30)
+            with db.write() as session:  # writer B, whole, while A waits in its transaction
+                assert store_results(session, "s1", job.id, [rows([3, 4, 5], [1.0, 1.05, 1.1], "b")], []) == 3
+            resume.set()
+            thread.join(30)
+        assert not errors, errors
+        with db.read() as session:
+            stored = session.scalar(select(func.count()).where(Evaluation.job_id == job.id))
+            entries = session.execute(text("SELECT fitness_m, candidate FROM fitness_index ORDER BY candidate")).all()
+            best = session.execute(text("SELECT best_fitness_m FROM job_roads WHERE job_id = :j AND road_index = 0"),
+                                   {"j": job.id}).scalar()
+            assert session.scalar(text("SELECT COUNT(*) FROM cache_index")) == stored
+    finally:
+        db.dispose()
+    return int(stored or 0), [tuple(e) for e in entries], best
+
+
+def test_a_writer_enters_only_its_own_rows_while_another_stores_the_same_job(postgres: object) -> None:
+    """Writer B commits while A has inserted its rows but not yet entered them in the index tables:
+    A enters its own three (B's, visible to it by then, are B's to enter: once each)."""
+    stored, entries, best = _interleaved(postgres, "add_entries")
+    assert stored == 6 and [candidate for _, candidate in entries] == list(range(6))
+    assert best == max(fitness for fitness, _ in entries[3:]) > max(fitness for fitness, _ in entries[:3])
+
+
+def test_a_writer_keeps_the_better_best_another_stored_since_it_read_it(postgres: object) -> None:
+    """Writer A read the road's best (none) before B stored a better one and committed: A's worse best
+    does not overwrite it (the comparison is made again in A's update)."""
+    stored, entries, best = _interleaved(postgres, "_better")
+    assert stored == 6 and len(entries) == 6
+    assert best == max(fitness for fitness, _ in entries[3:]) > max(fitness for fitness, _ in entries[:3])
+
