@@ -44,6 +44,10 @@ WRITER_CACHE_KIB = 16384
 PAGE_SIZE = 16384
 #: Seconds to open a connection to a database server before giving up.
 CONNECT_TIMEOUT_S = 5
+#: Each PostgreSQL session's settings. No JIT: once a store's tables hold ~10^5 rows the planner's cost of
+#: the result cache's lookup passes ``jit_above_cost`` and each lookup of ~900 keys was compiled first,
+#: 0.1-0.5 s of the server's CPU for a query that runs in ~10 ms (docs/performance-log.md, 2026-12-08).
+PG_OPTIONS = "-c jit=off"
 
 
 def display_url(url: str) -> str:
@@ -123,7 +127,8 @@ def make_engine(url: str, *, cache_kib: int | None = None, **kwargs: Any) -> Eng
     (``cache_kib``: the page cache of each SQLite connection)."""
     backend = make_url(url).get_backend_name()
     if backend == "postgresql":
-        kwargs = {"pool_pre_ping": True, "connect_args": {"connect_timeout": CONNECT_TIMEOUT_S}, **kwargs}
+        kwargs = {"pool_pre_ping": True, "connect_args": {"connect_timeout": CONNECT_TIMEOUT_S, "options": PG_OPTIONS},
+                  **kwargs}
     if backend != "sqlite":
         return create_engine(url, **kwargs)
     memory = in_memory(url)

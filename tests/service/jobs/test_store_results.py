@@ -387,3 +387,15 @@ def test_a_writer_keeps_the_better_best_another_stored_since_it_read_it(postgres
     assert stored == 6 and len(entries) == 6
     assert best == max(fitness for fitness, _ in entries[3:]) > max(fitness for fitness, _ in entries[:3])
 
+
+def test_postgresql_sessions_run_without_jit(postgres: object) -> None:
+    """The store's sessions turn PostgreSQL's JIT off: with a growing store's statistics it compiled each
+    result-cache lookup first (0.1-0.5 s of the server's CPU for a ~10 ms query; docs/performance-log.md)."""
+    from sqlalchemy import text
+
+    db = open_database(Settings(db_url=str(postgres.new_database())))  # type: ignore[attr-defined]
+    try:
+        with db.read() as session:
+            assert session.execute(text("SHOW jit")).scalar() == "off"
+    finally:
+        db.dispose()
