@@ -1,8 +1,8 @@
 """Several writer processes storing one scheduler's results at once, for PostgreSQL.
 
 One writer keeps PostgreSQL to one backend, and a transaction's work alternates between them: the
-writer's Python builds and sends the rows, then the server inserts them and their index entries (31-38
-us of its CPU an evaluation against the writer's 7.5-8: docs/performance-log.md). :class:`WriterPool`
+writer's Python builds and sends the rows, then the server inserts them and their index entries (31-42
+us of its CPU an evaluation against the writer's 8-13: docs/performance-log.md). :class:`WriterPool`
 runs ``n`` :class:`~finaldrive.service.jobs.writer_process.WriterProcess` children, with their
 interface: each put goes to the child with the fewest rows pending, so one job's evaluations are
 stored by several transactions at once. Each stores a slot once (``ON CONFLICT``), adds to the job's
