@@ -151,7 +151,8 @@ class Evaluation(Base):
     wall_s: Mapped[float] = mapped_column(Float)
     cached: Mapped[bool] = mapped_column(Boolean, default=False)
     cache_key: Mapped[str] = mapped_column(String(64))
-    #: the key's first 60 bits, indexed in ``cache_index``; lookups compare the whole key
+    #: the key's 60-bit hash (finaldrive.service.db.results.key_hashes), indexed in ``cache_index``; lookups
+    #: compare the whole key
     cache_hash: Mapped[int] = mapped_column(BigInteger)
     #: the failure may not recur (a time limit, a lost worker): never reused from the result cache
     transient: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())

@@ -21,7 +21,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from finaldrive.service.db.engine import Database
@@ -34,12 +34,13 @@ class _Held:
     """A job's generations, and the puts of its evaluations they wait for: (child, seq)."""
 
     generations: list[dict[str, Any]]
-    after: list[tuple[WriterProcess, int]] = field(default_factory=list)
+    after: list[tuple[WriterProcess, int]]
 
 
 class WriterPool:
     """``writers`` :class:`WriterProcess` children: ``put``, ``pending``, ``busy``, ``lost``, ``forget``,
-    ``drain``, ``wait`` and ``close`` as one writer's."""
+    ``drain``, ``wait`` and ``close`` as one writer's. Held generations whose evaluations are stored are
+    handed over by whichever of these the scheduler calls next (it calls them every turn)."""
 
     def __init__(self, db: Database, scheduler_id: str, writers: int) -> None:
         if writers < 1:
